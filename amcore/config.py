@@ -1,0 +1,355 @@
+"""Typed configuration: frozen dataclasses loaded from TOML.
+
+Unknown keys, wrong types and impossible values raise `ConfigError` naming the file and
+the key. Values that follow from others (total mass, hover thrust, the task frame of
+each AM, the nominal CoM offset) are computed, never entered; see `amcore.mission`.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+
+
+class ConfigError(ValueError):
+    """A configuration file is malformed; the message names the file and the key."""
+
+
+# ----------------------------------------------------------------------------- vehicle
+@dataclass(frozen=True)
+class RotorParams:
+    """Rotor geometry of the multirotor; the flight-controller emulation mixes with it."""
+
+    arm_length_m: float
+    thrust_max_n: float  # per rotor
+    thrust_min_n: float = 0.0
+    yaw_moment_coeff_m: float = 0.016  # rotor drag torque / rotor thrust [N m / N]
+    count: int = 4
+    layout: str = "x"
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """Components of the task variable y, in the AM's task frame (eq. jacobian_xi).
+
+    Position components: "x", "y", "z". Angle components: "roll", "pitch", "yaw", the
+    planar angle of the end-effector about that task axis (see `amcore.task`).
+    """
+
+    components: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Gains:
+    """Gains of eq. Com_controller, eq. ori_controller and eq. u3 (diagonal entries).
+
+    K_t [N/m], D_t [N s/m]; k_R [N m / rad-ish], k_w [N m s]; Lambda_wb_d [kg m^2] is the
+    desired rotational inertia of eq. ori_controller; K_y, D_y are per task component.
+    """
+
+    K_t: tuple[float, float, float]
+    D_t: tuple[float, float, float]
+    k_R: float
+    k_w: float
+    Lambda_wb_d: tuple[float, float, float]
+    K_y: tuple[float, ...]
+    D_y: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class Safety:
+    """Guards beyond the paper against the arm's singularity (see `amcore.control`).
+
+    - com_err_max_m: the CoM error entering the PD term is saturated at this norm.
+    - y_err_max: per task component, |y~| entering the spring is saturated (the spring
+      becomes the gradient of a convex, Huber-like potential, so passivity is kept).
+    - sigma_damping: below this smallest singular value of Jbar_3 the inverse in eq. u3
+      becomes a damped least-squares inverse with damping up to damping_max.
+    """
+
+    com_err_max_m: float = 0.5
+    y_err_max: tuple[float, ...] = ()
+    sigma_damping: float = 0.02
+    damping_max: float = 0.05
+
+
+@dataclass(frozen=True)
+class ControllerOptions:
+    force_compensation: bool = True
+    compensate_Lambda_y_dot: bool = False
+    force_filter_hz: float = 30.0  # cutoff of the 2nd-order low-pass on the measured wrench
+    force_filter_zeta: float = 1.0
+
+
+@dataclass(frozen=True)
+class VehicleParams:
+    name: str
+    urdf: Path
+    base_link: str
+    ee_frame: str
+    ft_frame: str
+    arm_joints: tuple[str, ...]
+    q_nominal_rad: tuple[float, ...]
+    joint_torque_max_nm: tuple[float, ...]
+    rotors: RotorParams
+    task: TaskSpec
+    gains: Gains
+    safety: Safety = Safety()
+    options: ControllerOptions = ControllerOptions()
+    gravity_mps2: float = 9.81
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.arm_joints)
+
+
+# ----------------------------------------------------------------------------- scenario
+@dataclass(frozen=True)
+class ObjectSpec:
+    shape: str  # "box" or "cylinder"
+    mass_kg: float
+    position_m: tuple[float, float, float]  # centre at rest, world frame
+    size_m: tuple[float, float, float] = (0.2, 0.2, 0.2)  # box edge lengths
+    radius_m: float = 0.0  # cylinder
+    height_m: float = 0.0  # cylinder
+    lateral_friction: float = 1.0
+
+    @property
+    def half_height_m(self) -> float:
+        return 0.5 * (self.size_m[2] if self.shape == "box" else self.height_m)
+
+
+@dataclass(frozen=True)
+class MissionSpec:
+    """Phase timing and geometry of the grasp, shared by all AMs (paper Sec. V).
+
+    Times are simulation seconds. Distances are along each AM's own task x axis
+    (pointing from the AM to the object centre) or vertical.
+    """
+
+    approach_end_s: float = 5.0
+    grasp_end_s: float = 10.0
+    hover_end_s: float = 20.0
+    approach_move_s: float = 4.0  # approach motion takes this long, then holds
+    grasp_move_s: float = 2.0
+    lift_move_s: float = 4.0
+    standoff_m: float = 0.25  # start: end-effector this far outside the surface
+    start_height_m: float = 0.2  # start: end-effector this far above grasp height
+    pre_gap_m: float = 0.02  # end of approach: pad this far from the surface
+    squeeze_m: float = 0.04  # grasp: y_x,d this deep inside the object
+    lift_m: float = 0.3
+
+
+@dataclass(frozen=True)
+class AmSpec:
+    sysid: int
+    azimuth_deg: float  # direction from the object centre to the AM, about world z
+
+
+@dataclass(frozen=True)
+class ScenarioSpec:
+    name: str
+    vehicle: VehicleParams
+    object: ObjectSpec
+    mission: MissionSpec
+    ams: tuple[AmSpec, ...]
+    duration_s: float = 20.0
+    rate_hz: float = 1000.0
+    seed: int = 0
+    path: Path | None = None
+
+    @property
+    def dt_s(self) -> float:
+        return 1.0 / self.rate_hz
+
+    def am(self, sysid: int) -> AmSpec:
+        for a in self.ams:
+            if a.sysid == sysid:
+                return a
+        known = ", ".join(str(a.sysid) for a in self.ams)
+        raise ConfigError(f"{self.path}: no [[am]] with sysid {sysid} (scenario has {known})")
+
+
+# ----------------------------------------------------------------------------- loading
+def _check_type(value, tp, where: str):
+    origin = typing.get_origin(tp)
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{where}: expected a number, got {value!r}")
+        if not math.isfinite(value):
+            raise ConfigError(f"{where}: must be finite, got {value!r}")
+        return float(value)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{where}: expected an integer, got {value!r}")
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where}: expected true or false, got {value!r}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{where}: expected a string, got {value!r}")
+        return value
+    if origin is tuple:
+        args = typing.get_args(tp)
+        if not isinstance(value, list):
+            raise ConfigError(f"{where}: expected a list, got {value!r}")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_check_type(v, args[0], f"{where}[{i}]") for i, v in enumerate(value))
+        if len(value) != len(args):
+            raise ConfigError(f"{where}: expected {len(args)} entries, got {len(value)}")
+        return tuple(_check_type(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
+    if tp is Path:
+        if not isinstance(value, str):
+            raise ConfigError(f"{where}: expected a path string, got {value!r}")
+        return value
+    if origin in (types.UnionType, typing.Union):
+        return value
+    if dataclasses.is_dataclass(tp):
+        if not isinstance(value, dict):
+            raise ConfigError(f"{where}: expected a table, got {value!r}")
+        return _build(tp, value, where)
+    raise ConfigError(f"{where}: unsupported type {tp}")  # pragma: no cover
+
+
+def _build(cls, table: dict, where: str, skip: tuple[str, ...] = ()):
+    """Construct dataclass `cls` from a TOML table, rejecting unknown and missing keys."""
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls) if f.init}
+    for key in table:
+        if key not in names or key in skip:
+            raise ConfigError(f"{where}: unknown key '{key}' (known: {', '.join(sorted(names - set(skip)))})")
+    kwargs = {}
+    for f in dataclasses.fields(cls):
+        if f.name in skip or not f.init:
+            continue
+        if f.name in table:
+            kwargs[f.name] = _check_type(table[f.name], hints[f.name], f"{where}.{f.name}")
+        elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+            raise ConfigError(f"{where}: missing key '{f.name}'")
+    return kwargs
+
+
+def _read_toml(path: Path) -> dict:
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+
+
+def _positive(where: str, values) -> None:
+    for i, v in enumerate(values if isinstance(values, tuple) else (values,)):
+        if not v > 0.0:
+            raise ConfigError(f"{where}: must be > 0, got {v!r}" + (f" (entry {i})" if isinstance(values, tuple) else ""))
+
+
+def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
+    where = str(path)
+    kw = _build(VehicleParams, data.get("vehicle", {}), f"{where}: [vehicle]",
+                skip=("rotors", "task", "gains", "safety", "options"))
+    extra = set(data) - {"vehicle", "rotors", "task", "gains", "safety", "options"}
+    if extra:
+        raise ConfigError(f"{where}: unknown table [{sorted(extra)[0]}]")
+    sub = {}
+    for name, cls in (("rotors", RotorParams), ("task", TaskSpec), ("gains", Gains),
+                      ("safety", Safety), ("options", ControllerOptions)):
+        if name in data:
+            sub[name] = cls(**_build(cls, data[name], f"{where}: [{name}]"))
+        elif name in ("rotors", "task", "gains"):
+            raise ConfigError(f"{where}: missing table [{name}]")
+    urdf = (path.parent / kw.pop("urdf")).resolve()
+    if not urdf.is_file():
+        raise ConfigError(f"{where}: [vehicle].urdf: file not found: {urdf}")
+    v = VehicleParams(urdf=urdf, **kw, **sub)
+    n = v.n_joints
+    g = v.gains
+    for key, seq in (("q_nominal_rad", v.q_nominal_rad), ("joint_torque_max_nm", v.joint_torque_max_nm)):
+        if len(seq) != n:
+            raise ConfigError(f"{where}: [vehicle].{key}: expected {n} entries (one per arm joint), got {len(seq)}")
+    if len(v.task.components) != n:
+        raise ConfigError(f"{where}: [task].components: a non-redundant arm needs {n} task components, got {len(v.task.components)}")
+    for c in v.task.components:
+        if c not in ("x", "y", "z", "roll", "pitch", "yaw"):
+            raise ConfigError(f"{where}: [task].components: unknown component '{c}'")
+    for key in ("K_y", "D_y"):
+        if len(getattr(g, key)) != n:
+            raise ConfigError(f"{where}: [gains].{key}: expected {n} entries, got {len(getattr(g, key))}")
+    for key in ("K_t", "D_t", "k_R", "k_w", "Lambda_wb_d", "K_y", "D_y"):
+        _positive(f"{where}: [gains].{key}", getattr(g, key))
+    if v.safety.y_err_max and len(v.safety.y_err_max) != n:
+        raise ConfigError(f"{where}: [safety].y_err_max: expected {n} entries, got {len(v.safety.y_err_max)}")
+    _positive(f"{where}: [rotors].thrust_max_n", v.rotors.thrust_max_n)
+    _positive(f"{where}: [rotors].arm_length_m", v.rotors.arm_length_m)
+    _positive(f"{where}: [vehicle].joint_torque_max_nm", v.joint_torque_max_nm)
+    _positive(f"{where}: [options].force_filter_hz", v.options.force_filter_hz)
+    return v
+
+
+def load_vehicle(path: str | Path) -> VehicleParams:
+    path = Path(path).resolve()
+    return vehicle_from_dict(_read_toml(path), path)
+
+
+def load_scenario(path: str | Path) -> ScenarioSpec:
+    """Load a scenario TOML; its [scenario].vehicle names a vehicle TOML relative to it.
+
+    A scenario may override controller options with an [options] table (e.g. to turn
+    force compensation off) and safety settings with [safety].
+    """
+    path = Path(path).resolve()
+    data = _read_toml(path)
+    where = str(path)
+    extra = set(data) - {"scenario", "object", "mission", "am", "options", "safety"}
+    if extra:
+        raise ConfigError(f"{where}: unknown table [{sorted(extra)[0]}]")
+    if "scenario" not in data:
+        raise ConfigError(f"{where}: missing table [scenario]")
+    sc = dict(data["scenario"])
+    if "vehicle" not in sc:
+        raise ConfigError(f"{where}: [scenario]: missing key 'vehicle'")
+    vpath = (path.parent / sc.pop("vehicle")).resolve()
+    vdata = _read_toml(vpath)
+    for tbl in ("options", "safety"):
+        if tbl in data:
+            merged = dict(vdata.get(tbl, {}))
+            merged.update(data[tbl])
+            vdata[tbl] = merged
+    vehicle = vehicle_from_dict(vdata, vpath)
+    kw = _build(ScenarioSpec, sc, f"{where}: [scenario]", skip=("vehicle", "object", "mission", "ams", "path"))
+    if "object" not in data:
+        raise ConfigError(f"{where}: missing table [object]")
+    obj = ObjectSpec(**_build(ObjectSpec, data["object"], f"{where}: [object]"))
+    if obj.shape not in ("box", "cylinder"):
+        raise ConfigError(f"{where}: [object].shape: expected 'box' or 'cylinder', got '{obj.shape}'")
+    _positive(f"{where}: [object].mass_kg", obj.mass_kg)
+    if obj.shape == "cylinder":
+        _positive(f"{where}: [object].radius_m", obj.radius_m)
+        _positive(f"{where}: [object].height_m", obj.height_m)
+    else:
+        _positive(f"{where}: [object].size_m", obj.size_m)
+    mission = MissionSpec(**_build(MissionSpec, data.get("mission", {}), f"{where}: [mission]"))
+    if not (0 < mission.approach_end_s < mission.grasp_end_s < mission.hover_end_s):
+        raise ConfigError(f"{where}: [mission]: need 0 < approach_end_s < grasp_end_s < hover_end_s")
+    am_tables = data.get("am", [])
+    if not isinstance(am_tables, list) or not am_tables:
+        raise ConfigError(f"{where}: needs at least one [[am]] entry")
+    ams = tuple(AmSpec(**_build(AmSpec, t, f"{where}: [[am]] #{i + 1}")) for i, t in enumerate(am_tables))
+    seen = set()
+    for i, a in enumerate(ams):
+        if not 1 < a.sysid < 256:
+            raise ConfigError(f"{where}: [[am]] #{i + 1}.sysid: must be in 2..255 (1 is the simulator), got {a.sysid}")
+        if a.sysid in seen:
+            raise ConfigError(f"{where}: [[am]] #{i + 1}.sysid: duplicate sysid {a.sysid}")
+        seen.add(a.sysid)
+    spec = ScenarioSpec(vehicle=vehicle, object=obj, mission=mission, ams=ams, path=path, **kw)
+    _positive(f"{where}: [scenario].rate_hz", spec.rate_hz)
+    _positive(f"{where}: [scenario].duration_s", spec.duration_s)
+    return spec

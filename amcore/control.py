@@ -1,0 +1,271 @@
+"""Decentralized passivity-based controller of one AM (paper Sec. III-B).
+
+One call of `step` evaluates, at one measured state:
+- the CoM law with force compensation (eq. Com_controller): f_d, u_1 = f_d . R_b e_3;
+- the desired attitude (eq. Rd) with Omega_d and Omegadot_d from f_d's derivatives;
+- the orientation law (eq. ori_controller) with e_R, e_w (eq. ori_error, ori_vel_error);
+- the end-effector impedance law (eq. u3), which makes the task error obey
+      Lambda_y y~dd + D_y y~d + K_y y~ = F_y          (eq. desired_task_behavior);
+- tau = T^T u, whose first two entries vanish (thrust acts along body z only).
+
+Details the paper leaves implicit, as implemented here:
+- Gamma_xi uses pinocchio's skew-consistent C (see amcore.model).
+- w_b,d = R_b^T R_d Omega_d, so d/dt w_b,d = -hat(w_b) w_b,d + R_b^T R_d Omegadot_d.
+- f_d's derivatives use the model's CoM acceleration r_c_dd = (u_1 b_3 + F_rc)/m - g e_3
+  and the measured wrench after a 2nd-order low-pass whose derivatives are exact.
+- Without force compensation (options.force_compensation = false) the controller needs
+  no F/T sensor: F_rc leaves f_d and the CoM-acceleration prediction, F_wb leaves u_2.
+  Omega_d is then the angular velocity R_d would have in free flight (F_e = 0); under
+  contact it differs from the true rate of R_d by the unmodelled D_t F_rc / m terms,
+  and the measured wrench does not influence the command at all.
+- Singularity guard (beyond the paper): the CoM error entering f_d's spring is saturated at
+  safety.com_err_max_m, each task error at safety.y_err_max, and Jbar_3 is inverted by
+  damped least squares once its smallest singular value drops below safety.sigma_damping.
+  Away from those limits the law is exactly the paper's.
+- Option compensate_Lambda_y_dot adds 1/2 dLambda_y/dt y~d to the damping, which the
+  paper's storage argument (Theorem 2) drops; with it the storage balance is exact.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from .attitude import desired_attitude
+from .config import VehicleParams
+from .filters import FilterState, LowPass2, lowpass_accel, lowpass_update
+from .model import AmModel, AmState, decoupled_terms
+from .so3 import cross, hat, vee
+from .task import TaskFrame, task_terms
+
+E3 = np.array([0.0, 0.0, 1.0])
+
+
+@dataclass(frozen=True)
+class Reference:
+    """Desired trajectories at one instant.
+
+    r_c: CoM position in {w} [m] with derivatives up to snap (r_c_d4); the heading psi of
+    b_1d = [cos psi, sin psi, 0] [rad] with two derivatives; y_d in the task frame with two.
+    """
+
+    r_c: np.ndarray
+    r_c_d1: np.ndarray
+    r_c_d2: np.ndarray
+    r_c_d3: np.ndarray
+    r_c_d4: np.ndarray
+    psi: float
+    psi_d1: float
+    psi_d2: float
+    y: np.ndarray
+    y_d1: np.ndarray
+    y_d2: np.ndarray
+
+
+@dataclass(frozen=True)
+class ControllerParams:
+    """Everything constant about one AM's controller."""
+
+    gains_K_t: np.ndarray
+    gains_D_t: np.ndarray
+    k_R: float
+    k_w: float
+    Lambda_wb_d_inv: np.ndarray
+    K_y: np.ndarray
+    D_y: np.ndarray
+    com_err_max: float
+    y_err_max: np.ndarray
+    sigma_damping: float
+    damping_max: float
+    force_compensation: bool
+    compensate_Lambda_y_dot: bool
+    wrench_filter: LowPass2
+    task_frame: TaskFrame
+    components: tuple[str, ...]
+
+    @staticmethod
+    def from_vehicle(v: VehicleParams, task_frame: TaskFrame) -> "ControllerParams":
+        g, s, o = v.gains, v.safety, v.options
+        n = v.n_joints
+        return ControllerParams(
+            gains_K_t=np.diag(g.K_t), gains_D_t=np.diag(g.D_t), k_R=g.k_R, k_w=g.k_w,
+            Lambda_wb_d_inv=np.diag(1.0 / np.array(g.Lambda_wb_d)),
+            K_y=np.diag(g.K_y), D_y=np.diag(g.D_y),
+            com_err_max=s.com_err_max_m,
+            y_err_max=np.array(s.y_err_max) if s.y_err_max else np.full(n, np.inf),
+            sigma_damping=s.sigma_damping, damping_max=s.damping_max,
+            force_compensation=o.force_compensation, compensate_Lambda_y_dot=o.compensate_Lambda_y_dot,
+            wrench_filter=LowPass2(o.force_filter_hz, o.force_filter_zeta),
+            task_frame=task_frame, components=v.task.components,
+        )
+
+
+@dataclass(frozen=True)
+class ControllerMemory:
+    """What the controller carries from one step to the next (passed back in)."""
+
+    t_s: float | None = None
+    wrench: FilterState | None = None  # filtered [f; m] of F_e, world-aligned at {e} [N, N m]
+
+
+@dataclass(frozen=True)
+class Command:
+    """Torque-level setpoint: thrust along body z [N], body torque [N m], joint torques [N m]."""
+
+    thrust_n: float
+    tau_B_nm: np.ndarray
+    tau_q_nm: np.ndarray
+
+
+@dataclass
+class Diagnostics:
+    r_c: np.ndarray
+    r_c_d: np.ndarray
+    r_c_err: np.ndarray  # r~_c = r_c - r_c,d [m]
+    rdot_c: np.ndarray
+    e_R: np.ndarray
+    e_w: np.ndarray
+    R_WB: np.ndarray
+    R_d: np.ndarray
+    w_bd: np.ndarray
+    wdot_bd: np.ndarray
+    Omega_d: np.ndarray
+    f_d: np.ndarray
+    y: np.ndarray
+    y_d: np.ndarray
+    y_err: np.ndarray
+    ydot: np.ndarray
+    F_y: np.ndarray
+    F_rc: np.ndarray  # filtered end-effector force in {w} [N]
+    wrench_E_filtered: np.ndarray
+    sigma_min_J3: float
+    damping: float
+    com_err_saturated: bool
+    y_err_saturated: bool
+    u: np.ndarray
+    tau: np.ndarray
+    Lambda_y: np.ndarray
+    Lambda_y_dot: np.ndarray | None = None
+
+
+@dataclass
+class StepResult:
+    command: Command
+    diagnostics: Diagnostics
+    memory: ControllerMemory
+
+
+def _saturation(e: np.ndarray, limit: float) -> tuple[float, np.ndarray | None]:
+    """Radial saturation sat(e) = e min(1, limit/|e|): returns (scale, P) with P = d sat / d e
+    where saturated (None otherwise). Derivatives of sat(e) are taken as P e^(k): exact for the
+    first, the saturation's curvature is dropped in higher ones (feed-forward only)."""
+    n = float(np.linalg.norm(e))
+    if n <= limit:
+        return 1.0, None
+    return limit / n, (np.eye(3) - np.outer(e, e) / n**2) * (limit / n)
+
+
+def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmState,
+         ref: Reference, wrench_E: np.ndarray, memory: ControllerMemory, t_s: float) -> StepResult:
+    """One evaluation of eqs. Com_controller, Rd, ori_controller and u3 at time t_s [s].
+
+    wrench_E: the wrench [f_e; tau_e] the environment applies on the end-effector,
+    expressed in {e} (an F/T sensor's reading) [N, N m].
+    """
+    p = params
+    m, g = model.mass_kg, model.gravity_mps2
+    need_full = p.compensate_Lambda_y_dot
+    tm = decoupled_terms(model, data, state, full=need_full)
+    tk = task_terms(model, data, tm, p.task_frame, p.components, full=need_full)
+    R, w = state.R_WB, state.w_B
+    xi = tm.xi
+
+    # --- measured wrench: world-aligned at {e}, low-pass filtered (exact derivatives)
+    R_WE = tk.R_WE
+    raw_W = np.concatenate([R_WE @ wrench_E[0:3], R_WE @ wrench_E[3:6]])
+    dt = 0.0 if memory.t_s is None else t_s - memory.t_s
+    filt = lowpass_update(p.wrench_filter, memory.wrench, raw_W, dt)
+    filt_dd = lowpass_accel(p.wrench_filter, filt, raw_W)
+    F_W, F_W_d, F_W_dd = filt.x[0:3], filt.xdot[0:3], filt_dd[0:3]
+    wrench_E_f = np.concatenate([R_WE.T @ filt.x[0:3], R_WE.T @ filt.x[3:6]])
+    F_xi = tm.T_inv.T @ (tk.J_e.T @ wrench_E_f)
+    s = 1.0 if p.force_compensation else 0.0
+
+    # --- CoM law, eq. Com_controller
+    b3 = R[:, 2]
+    b3_d = R @ cross(w, E3)
+    e = tm.r_c - ref.r_c
+    ed = xi[0:3] - ref.r_c_d1
+    scale, P = _saturation(e, p.com_err_max)
+    sat = (lambda x: x) if P is None else (lambda x: P @ x)
+    f_d = m * ref.r_c_d2 + m * g * E3 - s * F_W - p.gains_K_t @ (scale * e) - p.gains_D_t @ ed
+    u1 = float(f_d @ b3)
+    a_c = (u1 * b3 + s * F_W) / m - g * E3  # model CoM acceleration (F_rc only if measured)
+    edd = a_c - ref.r_c_d2
+    f_d_d = m * ref.r_c_d3 - p.gains_K_t @ sat(ed) - p.gains_D_t @ edd - s * F_W_d
+    u1_d = float(f_d_d @ b3 + f_d @ b3_d)
+    a_c_d = (u1_d * b3 + u1 * b3_d + s * F_W_d) / m
+    eddd = a_c_d - ref.r_c_d3
+    f_d_dd = m * ref.r_c_d4 - p.gains_K_t @ sat(edd) - p.gains_D_t @ eddd - s * F_W_dd
+    com_sat = P is not None
+
+    # --- desired attitude, eq. Rd
+    c, sn = np.cos(ref.psi), np.sin(ref.psi)
+    b1 = np.array([c, sn, 0.0])
+    b1_d = ref.psi_d1 * np.array([-sn, c, 0.0])
+    b1_dd = ref.psi_d2 * np.array([-sn, c, 0.0]) - ref.psi_d1**2 * np.array([c, sn, 0.0])
+    R_d, Om_d, Omd_d = desired_attitude(f_d, f_d_d, f_d_dd, b1, b1_d, b1_dd)
+
+    # --- orientation law, eq. ori_controller
+    e_R = 0.5 * vee(R_d.T @ R - R.T @ R_d)
+    RtRd = R.T @ R_d
+    w_bd = RtRd @ Om_d
+    e_w = w - w_bd
+    wdot_bd = -cross(w, w_bd) + RtRd @ Omd_d
+    Lam_w = tm.Lambda_xi[3:6, 3:6]
+    Gxi = tm.Gamma_xi_xi
+    u2 = Lam_w @ (wdot_bd - p.Lambda_wb_d_inv @ (p.k_R * e_R + p.k_w * e_w)) + Gxi[3:6] - s * F_xi[3:6]
+
+    # --- end-effector impedance law, eq. u3
+    Li = tm.Lambda_xi_inv
+    J = tk.J
+    LiJt = Li @ J.T
+    Lambda_y = np.linalg.inv(J @ LiJt)
+    Jbar = Lambda_y @ LiJt.T  # (J^{Lambda+})^T = Lambda_y J Lambda_xi^-1
+    y_err = tk.y - ref.y
+    y_err_s = np.clip(y_err, -p.y_err_max, p.y_err_max)
+    ydot = J @ xi
+    yd_err = ydot - ref.y_d1
+    rhs = -(Lambda_y @ (tk.Jdot_xi - ref.y_d2) + p.D_y @ yd_err + p.K_y @ y_err_s)
+    Lambda_y_dot = None
+    if p.compensate_Lambda_y_dot:
+        Lxi_dot = tm.Gamma_xi + tm.Gamma_xi.T
+        Jd = tk.Jdot
+        inner = Jd @ LiJt + LiJt.T @ Jd.T - LiJt.T @ Lxi_dot @ LiJt
+        Lambda_y_dot = -Lambda_y @ inner @ Lambda_y
+        rhs = rhs - 0.5 * Lambda_y_dot @ yd_err
+    known = Jbar[:, 0:3] @ (u1 * b3 - m * g * E3) + Jbar[:, 3:6] @ (u2 - Gxi[3:6])
+    J3 = Jbar[:, 6:]
+    sv = np.linalg.svd(J3, compute_uv=False)
+    sigma_min = float(sv[-1])
+    damping = 0.0
+    if sigma_min >= p.sigma_damping:
+        u3 = Gxi[6:] + np.linalg.solve(J3, rhs - known)
+    else:
+        damping = p.damping_max**2 * (1.0 - (sigma_min / p.sigma_damping) ** 2)
+        n = J3.shape[0]
+        u3 = Gxi[6:] + J3.T @ np.linalg.solve(J3 @ J3.T + damping * np.eye(n), rhs - known)
+
+    u = np.concatenate([u1 * b3, u2, u3])
+    tau = tm.T.T @ u
+    F_y = Jbar @ F_xi
+    cmd = Command(thrust_n=float(tau[2]), tau_B_nm=tau[3:6].copy(), tau_q_nm=tau[6:].copy())
+    diag = Diagnostics(
+        r_c=tm.r_c, r_c_d=ref.r_c, r_c_err=e, rdot_c=xi[0:3].copy(), e_R=e_R, e_w=e_w, R_WB=R, R_d=R_d,
+        w_bd=w_bd, wdot_bd=wdot_bd, Omega_d=Om_d, f_d=f_d, y=tk.y, y_d=ref.y, y_err=y_err, ydot=ydot,
+        F_y=F_y, F_rc=F_W.copy(), wrench_E_filtered=wrench_E_f, sigma_min_J3=sigma_min, damping=damping,
+        com_err_saturated=com_sat, y_err_saturated=bool(np.any(y_err_s != y_err)), u=u, tau=tau,
+        Lambda_y=Lambda_y, Lambda_y_dot=Lambda_y_dot,
+    )
+    return StepResult(cmd, diag, ControllerMemory(t_s=t_s, wrench=filt))

@@ -1,0 +1,131 @@
+"""Per-AM references for the paper's grasp scenario (Sec. V), derived from a scenario.
+
+Each AM computes its own references from the shared [mission] table, the object's
+nominal geometry and its own [[am]] entry; it never sees another AM's state.
+
+Task frame {t} of an AM: origin at the object's rest centre, x axis pointing from the
+AM towards the object (the AM's heading), z up. In {t} the AM's pad works at negative x.
+Phases (paper Sec. V): approach 0..approach_end_s (free flight; the pad stops pre_gap_m
+outside the surface), grasp ..grasp_end_s (y_x,d moves squeeze_m inside the object so the
+pads squeeze; the CoM moves only by pre_gap_m so that at contact the arm sits at its
+nominal pose), lift and hover ..hover_end_s (CoM and y_z,d rise by lift_m).
+The CoM reference is derived from the end-effector reference through the nominal arm
+pose (paper Sec. IV, "CoM trajectory"), computed from the URDF, not entered.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from .config import AmSpec, ObjectSpec, ScenarioSpec
+from .control import Reference
+from .model import AmModel, AmState, create_data
+from .so3 import Rz
+from .task import TaskFrame, angle_of
+from .trajectory import SmoothPath, path_through
+
+
+@dataclass(frozen=True)
+class NominalGeometry:
+    """At q_nominal with a level base: end-effector and CoM offsets from {b}'s origin [m]."""
+
+    p_BE: np.ndarray
+    r_BC: np.ndarray
+    pitch_rad: float
+
+
+def nominal_geometry(model: AmModel) -> NominalGeometry:
+    pm = model.pin_model
+    data = create_data(model)
+    q = pin.neutral(pm)
+    q[7:] = model.vehicle.q_nominal_rad
+    pin.framesForwardKinematics(pm, data, q)
+    com = pin.centerOfMass(pm, data, q)
+    R_BE = data.oMf[model.ee_frame_id].rotation
+    return NominalGeometry(
+        p_BE=data.oMf[model.ee_frame_id].translation.copy(), r_BC=com.copy(), pitch_rad=angle_of(R_BE, "pitch")
+    )
+
+
+def surface_distance(obj: ObjectSpec, azimuth_rad: float) -> float:
+    """Distance [m] from the object's vertical axis to its side along the horizontal direction azimuth."""
+    if obj.shape == "cylinder":
+        return obj.radius_m
+    hx, hy = 0.5 * obj.size_m[0], 0.5 * obj.size_m[1]
+    c, s = abs(np.cos(azimuth_rad)), abs(np.sin(azimuth_rad))
+    return min(hx / c if c > 1e-12 else np.inf, hy / s if s > 1e-12 else np.inf)
+
+
+@dataclass(frozen=True)
+class AmMission:
+    """References of one AM: CoM and task paths in {t}, heading, and the task frame."""
+
+    sysid: int
+    frame: TaskFrame
+    psi: float
+    com_path_t: SmoothPath  # CoM in {t}
+    y_path: SmoothPath  # y_d = (x, z, pitch) in {t}
+    nominal: NominalGeometry
+    q_nominal: tuple[float, ...]
+    phase_ends_s: tuple[float, float, float]
+
+    def reference(self, t: float) -> Reference:
+        c = self.com_path_t.eval(t, 4)
+        R = self.frame.R_WT
+        y = self.y_path.eval(t, 2)
+        return Reference(
+            r_c=self.frame.p_WT + R @ c[0], r_c_d1=R @ c[1], r_c_d2=R @ c[2], r_c_d3=R @ c[3], r_c_d4=R @ c[4],
+            psi=self.psi, psi_d1=0.0, psi_d2=0.0, y=y[0], y_d1=y[1], y_d2=y[2],
+        )
+
+    def phase(self, t: float) -> str:
+        a, g, _ = self.phase_ends_s
+        return "approach" if t < a else ("grasp" if t < g else "hover")
+
+    def initial_state(self) -> AmState:
+        """At rest on the reference at t = 0, level, arm at the nominal pose."""
+        r = self.reference(0.0)
+        R_WB = Rz(self.psi)
+        p_WB = r.r_c - R_WB @ self.nominal.r_BC
+        return AmState(p_WB=p_WB, R_WB=R_WB, v_B=np.zeros(3), w_B=np.zeros(3),
+                       q=np.array(self.q_nominal), qdot=np.zeros(len(self.q_nominal)))
+
+
+def am_mission(spec: ScenarioSpec, am: AmSpec, model: AmModel) -> AmMission:
+    """Build AM `am`'s references from the scenario. Needs task components (x, z, pitch)."""
+    if tuple(spec.vehicle.task.components) != ("x", "z", "pitch"):
+        raise ValueError(f"the grasp mission is defined for task components (x, z, pitch), "
+                         f"vehicle has {spec.vehicle.task.components}")
+    ms = spec.mission
+    az = np.deg2rad(am.azimuth_deg)
+    psi = az + np.pi  # face the object
+    frame = TaskFrame(R_WT=Rz(psi), p_WT=np.array(spec.object.position_m, dtype=float))
+    geo = nominal_geometry(model)
+    d = geo.p_BE - geo.r_BC  # end-effector relative to CoM, level, in {b} = {t} orientation
+    half = surface_distance(spec.object, az)
+    pitch = geo.pitch_rad  # hold the nominal pose's pad orientation
+    y0 = np.array([-(half + ms.standoff_m), ms.start_height_m, pitch])
+    y_app = np.array([-(half + ms.pre_gap_m), 0.0, pitch])
+    y_grasp = np.array([-(half - ms.squeeze_m), 0.0, pitch])
+    y_lift = y_grasp + np.array([0.0, ms.lift_m, 0.0])
+    t_a, t_g = ms.approach_end_s, ms.grasp_end_s
+    if ms.approach_move_s > t_a or t_a + ms.grasp_move_s > t_g or t_g + ms.lift_move_s > ms.hover_end_s:
+        raise ValueError("mission moves do not fit in their phases")
+    y_path = path_through(y0, [(0.0, ms.approach_move_s, y_app), (t_a, t_a + ms.grasp_move_s, y_grasp),
+                               (t_g, t_g + ms.lift_move_s, y_lift)])
+
+    def com_of(y_xz):
+        return np.array([y_xz[0] - d[0], 0.0, y_xz[1] - d[2]])
+
+    c_contact = com_of([-half, 0.0])
+    com_path = path_through(com_of(y0[:2]), [
+        (0.0, ms.approach_move_s, com_of(y_app[:2])),
+        (t_a, t_a + ms.grasp_move_s, c_contact),
+        (t_g, t_g + ms.lift_move_s, c_contact + np.array([0.0, 0.0, ms.lift_m])),
+    ])
+    mission = AmMission(sysid=am.sysid, frame=frame, psi=psi, com_path_t=com_path, y_path=y_path,
+                        nominal=geo, q_nominal=tuple(spec.vehicle.q_nominal_rad),
+                        phase_ends_s=(t_a, t_g, ms.hover_end_s))
+    return mission

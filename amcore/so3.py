@@ -1,0 +1,68 @@
+"""Small SO(3) helpers: hat/vee (eq. hat), quaternion <-> rotation matrix, elementary rotations."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def hat(r: np.ndarray) -> np.ndarray:
+    """Skew-symmetric matrix of r (eq. hat): hat(r) @ x == np.cross(r, x)."""
+    x, y, z = r
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def vee(S: np.ndarray) -> np.ndarray:
+    """Inverse of hat for a skew-symmetric matrix (uses the antisymmetric part)."""
+    return 0.5 * np.array([S[2, 1] - S[1, 2], S[0, 2] - S[2, 0], S[1, 0] - S[0, 1]])
+
+
+def quat_wxyz_to_R(qwxyz: np.ndarray) -> np.ndarray:
+    """Rotation matrix of a unit quaternion given as (w, x, y, z); normalises first."""
+    w, x, y, z = np.asarray(qwxyz, dtype=float) / np.linalg.norm(qwxyz)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def R_to_quat_wxyz(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) with w >= 0 of a rotation matrix (Shepperd's method)."""
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    if tr > 0.0:
+        s = 2.0 * np.sqrt(tr + 1.0)
+        q = np.array([0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s])
+    else:
+        i = int(np.argmax(np.diag(R)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * np.sqrt(1.0 + R[i, i] - R[j, j] - R[k, k])
+        q = np.empty(4)
+        q[0] = (R[k, j] - R[j, k]) / s
+        q[1 + i] = 0.25 * s
+        q[1 + j] = (R[j, i] + R[i, j]) / s
+        q[1 + k] = (R[k, i] + R[i, k]) / s
+    q /= np.linalg.norm(q)
+    return q if q[0] >= 0.0 else -q
+
+
+def Rz(psi: float) -> np.ndarray:
+    """Rotation about z by psi [rad]."""
+    c, s = np.cos(psi), np.sin(psi)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def exp_so3(w: np.ndarray) -> np.ndarray:
+    """Rodrigues' formula: rotation exp(hat(w))."""
+    th = float(np.linalg.norm(w))
+    if th < 1e-12:
+        return np.eye(3) + hat(w)
+    K = hat(np.asarray(w) / th)
+    return np.eye(3) + np.sin(th) * K + (1.0 - np.cos(th)) * (K @ K)
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b for 3-vectors; np.cross costs ~50x more on this size (axis handling)."""
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])

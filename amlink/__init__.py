@@ -1,0 +1,32 @@
+"""amlink: the wire protocol between the simulator and the companions, defined once.
+
+* :mod:`amlink.dialect` -- the amstack MAVLink 2 dialect (XML in ``amlink/dialect/``),
+  generated with pymavlink's mavgen into a cache on first use.
+* :mod:`amlink.types` -- value types (numpy only): SensorFrame, TorqueSetpoint,
+  AttitudeTarget, ScenarioInfo.
+* :mod:`amlink.codec` -- value types <-> MAVLink frames.
+* :mod:`amlink.lockstep` -- SimServer / CompanionClient over UDP.
+
+Importing this package does no I/O; the dialect is generated when
+:mod:`amlink.codec` (or anything that needs it) is first imported.
+"""
+
+from amlink.types import (
+    MAX_JOINTS,
+    AttitudeTarget,
+    ScenarioInfo,
+    SensorFrame,
+    SetpointFlag,
+    StepFlag,
+    TorqueSetpoint,
+)
+
+__all__ = [
+    "MAX_JOINTS",
+    "AttitudeTarget",
+    "ScenarioInfo",
+    "SensorFrame",
+    "SetpointFlag",
+    "StepFlag",
+    "TorqueSetpoint",
+]

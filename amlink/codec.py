@@ -1,0 +1,366 @@
+"""Encode/decode amlink value types to/from MAVLink 2 frames of the amstack dialect.
+
+Batches (each one UDP datagram, frames concatenated, the marker frame LAST):
+
+* sensor batch, simulator -> companion:
+  ``ODOMETRY, AM_JOINT_STATE, AM_WRENCH, AM_SIM_STEP``
+* setpoint batch, companion -> simulator:
+  ``[SET_ATTITUDE_TARGET,] AM_TORQUE_SETPOINT``
+
+ODOMETRY conventions (documented choice): ``frame_id = MAV_FRAME_LOCAL_ENU`` (4),
+the only earth-fixed z-up frame in common.xml with fixed axes (the simulator's
+world x/y are read as east/north); ``child_frame_id = MAV_FRAME_RESERVED_13`` (13),
+which common.xml documents as the former ``MAV_FRAME_BODY_FLU`` (x forward,
+y left, z up) -- deprecated, but the only value whose definition is a FLU body
+frame (``MAV_FRAME_LOCAL_FLU`` is earth-fixed; ``MAV_FRAME_BODY_FRD`` is z down).
+Pose = p_WB [m] and q_WB (w, x, y, z); twist = v_B [m/s], w_B [rad/s], both in B.
+``time_usec`` = simulation time.  The decoder rejects other frame ids.
+
+SET_ATTITUDE_TARGET is defined by MAVLink as NED <- FRD; :class:`AttitudeTarget`
+is ENU <- FLU, so the codec converts at this edge (a fixed quaternion map).
+
+Floats: ODOMETRY and SET_ATTITUDE_TARGET force float32; amstack messages carry
+float64.  Decoding rejects non-finite values with :class:`NonFiniteValueError`.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass
+
+
+from amlink import dialect
+from amlink.types import (
+    MAX_JOINTS,
+    AttitudeTarget,
+    ScenarioInfo,
+    SensorFrame,
+    StepFlag,
+    TorqueSetpoint,
+)
+
+mav = dialect.load()
+
+ODOM_FRAME_ID = mav.MAV_FRAME_LOCAL_ENU
+ODOM_CHILD_FRAME_ID = mav.MAV_FRAME_RESERVED_13  # formerly MAV_FRAME_BODY_FLU
+_UNKNOWN_COV = [math.nan] + [0.0] * 20  # MAVLink: NaN first element = unknown
+_ZEROS = [0.0] * MAX_JOINTS
+_H = math.sqrt(0.5)
+
+
+class CodecError(ValueError):
+    """Base class of encode/decode errors."""
+
+
+class EncodeError(CodecError):
+    """A value cannot be put on the wire (non-finite, out of range)."""
+
+
+class NonFiniteValueError(CodecError):
+    """A decoded float is NaN or infinite; ``field`` names the message field."""
+
+    def __init__(self, message: str, field: str):
+        super().__init__(f"non-finite value in {message}.{field}")
+        self.message = message
+        self.field = field
+
+
+class BatchMismatchError(CodecError):
+    """The frames of one batch disagree (step/time) or a part is missing."""
+
+
+class FrameConventionError(CodecError):
+    """ODOMETRY carries frame ids other than LOCAL_ENU / BODY_FLU."""
+
+
+def all_finite(values) -> bool:
+    """True if every float in ``values`` is finite (fast path: one sum)."""
+    if math.isfinite(sum(values)):
+        return True
+    return all(map(math.isfinite, values))  # a finite sum can only overflow, recheck
+
+
+def _check_finite(msgname: str, field: str, values) -> None:
+    if not all_finite(values):
+        raise NonFiniteValueError(msgname, field)
+
+
+def _pad(values: list[float]) -> list[float]:
+    return values + _ZEROS[len(values) :]
+
+
+def _usec(time_s: float) -> int:
+    if not (math.isfinite(time_s) and time_s >= 0.0):
+        raise EncodeError(f"time_s must be finite and >= 0, got {time_s}")
+    return round(time_s * 1e6)
+
+
+# -- attitude frame conversion (ENU <- FLU)  <->  (NED <- FRD) ------------------
+
+
+def enu_flu_to_ned_frd(q_wxyz) -> tuple[float, float, float, float]:
+    """Map q_ENU_FLU (W <- B) to q_NED_FRD, the convention of SET_ATTITUDE_TARGET.
+
+    q_NED_FRD = -(q_NED_ENU * q_ENU_FLU * q_FLU_FRD) with q_NED_ENU = (0, h, h, 0),
+    q_FLU_FRD = (0, 1, 0, 0), h = sqrt(1/2); the overall sign (same rotation) is
+    dropped so the map is linear, orthogonal and its own inverse.
+    """
+    w, x, y, z = q_wxyz
+    return (_H * (w + z), _H * (x + y), _H * (x - y), _H * (w - z))
+
+
+ned_frd_to_enu_flu = enu_flu_to_ned_frd  # the map is an involution
+
+
+# -- message builders ---------------------------------------------------------
+
+
+def sensor_frame_messages(frame: SensorFrame, scenario_id: int = 0) -> list:
+    """The four messages of a sensor batch, AM_SIM_STEP last."""
+    t_us = _usec(frame.time_s)
+    p, qt = frame.p_WB.tolist(), frame.quat_WB_wxyz.tolist()
+    v, w = frame.v_B.tolist(), frame.w_B.tolist()
+    q, qdot, wr = frame.q.tolist(), frame.qdot.tolist(), frame.wrench_E.tolist()
+    if not all_finite(p + qt + v + w + q + qdot + wr):
+        raise EncodeError(f"non-finite value in SensorFrame step {frame.step}")
+    odom = mav.MAVLink_odometry_message(
+        t_us, ODOM_FRAME_ID, ODOM_CHILD_FRAME_ID, p[0], p[1], p[2], qt,
+        v[0], v[1], v[2], w[0], w[1], w[2],
+        _UNKNOWN_COV, _UNKNOWN_COV, 0, mav.MAV_ESTIMATOR_TYPE_NAIVE, 100,
+    )  # fmt: skip
+    joints = mav.MAVLink_am_joint_state_message(frame.step, len(q), _pad(q), _pad(qdot))
+    wrench = mav.MAVLink_am_wrench_message(frame.step, wr[:3], wr[3:])
+    step = mav.MAVLink_am_sim_step_message(frame.step, t_us, scenario_id, int(frame.flags))
+    return [odom, joints, wrench, step]
+
+
+def shutdown_message(step: int, time_s: float, scenario_id: int = 0) -> object:
+    """A bare AM_SIM_STEP with the SHUTDOWN flag (the last message of a run)."""
+    return mav.MAVLink_am_sim_step_message(step, _usec(time_s), scenario_id, int(StepFlag.SHUTDOWN))
+
+
+def setpoint_messages(
+    sp: TorqueSetpoint, attitude: AttitudeTarget | None = None, time_boot_ms: int = 0,
+    target_system: int = 1, target_component: int = 1,
+) -> list:  # fmt: skip
+    """The messages of a setpoint batch, AM_TORQUE_SETPOINT last."""
+    tau_B, tau_q = sp.tau_B_nm.tolist(), sp.tau_q_nm.tolist()
+    if not all_finite([sp.thrust_n, *tau_B, *tau_q]):
+        raise EncodeError(f"non-finite value in TorqueSetpoint step {sp.step}")
+    out = []
+    if attitude is not None:
+        quat, r = attitude.quat_wxyz.tolist(), attitude.rates_rad_s.tolist()
+        if not all_finite([*quat, *r, attitude.thrust_normalized]):
+            raise EncodeError(f"non-finite value in AttitudeTarget step {attitude.step}")
+        # FLU -> FRD body rates: (p, q, r) -> (p, -q, -r)
+        out.append(mav.MAVLink_set_attitude_target_message(
+            time_boot_ms & 0xFFFFFFFF, target_system, target_component, 0,
+            list(enu_flu_to_ned_frd(quat)), r[0], -r[1], -r[2], attitude.thrust_normalized,
+        ))  # fmt: skip
+    out.append(mav.MAVLink_am_torque_setpoint_message(
+        sp.step, sp.thrust_n, tau_B, len(tau_q), _pad(tau_q), int(sp.flags),
+    ))  # fmt: skip
+    return out
+
+
+def scenario_message(info: ScenarioInfo) -> object:
+    return mav.MAVLink_am_scenario_message(
+        info.scenario_id, info.n_am, info.name.encode("ascii"), info.seed, info.rate_hz
+    )
+
+
+# -- decoders -------------------------------------------------------------------
+
+
+def scenario_from_message(msg) -> ScenarioInfo:
+    name = msg.name.decode("ascii", errors="replace") if isinstance(msg.name, bytes) else msg.name
+    if not math.isfinite(msg.rate_hz):
+        raise NonFiniteValueError("AM_SCENARIO", "rate_hz")
+    return ScenarioInfo(msg.scenario_id, msg.n_am, name.rstrip("\x00"), msg.seed, msg.rate_hz)
+
+
+def sensor_frame_from_messages(odom, joints, wrench, step_msg) -> SensorFrame:
+    """Assemble a :class:`SensorFrame` from the four messages of one batch.
+
+    Raises BatchMismatchError if the steps (or ODOMETRY/AM_SIM_STEP times)
+    disagree, FrameConventionError on unexpected ODOMETRY frames, and
+    NonFiniteValueError on NaN/inf.
+    """
+    step = step_msg.step
+    if joints.step != step or wrench.step != step:
+        raise BatchMismatchError(
+            f"batch steps disagree: AM_SIM_STEP {step}, AM_JOINT_STATE {joints.step}, AM_WRENCH {wrench.step}"
+        )
+    if odom.time_usec != step_msg.time_usec:
+        raise BatchMismatchError(
+            f"step {step}: ODOMETRY time_usec {odom.time_usec} != AM_SIM_STEP time_usec {step_msg.time_usec}"
+        )
+    if odom.frame_id != ODOM_FRAME_ID or odom.child_frame_id != ODOM_CHILD_FRAME_ID:
+        raise FrameConventionError(
+            f"ODOMETRY frames ({odom.frame_id}, {odom.child_frame_id}) != (LOCAL_ENU, BODY_FLU)"
+            f" = ({ODOM_FRAME_ID}, {ODOM_CHILD_FRAME_ID})"
+        )
+    n = joints.n_joints
+    if n > MAX_JOINTS:
+        raise CodecError(f"AM_JOINT_STATE.n_joints={n} > {MAX_JOINTS}")
+    base = (odom.x, odom.y, odom.z, *odom.q, odom.vx, odom.vy, odom.vz,
+            odom.rollspeed, odom.pitchspeed, odom.yawspeed)  # fmt: skip
+    _check_finite("ODOMETRY", "pose/twist", base)
+    q, qdot = joints.position_rad[:n], joints.velocity_rad_s[:n]
+    _check_finite("AM_JOINT_STATE", "position_rad", q)
+    _check_finite("AM_JOINT_STATE", "velocity_rad_s", qdot)
+    wr = (*wrench.force_n, *wrench.torque_nm)
+    _check_finite("AM_WRENCH", "force_n/torque_nm", wr)
+    return SensorFrame(
+        step=step, time_s=step_msg.time_usec / 1e6,
+        p_WB=base[0:3], quat_WB_wxyz=base[3:7], v_B=base[7:10], w_B=base[10:13],
+        q=q, qdot=qdot, wrench_E=wr, flags=step_msg.flags,
+    )  # fmt: skip
+
+
+def setpoint_from_message(msg) -> TorqueSetpoint:
+    n = msg.n_joints
+    if n > MAX_JOINTS:
+        raise CodecError(f"AM_TORQUE_SETPOINT.n_joints={n} > {MAX_JOINTS}")
+    if not math.isfinite(msg.thrust_n):
+        raise NonFiniteValueError("AM_TORQUE_SETPOINT", "thrust_n")
+    tau_B, tau_q = msg.body_torque_nm, msg.joint_torque_nm[:n]
+    _check_finite("AM_TORQUE_SETPOINT", "body_torque_nm", tau_B)
+    _check_finite("AM_TORQUE_SETPOINT", "joint_torque_nm", tau_q)
+    return TorqueSetpoint(msg.step, msg.thrust_n, tau_B, tau_q, msg.flags)
+
+
+def attitude_from_message(msg, step: int) -> AttitudeTarget:
+    vals = (*msg.q, msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate, msg.thrust)
+    _check_finite("SET_ATTITUDE_TARGET", "q/rates/thrust", vals)
+    rates = (vals[4], -vals[5], -vals[6])  # FRD -> FLU
+    return AttitudeTarget(step, ned_frd_to_enu_flu(vals[0:4]), rates, vals[7])
+
+
+# -- stateful assemblers (one per connection) ---------------------------------
+
+
+@dataclass(frozen=True)
+class Shutdown:
+    """The simulator announced the end of the run (AM_SIM_STEP with SHUTDOWN)."""
+
+    step: int
+    time_s: float
+    flags: StepFlag
+
+
+class SensorFrameAssembler:
+    """Collects the parts of a sensor batch; emits when its AM_SIM_STEP arrives.
+
+    Parts may arrive across several datagrams. A batch with missing parts raises
+    BatchMismatchError; a SHUTDOWN step emits :class:`Shutdown` whatever came before.
+    """
+
+    def __init__(self) -> None:
+        self._odom = self._joints = self._wrench = None
+
+    def push(self, msg) -> SensorFrame | Shutdown | None:
+        mid = msg.get_msgId()  # not msg.id: STATUSTEXT has a field named "id"
+        if mid == mav.MAVLINK_MSG_ID_ODOMETRY:
+            self._odom = msg
+        elif mid == mav.MAVLINK_MSG_ID_AM_JOINT_STATE:
+            self._joints = msg
+        elif mid == mav.MAVLINK_MSG_ID_AM_WRENCH:
+            self._wrench = msg
+        elif mid == mav.MAVLINK_MSG_ID_AM_SIM_STEP:
+            odom, joints, wrench = self._odom, self._joints, self._wrench
+            self._odom = self._joints = self._wrench = None
+            if msg.flags & StepFlag.SHUTDOWN:
+                return Shutdown(msg.step, msg.time_usec / 1e6, StepFlag(msg.flags))
+            if odom is None or joints is None or wrench is None:
+                missing = [n for n, m in (("ODOMETRY", odom), ("AM_JOINT_STATE", joints), ("AM_WRENCH", wrench))
+                           if m is None]  # fmt: skip
+                raise BatchMismatchError(f"step {msg.step}: batch incomplete, missing {', '.join(missing)}")
+            return sensor_frame_from_messages(odom, joints, wrench, msg)
+        return None
+
+
+class SetpointAssembler:
+    """Pairs an optional SET_ATTITUDE_TARGET with the AM_TORQUE_SETPOINT that follows it."""
+
+    def __init__(self) -> None:
+        self._attitude = None
+
+    def push(self, msg) -> tuple[TorqueSetpoint, AttitudeTarget | None] | None:
+        mid = msg.get_msgId()  # not msg.id: STATUSTEXT has a field named "id"
+        if mid == mav.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET:
+            self._attitude = msg
+        elif mid == mav.MAVLINK_MSG_ID_AM_TORQUE_SETPOINT:
+            att_msg, self._attitude = self._attitude, None
+            sp = setpoint_from_message(msg)
+            return sp, (attitude_from_message(att_msg, sp.step) if att_msg is not None else None)
+        return None
+
+
+# -- byte level: one encoder/decoder per link ------------------------------------
+
+
+class _Sink:
+    """File-like target for MAVLink.send that collects frames for one datagram."""
+
+    def __init__(self) -> None:
+        self.parts: list[bytes] = []
+
+    def write(self, data: bytes) -> None:
+        self.parts.append(data)
+
+
+class Encoder:
+    """Packs messages as (sysid, compid) on one link; owns the MAVLink sequence number.
+
+    :meth:`pack` is the single place frames are serialized (hook for MAVLink 2
+    signing: set ``self.mavlink.signing``).
+    """
+
+    def __init__(self, sysid: int, compid: int) -> None:
+        self._sink = _Sink()
+        self.mavlink = mav.MAVLink(self._sink, srcSystem=sysid, srcComponent=compid)
+
+    def pack(self, msgs) -> bytes:
+        """Serialize ``msgs`` into one datagram (concatenated MAVLink 2 frames)."""
+        sink = self._sink
+        try:
+            for m in msgs:
+                self.mavlink.send(m)
+        except (struct.error, OverflowError) as exc:
+            sink.parts.clear()
+            raise EncodeError(f"cannot pack {m.msgname}: {exc}") from exc
+        data = b"".join(sink.parts)
+        sink.parts.clear()
+        return data
+
+
+class Decoder:
+    """Parses datagrams from one peer into messages (a MAVLink parser per link).
+
+    Corrupt frames are dropped and counted in ``bad_frames``; bytes of a frame
+    truncated at the end of a datagram are discarded (UDP carries whole frames).
+    """
+
+    def __init__(self) -> None:
+        self.mavlink = mav.MAVLink(None)
+        self.mavlink.robust_parsing = True
+        self.bad_frames = 0
+
+    def feed(self, datagram: bytes) -> list:
+        """All valid messages in ``datagram``, in order."""
+        p = self.mavlink
+        msgs = p.parse_buffer(datagram) or []
+        if p.buf_len() != 0:  # truncated tail: drop it, next datagram starts afresh
+            self.bad_frames += 1
+            p.buf = bytearray()
+            p.buf_index = 0
+            p.expected_length = mav.HEADER_LEN_V1 + 2
+        good = []
+        for m in msgs:
+            if isinstance(m, (mav.MAVLink_bad_data, mav.MAVLink_unknown)):
+                self.bad_frames += 1
+            else:
+                good.append(m)
+        return good

@@ -1,0 +1,211 @@
+"""Value types exchanged between the simulator and a companion (numpy only, no I/O).
+
+Frames (Drake-style names, see STYLE.md):
+
+* ``W`` -- world frame, earth fixed, z up (x "east", y "north": ENU by convention).
+* ``B`` -- base (quadrotor body) frame, FLU: x forward, y left, z up.
+* ``E`` -- end-effector frame of the arm.
+
+Quaternions are scalar-first ``(w, x, y, z)``; ``quat_WB_wxyz`` rotates vectors
+expressed in B into W (``v_W = R(quat_WB) v_B``).
+
+All arrays are stored as read-only ``float64`` copies, so instances are truly
+immutable and can be shared between threads.  Note that the wire carries the base
+state (``p_WB``, ``quat_WB_wxyz``, ``v_B``, ``w_B``) as float32 because the
+standard ODOMETRY message does; the controller therefore sees float32-rounded
+base state.  Joint state, wrench and all setpoints travel as float64, exactly.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+MAX_JOINTS = 8
+"""Size of the fixed joint arrays in the amstack dialect."""
+
+SCENARIO_NAME_MAX_BYTES = 32
+"""Size of the AM_SCENARIO name field (ASCII, NUL padded)."""
+
+
+class StepFlag(enum.IntFlag):
+    """Flags of a sensor frame (AM_SIM_STEP.flags; mirrors enum AM_STEP_FLAG)."""
+
+    NONE = 0
+    SHUTDOWN = 1  # the run is ending; last message of the run
+    FAILSAFE = 2  # the simulator put this vehicle in failsafe
+
+
+class SetpointFlag(enum.IntFlag):
+    """Flags of a torque setpoint (AM_TORQUE_SETPOINT.flags; mirrors AM_SETPOINT_FLAG)."""
+
+    NONE = 0
+    FAULT = 1  # controller detected a fault; this is its safe fallback
+    SATURATED = 2  # thrust or a torque was clipped to its limit
+
+
+def _vec(name: str, value, size: int | None) -> np.ndarray:
+    """Read-only float64 copy of ``value``; ``size`` None means any length <= MAX_JOINTS."""
+    arr = np.array(value, dtype=np.float64)
+    if arr.ndim != 1:
+        raise ValueError(f"{name} must be 1-D, got shape {arr.shape}")
+    if size is None:
+        if arr.shape[0] > MAX_JOINTS:
+            raise ValueError(f"{name} has {arr.shape[0]} joints, at most {MAX_JOINTS} fit the wire")
+    elif arr.shape[0] != size:
+        raise ValueError(f"{name} must have shape ({size},), got {arr.shape}")
+    arr.setflags(write=False)
+    return arr
+
+
+_STEP_FLAGS = tuple(StepFlag(i) for i in range(256))  # enum construction is slow; 1 kHz path
+_SETPOINT_FLAGS = tuple(SetpointFlag(i) for i in range(256))
+
+
+def _uint(name: str, value: int, bits: int) -> int:
+    value = int(value)
+    if not 0 <= value < (1 << bits):
+        raise ValueError(f"{name}={value} does not fit uint{bits}")
+    return value
+
+
+@dataclass(frozen=True, eq=False)
+class SensorFrame:
+    """Everything a companion receives for one lockstep step.
+
+    Attributes:
+        step: step index (uint64), 0 at the start of the run.
+        time_s: simulation time [s]; carried on the wire in whole microseconds.
+        p_WB: (3,) base position in W [m].
+        quat_WB_wxyz: (4,) base attitude, W <- B, scalar first.
+        v_B: (3,) base linear velocity expressed in B [m/s].
+        w_B: (3,) base angular velocity expressed in B [rad/s].
+        q: (n,) joint positions [rad], n <= 8.
+        qdot: (n,) joint velocities [rad/s].
+        wrench_E: (6,) [force [N]; torque [N m]] the environment applies on the
+            end-effector, expressed in E.
+        flags: :class:`StepFlag` bits.
+    """
+
+    step: int
+    time_s: float
+    p_WB: np.ndarray
+    quat_WB_wxyz: np.ndarray
+    v_B: np.ndarray
+    w_B: np.ndarray
+    q: np.ndarray
+    qdot: np.ndarray
+    wrench_E: np.ndarray
+    flags: StepFlag = StepFlag.NONE
+
+    def __post_init__(self) -> None:
+        s = object.__setattr__
+        s(self, "step", _uint("step", self.step, 64))
+        s(self, "time_s", float(self.time_s))
+        s(self, "p_WB", _vec("p_WB", self.p_WB, 3))
+        s(self, "quat_WB_wxyz", _vec("quat_WB_wxyz", self.quat_WB_wxyz, 4))
+        s(self, "v_B", _vec("v_B", self.v_B, 3))
+        s(self, "w_B", _vec("w_B", self.w_B, 3))
+        s(self, "q", _vec("q", self.q, None))
+        s(self, "qdot", _vec("qdot", self.qdot, self.q.shape[0]))
+        s(self, "wrench_E", _vec("wrench_E", self.wrench_E, 6))
+        s(self, "flags", _STEP_FLAGS[_uint("flags", self.flags, 8)])
+
+    @property
+    def n_joints(self) -> int:
+        return int(self.q.shape[0])
+
+    @property
+    def shutdown(self) -> bool:
+        return bool(self.flags & StepFlag.SHUTDOWN)
+
+
+@dataclass(frozen=True, eq=False)
+class TorqueSetpoint:
+    """A companion's actuation answer to one step.
+
+    Attributes:
+        step: the step of the :class:`SensorFrame` this answers.
+        thrust_n: collective rotor thrust along +z of B [N].
+        tau_B_nm: (3,) rotor torque on the base, expressed in B [N m].
+        tau_q_nm: (n,) joint torques [N m], n <= 8.
+        flags: :class:`SetpointFlag` bits.
+    """
+
+    step: int
+    thrust_n: float
+    tau_B_nm: np.ndarray
+    tau_q_nm: np.ndarray
+    flags: SetpointFlag = SetpointFlag.NONE
+
+    def __post_init__(self) -> None:
+        s = object.__setattr__
+        s(self, "step", _uint("step", self.step, 64))
+        s(self, "thrust_n", float(self.thrust_n))
+        s(self, "tau_B_nm", _vec("tau_B_nm", self.tau_B_nm, 3))
+        s(self, "tau_q_nm", _vec("tau_q_nm", self.tau_q_nm, None))
+        s(self, "flags", _SETPOINT_FLAGS[_uint("flags", self.flags, 8)])
+
+    @property
+    def n_joints(self) -> int:
+        return int(self.tau_q_nm.shape[0])
+
+
+@dataclass(frozen=True, eq=False)
+class AttitudeTarget:
+    """Informational attitude target a companion sends with its setpoint.
+
+    Attributes:
+        step: step of the setpoint it accompanies.
+        quat_wxyz: (4,) desired base attitude, W <- B (ENU <- FLU), scalar first.
+        rates_rad_s: (3,) desired body rates, expressed in B (FLU) [rad/s].
+        thrust_normalized: desired collective thrust in [0, 1] (1 = max thrust).
+
+    On the wire this travels as SET_ATTITUDE_TARGET, converted to that message's
+    NED <- FRD convention (float32).
+    """
+
+    step: int
+    quat_wxyz: np.ndarray
+    rates_rad_s: np.ndarray
+    thrust_normalized: float
+
+    def __post_init__(self) -> None:
+        s = object.__setattr__
+        s(self, "step", _uint("step", self.step, 64))
+        s(self, "quat_wxyz", _vec("quat_wxyz", self.quat_wxyz, 4))
+        s(self, "rates_rad_s", _vec("rates_rad_s", self.rates_rad_s, 3))
+        s(self, "thrust_normalized", float(self.thrust_normalized))
+
+
+@dataclass(frozen=True)
+class ScenarioInfo:
+    """What run this is; sent by the simulator in AM_SCENARIO during the handshake.
+
+    Attributes:
+        scenario_id: scenario identifier (uint32).
+        n_am: number of aerial manipulators in the run (uint8).
+        name: ASCII name, at most 32 bytes.
+        seed: random seed of the run (uint32).
+        rate_hz: lockstep rate [Hz]; carried as float32.
+    """
+
+    scenario_id: int
+    n_am: int
+    name: str
+    seed: int
+    rate_hz: float
+
+    def __post_init__(self) -> None:
+        s = object.__setattr__
+        s(self, "scenario_id", _uint("scenario_id", self.scenario_id, 32))
+        s(self, "n_am", _uint("n_am", self.n_am, 8))
+        s(self, "seed", _uint("seed", self.seed, 32))
+        s(self, "rate_hz", float(self.rate_hz))
+        raw = self.name.encode("ascii")  # UnicodeEncodeError is a ValueError
+        if len(raw) > SCENARIO_NAME_MAX_BYTES or b"\x00" in raw:
+            raise ValueError(f"scenario name {self.name!r} must be <= 32 ASCII bytes without NUL")
+        if not (self.rate_hz > 0.0 and np.isfinite(self.rate_hz)):
+            raise ValueError(f"rate_hz must be positive and finite, got {self.rate_hz}")

@@ -1,0 +1,90 @@
+"""UDP plumbing shared by both ends of the lockstep link: endpoints, ids, counters.
+
+``Udp.send`` and ``Udp.recv`` are the only places datagrams leave and enter a
+process -- the hook for link impairment (loss, delay, reordering) later.
+"""
+
+from __future__ import annotations
+
+import select
+import socket
+from dataclasses import dataclass
+
+from amlink.codec import mav
+
+SIM_SYSID = 1
+SIM_COMPID = mav.MAV_COMP_ID_AUTOPILOT1
+COMPANION_COMPID = mav.MAV_COMP_ID_ONBOARD_COMPUTER
+HEARTBEAT_PERIOD_S = 0.5
+COMMAND_RETRY_S = 0.25
+STATUSTEXT_MAX = 50  # bytes in STATUSTEXT.text
+_MAX_DATAGRAM = 65535
+_MAX_DRAIN = 256  # datagrams read per wake-up before checking the clock again
+_DONTWAIT = getattr(socket, "MSG_DONTWAIT", None)
+
+
+def parse_endpoint(url: str, schemes: tuple[str, ...]) -> tuple[str, int]:
+    """Split ``"udp:HOST:PORT"`` into ``(HOST, PORT)``; the scheme must be in ``schemes``."""
+    try:
+        scheme, host, port = url.split(":")
+        port_n = int(port)
+    except ValueError:
+        raise ValueError(f"endpoint {url!r} is not SCHEME:HOST:PORT") from None
+    if scheme not in schemes:
+        raise ValueError(f"endpoint {url!r}: scheme must be one of {schemes}")
+    if not 0 <= port_n < 65536 or not host:
+        raise ValueError(f"endpoint {url!r}: bad host or port")
+    return host, port_n
+
+
+@dataclass
+class LinkStats:
+    """Counters of one endpoint (MAVLink packets unless noted)."""
+
+    datagrams_rx: int = 0
+    datagrams_tx: int = 0
+    bad_frames: int = 0  # CRC errors, unknown message ids, truncated frames
+    unknown_sysid: int = 0  # packets from a sysid we do not talk to
+    stale_setpoints: int = 0  # setpoint for a step older than the one awaited
+    duplicate_setpoints: int = 0  # second setpoint for the awaited step
+    wrong_step_setpoints: int = 0  # setpoint for a step not yet sent
+    ignored: int = 0  # valid packets of types this endpoint does not use
+
+
+class Udp:
+    """One UDP socket; ``send`` and ``recv`` are the only I/O paths (impairment hook)."""
+
+    def __init__(self, sock: socket.socket, stats: LinkStats) -> None:
+        self.sock = sock
+        self.stats = stats
+
+    def send(self, addr: tuple[str, int], data: bytes) -> None:
+        self.sock.sendto(data, addr)
+        self.stats.datagrams_tx += 1
+
+    def recv(self, timeout_s: float) -> list[tuple[bytes, tuple[str, int]]]:
+        """Datagrams available within ``timeout_s`` (waits for the first, drains the rest)."""
+        ready, _, _ = select.select([self.sock], [], [], max(0.0, timeout_s))
+        out: list[tuple[bytes, tuple[str, int]]] = []
+        if not ready:
+            return out
+        for i in range(_MAX_DRAIN):
+            try:
+                if i == 0:
+                    data, addr = self.sock.recvfrom(_MAX_DATAGRAM)
+                elif _DONTWAIT is None:
+                    break
+                else:
+                    data, addr = self.sock.recvfrom(_MAX_DATAGRAM, _DONTWAIT)
+            except BlockingIOError:
+                break
+            except ConnectionResetError:  # Windows reports ICMP port unreachable here
+                continue
+            out.append((data, addr))
+        self.stats.datagrams_rx += len(out)
+        return out
+
+    def close(self) -> None:
+        self.sock.close()
+
+

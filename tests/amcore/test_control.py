@@ -1,0 +1,195 @@
+"""The control law: literal agreement, closed-loop identities, force compensation, guards."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from amcore.control import ControllerMemory, ControllerParams, step
+from amcore.filters import FilterState
+from amcore.ideal import forward_dynamics, full_tau
+from amcore.model import AmState, create_data, decoupled_terms
+from amcore.so3 import exp_so3
+from amcore.task import task_terms
+
+from .literal import controller_literal
+
+DT = 1e-3
+
+
+def near_reference(mission, model, t, rng, scale=1.0):
+    """A state close to the reference at t (errors well inside every saturation)."""
+    x = mission.initial_state()
+    ref = mission.reference(t)
+    p_WB = ref.r_c - x.R_WB @ mission.nominal.r_BC
+    return AmState(
+        p_WB=p_WB + scale * 0.03 * rng.normal(size=3),
+        R_WB=x.R_WB @ exp_so3(scale * 0.08 * rng.normal(size=3)),
+        v_B=scale * 0.3 * rng.normal(size=3),
+        w_B=scale * 0.5 * rng.normal(size=3),
+        q=np.array(mission.q_nominal) + scale * 0.15 * rng.normal(size=model.n),
+        qdot=scale * 0.5 * rng.normal(size=model.n),
+    )
+
+
+def steady_memory(model, st, F_e, t):
+    """Filter state at steady state for a constant reading F_e (world-aligned at {e})."""
+    d = create_data(model)
+    pin.framesForwardKinematics(model.pin_model, d, st.pin_q())
+    R_e = d.oMf[model.ee_frame_id].rotation
+    W = np.concatenate([R_e @ F_e[0:3], R_e @ F_e[3:6]])
+    return ControllerMemory(t_s=t - DT, wrench=FilterState(W, np.zeros(6)))
+
+
+@pytest.mark.parametrize("comp", [True, False])
+def test_fast_controller_agrees_with_literal_transcription(model, mission, params, comp):
+    params = dataclasses.replace(params, force_compensation=comp)
+    rng = np.random.default_rng(10 + comp)
+    data = create_data(model)
+    for t in (0.7, 2.1, 6.0, 11.3, 12.5):
+        st = near_reference(mission, model, t, rng, scale=0.5)
+        F_e = rng.normal(size=6) * np.array([5, 5, 5, 0.3, 0.3, 0.3])
+        ref = mission.reference(t)
+        res = step(model, data, params, st, ref, F_e, steady_memory(model, st, F_e, t), t)
+        assert not res.diagnostics.com_err_saturated and not res.diagnostics.y_err_saturated
+        assert res.diagnostics.damping == 0.0
+        tau_lit = controller_literal(model, params, st, ref, F_e)
+        assert np.abs(res.diagnostics.tau - tau_lit).max() < 1e-9 * max(1.0, np.abs(tau_lit).max())
+
+
+def test_thrust_acts_along_body_z_only(model, mission, params):
+    """tau = T^T u has zero first two entries (eq. new_dynamics, u_1 R_b e_3)."""
+    rng = np.random.default_rng(4)
+    data = create_data(model)
+    mem = ControllerMemory()
+    for k in range(20):
+        st = near_reference(mission, model, 0.5 * k, rng, scale=2.0)
+        res = step(model, data, params, st, mission.reference(0.5 * k), rng.normal(size=6), mem, 0.5 * k)
+        assert np.abs(res.diagnostics.tau[0:2]).max() < 1e-10
+        assert res.command.thrust_n == pytest.approx(res.diagnostics.f_d @ st.R_WB[:, 2])
+
+
+def _closed_loop_accel(model, params, mission, st, t, F_e, comp=True):
+    params = dataclasses.replace(params, force_compensation=comp)
+    data = create_data(model)
+    ref = mission.reference(t)
+    res = step(model, data, params, st, ref, F_e, steady_memory(model, st, F_e, t), t)
+    Vdot = forward_dynamics(model, create_data(model), st.pin_q(), st.pin_v(), full_tau(res.command, model.n), F_e)
+    d2 = create_data(model)
+    tm = decoupled_terms(model, d2, st)
+    tk = task_terms(model, d2, tm, params.task_frame, params.components)
+    return res, ref, Vdot, tm, tk
+
+
+@pytest.mark.parametrize("comp", [True, False])
+def test_task_space_impedance_identity_under_contact(model, mission, params, comp):
+    """Lambda_y y~dd + D_y y~d + K_y y~ = F_y (eq. desired_task_behavior) holds exactly, with or
+    without force compensation, for an arbitrary end-effector wrench."""
+    rng = np.random.default_rng(20)
+    for t in (1.0, 7.0, 12.0):
+        st = near_reference(mission, model, t, rng, scale=0.5)
+        F_e = rng.normal(size=6) * np.array([8, 8, 8, 0.5, 0.5, 0.5])
+        res, ref, Vdot, tm, tk = _closed_loop_accel(model, params, mission, st, t, F_e, comp)
+        dg = res.diagnostics
+        assert not dg.y_err_saturated  # the identity is the unsaturated spring's
+        yddot = tk.J_y @ Vdot + tk.Jdot_y_V
+        lhs = dg.Lambda_y @ (yddot - ref.y_d2) + params.D_y @ (dg.ydot - ref.y_d1) + params.K_y @ dg.y_err
+        assert np.abs(lhs - dg.F_y).max() < 1e-8 * (1 + np.abs(dg.F_y).max())
+        assert np.abs(dg.F_y).max() > 0.1
+
+
+def test_orientation_closed_loop_identity(model, mission, params):
+    """With compensation: Lambda_wb,d e_w_dot + k_w e_w + k_R e_R = 0 (eq. closed_loop)."""
+    rng = np.random.default_rng(21)
+    h = 1e-6
+    for t in (1.0, 6.0, 12.0):
+        st = near_reference(mission, model, t, rng, scale=0.5)
+        F_e = rng.normal(size=6) * np.array([8, 8, 8, 0.5, 0.5, 0.5])
+        res, ref, Vdot, tm, tk = _closed_loop_accel(model, params, mission, st, t, F_e)
+        dg = res.diagnostics
+        e_w_dot = Vdot[3:6] - dg.wdot_bd
+        Ld = np.linalg.inv(params.Lambda_wb_d_inv)
+        lhs = Ld @ e_w_dot + params.k_w * dg.e_w + params.k_R * dg.e_R
+        assert np.abs(lhs).max() < 1e-8
+        # and wdot_bd is the derivative of w_bd along the closed loop, for a contact force
+        # constant in {w} (what the filter's derivatives describe at steady state)
+        q2 = pin.integrate(model.pin_model, st.pin_q(), st.pin_v() * h)
+        st2 = AmState.from_pin(q2, st.pin_v() + Vdot * h)
+        R1, R2 = _R_e(model, st), _R_e(model, st2)
+        F_e2 = np.concatenate([R2.T @ R1 @ F_e[0:3], R2.T @ R1 @ F_e[3:6]])
+        res2 = step(model, create_data(model), params, st2, mission.reference(t + h), F_e2,
+                    steady_memory(model, st2, F_e2, t + h), t + h)
+        fd = (res2.diagnostics.w_bd - dg.w_bd) / h
+        assert np.abs(fd - dg.wdot_bd).max() < 1e-3 * (1 + np.abs(dg.wdot_bd).max())
+
+
+def _R_e(model, st):
+    d = create_data(model)
+    pin.framesForwardKinematics(model.pin_model, d, st.pin_q())
+    return d.oMf[model.ee_frame_id].rotation.copy()
+
+
+def test_without_compensation_the_wrench_does_not_reach_the_command(model, mission, params):
+    """Force compensation off: f_d, Omega_d and the whole command ignore the F/T reading;
+    Omega_d is the free-flight feed-forward, identical to what F_e = 0 gives."""
+    p_off = dataclasses.replace(params, force_compensation=False)
+    rng = np.random.default_rng(5)
+    st = near_reference(mission, model, 6.0, rng)
+    ref = mission.reference(6.0)
+    zero = np.zeros(6)
+    F_e = np.array([-12.0, 1.0, -4.9, 0.1, -0.2, 0.05])
+    a = step(model, create_data(model), p_off, st, ref, zero, steady_memory(model, st, zero, 6.0), 6.0)
+    b = step(model, create_data(model), p_off, st, ref, F_e, steady_memory(model, st, F_e, 6.0), 6.0)
+    assert np.array_equal(a.diagnostics.tau, b.diagnostics.tau)
+    assert np.array_equal(a.diagnostics.Omega_d, b.diagnostics.Omega_d)
+    assert np.abs(b.diagnostics.F_y).max() > 1.0  # the sensor is still read for diagnostics
+    # with compensation on, the same reading moves f_d by exactly -F_rc
+    c = step(model, create_data(model), params, st, ref, F_e, steady_memory(model, st, F_e, 6.0), 6.0)
+    d = step(model, create_data(model), params, st, ref, zero, steady_memory(model, st, zero, 6.0), 6.0)
+    assert np.abs((c.diagnostics.f_d - d.diagnostics.f_d) + c.diagnostics.F_rc).max() < 1e-12
+    assert not np.allclose(c.diagnostics.Omega_d, d.diagnostics.Omega_d)
+
+
+def test_singularity_guard_bounds_torques_near_a_straight_elbow(model, mission, params):
+    """Reference far beyond reach, elbow straightening (q2 -> 0): Jbar_3 loses rank. With the
+    damped inverse the joint torques stay bounded; the undamped law (sigma_damping = 0)
+    demands torques that grow like 1/q2."""
+    st0 = mission.initial_state()
+    ref = mission.reference(5.0)
+    torques = {}
+    for guard in (True, False):
+        p = params if guard else dataclasses.replace(params, sigma_damping=0.0)
+        worst = 0.0
+        for q2 in (1e-2, 3e-3, 1e-3, 1e-4, 1e-5):
+            q = np.array([0.5, q2, 0.0])
+            st = AmState(st0.p_WB, st0.R_WB, np.zeros(3), np.zeros(3), q, np.zeros(3))
+            res = step(model, create_data(model), p, st, ref, np.zeros(6), ControllerMemory(), 5.0)
+            worst = max(worst, np.abs(res.command.tau_q_nm).max())
+            if guard and q2 <= 1e-3:
+                assert res.diagnostics.sigma_min_J3 < params.sigma_damping
+                assert res.diagnostics.damping > 0.0
+        torques[guard] = worst
+    assert torques[True] < 150.0
+    assert torques[False] > 50 * torques[True]
+
+
+def test_guard_is_inactive_across_the_working_range(model, mission, params):
+    """Away from a straight elbow the law is exactly the paper's (no damping engaged)."""
+    st0 = mission.initial_state()
+    for q1 in np.linspace(0.2, 1.8, 9):
+        for q2 in np.linspace(-2.0, -0.2, 10):
+            for q3 in (-0.8, 0.0, 0.8):
+                st = AmState(st0.p_WB, st0.R_WB, np.zeros(3), np.zeros(3), np.array([q1, q2, q3]), np.zeros(3))
+                res = step(model, create_data(model), params, st, mission.reference(1.0), np.zeros(6),
+                           ControllerMemory(), 1.0)
+                assert res.diagnostics.damping == 0.0, (q1, q2, q3, res.diagnostics.sigma_min_J3)
+
+
+def test_error_saturation_is_reported(model, mission, params):
+    st0 = mission.initial_state()
+    far = AmState(st0.p_WB + np.array([2.0, 0, 0]), st0.R_WB, st0.v_B, st0.w_B, st0.q + 0.6, st0.qdot)
+    res = step(model, create_data(model), params, far, mission.reference(0.0), np.zeros(6), ControllerMemory(), 0.0)
+    assert res.diagnostics.com_err_saturated and res.diagnostics.y_err_saturated
+    assert np.all(np.isfinite(res.diagnostics.tau))

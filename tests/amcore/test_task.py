@@ -1,0 +1,77 @@
+"""Task variable y, ydot = J_y V = J xi, and the drift Jdot xi against finite differences."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from amcore.model import AmState, create_data, decoupled_terms
+from amcore.so3 import exp_so3
+from amcore.task import TaskFrame, angle_of, task_terms
+
+from .conftest import flow, states
+
+H = 1e-5
+
+
+def _tk(model, st, frame, comps, full=False):
+    d = create_data(model)
+    tm = decoupled_terms(model, d, st, full=full)
+    return tm, task_terms(model, d, tm, frame, comps, full=full)
+
+
+@pytest.mark.parametrize("comps", [("x", "z", "pitch"), ("y", "roll", "yaw")])
+def test_jacobians_and_drift_against_finite_differences(model, mission, comps):
+    frame = mission.frame
+    for st in states(model, seed=7):
+        tm, tk = _tk(model, st, frame, comps, full=True)
+        _, tp = _tk(model, flow(model, st, H), frame, comps)
+        _, tn = _tk(model, flow(model, st, -H), frame, comps)
+        ydot_fd = (tp.y - tn.y) / (2 * H)
+        assert np.abs(tk.J_y @ tm.V - ydot_fd).max() < 1e-7
+        assert np.abs(tk.J @ tm.xi - ydot_fd).max() < 1e-7
+        Jdot_fd = (tp.J - tn.J) / (2 * H)
+        assert np.abs(tk.Jdot - Jdot_fd).max() < 1e-7 * (1 + np.abs(Jdot_fd).max())
+        ref = Jdot_fd @ tm.xi
+        assert np.abs(tk.Jdot_xi - ref).max() < 1e-8 * (1 + np.abs(ref).max())
+        Jydot_fd = (tp.J_y - tn.J_y) / (2 * H)
+        ref = Jydot_fd @ tm.V
+        assert np.abs(tk.Jdot_y_V - ref).max() < 1e-8 * (1 + np.abs(ref).max())
+
+
+def test_drift_needs_the_T_inverse_Tdot_term(model, mission):
+    """Dropping -J_y T^-1 Tdot V from Jdot xi gives a measurably wrong drift."""
+    st = states(model, seed=11)[0]
+    tm, tk = _tk(model, st, mission.frame, ("x", "z", "pitch"))
+    assert np.abs(tk.J @ tm.Tdot_V).max() > 1e-2
+    assert np.abs(tk.Jdot_y_V - tk.Jdot_xi).max() > 1e-2
+
+
+def test_classical_not_spatial_acceleration(model, mission):
+    """With Vdot = 0 the end-effector point's acceleration is J_y_dot V (classical)."""
+    for st in states(model, count=4, seed=2):
+        _, tk = _tk(model, st, mission.frame, ("x", "y", "z"))
+        _, tp = _tk(model, flow(model, st, H), mission.frame, ("x", "y", "z"))
+        _, tn = _tk(model, flow(model, st, -H), mission.frame, ("x", "y", "z"))
+        acc_fd = (tp.y - 2 * tk.y + tn.y) / H**2
+        assert np.abs(tk.Jdot_y_V - acc_fd).max() < 1e-3
+
+
+def test_planar_angle_is_the_joint_sum_when_level(model, mission):
+    q = np.array([0.9, -0.5, 0.2])
+    st = AmState(np.zeros(3), mission.frame.R_WT, np.zeros(3), np.zeros(3), q, np.zeros(3))
+    _, tk = _tk(model, st, mission.frame, ("x", "z", "pitch"))
+    # positive joint angles turn the links down (about +y): pitch = sum(q)
+    assert tk.y[2] == pytest.approx(q.sum(), abs=1e-12)
+    assert angle_of(exp_so3(np.array([0, 0.3, 0])), "pitch") == pytest.approx(0.3)
+    assert angle_of(exp_so3(np.array([0, 0, -0.4])), "yaw") == pytest.approx(-0.4)
+
+
+def test_task_frame_turns_with_heading(model, mission):
+    """Rotating the whole AM and its task frame about z leaves y unchanged."""
+    st = states(model, count=1, seed=5)[0]
+    _, tk = _tk(model, st, mission.frame, ("x", "z", "pitch"))
+    Rz = exp_so3(np.array([0, 0, 1.1]))
+    st2 = AmState(Rz @ st.p_WB, Rz @ st.R_WB, st.v_B, st.w_B, st.q, st.qdot)
+    f2 = TaskFrame(Rz @ mission.frame.R_WT, Rz @ mission.frame.p_WT)
+    _, tk2 = _tk(model, st2, f2, ("x", "z", "pitch"))
+    assert np.abs(tk.y - tk2.y).max() < 1e-12

@@ -1,0 +1,291 @@
+"""Lockstep transport over loopback UDP: handshake, matching, timeouts, shutdown."""
+
+from __future__ import annotations
+
+import contextlib
+import socket
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from amlink import codec
+from amlink.codec import mav
+from amlink.errors import (
+    PeerMissingError,
+    PeerProtocolError,
+    PeerTimeoutError,
+    SimulatorTimeoutError,
+    SimulatorUnreachableError,
+)
+from amlink.lockstep import CompanionClient, SimServer
+from amlink.types import AttitudeTarget, ScenarioInfo, SensorFrame, StepFlag, TorqueSetpoint
+from amlink.udp import parse_endpoint
+
+SCENARIO = ScenarioInfo(scenario_id=7, n_am=2, name="two_am_carry", seed=1234, rate_hz=1000.0)
+
+
+def make_frame(sysid: int, step: int) -> SensorFrame:
+    """A frame whose content depends on (sysid, step), so mix-ups are visible."""
+    n = sysid  # sysid 2 -> 2 joints, sysid 3 -> 3 joints
+    return SensorFrame(
+        step=step, time_s=step * 1e-3, p_WB=[sysid, step, 0.5], quat_WB_wxyz=[1, 0, 0, 0],
+        v_B=[0, 0, 0], w_B=[0, 0, 0], q=np.arange(n) * 0.1 + step * 1e-3 + sysid, qdot=np.full(n, -step),
+        wrench_E=[0, 0, sysid, 0, 0, step],
+    )  # fmt: skip
+
+
+def answer(frame: SensorFrame, sysid: int) -> TorqueSetpoint:
+    """The companions' stand-in controller: a pure function of the frame and sysid."""
+    return TorqueSetpoint(frame.step, 100.0 * sysid + frame.step, frame.p_WB * 2.0, frame.q * 3.0 + frame.qdot)
+
+
+def server_for(sysids, timeout_s=1.0) -> SimServer:
+    return SimServer(bind="udp:127.0.0.1:0", sysids=sysids, scenario=SCENARIO, timeout_s=timeout_s)
+
+
+def url(server: SimServer) -> str:
+    return f"udp:127.0.0.1:{server.address[1]}"
+
+
+@contextlib.contextmanager
+def linked(sysids, timeout_s=1.0):
+    """An open server and connected clients (handshake in threads), all closed afterwards."""
+    server = server_for(sysids, timeout_s)
+    server.open()
+    clients = {s: CompanionClient(s, sim=url(server)) for s in sysids}
+    threads = [threading.Thread(target=c.connect, args=(5.0,)) for c in clients.values()]
+    try:
+        for t in threads:
+            t.start()
+        server.wait_for_peers(5.0)
+        for t in threads:
+            t.join(5.0)
+        assert all(c.scenario == SCENARIO for c in clients.values())
+        yield server, clients
+    finally:
+        server.close("test over")
+        for c in clients.values():
+            c.close()
+
+
+def test_parse_endpoint_forms():
+    assert parse_endpoint("udp:0.0.0.0:14550", ("udp", "udpin")) == ("0.0.0.0", 14550)
+    assert parse_endpoint("udpin:127.0.0.1:0", ("udp", "udpin")) == ("127.0.0.1", 0)
+    for bad in ("tcp:1.2.3.4:5", "udp:1.2.3.4", "udp:host:port", "udp::5", "udp:h:70000"):
+        with pytest.raises(ValueError):
+            parse_endpoint(bad, ("udp", "udpin"))
+
+
+def test_constructors_do_no_io():
+    server = server_for([2, 3])
+    with pytest.raises(RuntimeError):
+        server.address
+    client = CompanionClient(2, sim="udp:127.0.0.1:9")
+    with pytest.raises(RuntimeError):
+        client.recv_frame(0.0)
+    with pytest.raises(ValueError):
+        server_for([1, 2])  # sysid 1 is the simulator
+
+
+def test_bind_all_interfaces_and_ephemeral_port():
+    server = SimServer(bind="udpin:0.0.0.0:0", sysids=[2], scenario=SCENARIO)
+    host, port = server.open()
+    try:
+        assert host == "0.0.0.0" and port > 0
+        client = CompanionClient(2, sim=f"udp:127.0.0.1:{port}")
+        t = threading.Thread(target=client.connect, args=(5.0,))
+        t.start()
+        server.wait_for_peers(5.0)
+        t.join(5.0)
+        assert client.scenario == SCENARIO
+        client.close()
+    finally:
+        server.close()
+
+
+def test_two_companions_200_lockstep_steps_matched_by_sysid_and_step():
+    server = server_for([2, 3], timeout_s=2.0)
+    server.open()
+    errors: list[BaseException] = []
+    received: dict[int, list[int]] = {2: [], 3: []}
+
+    def companion(sysid: int) -> None:
+        try:
+            with CompanionClient(sysid, sim=url(server)) as c:
+                assert c.connect(5.0) == SCENARIO
+                c.arm(2.0)
+                while (frame := c.recv_frame(5.0)) is not None:
+                    received[sysid].append(frame.step)
+                    att = AttitudeTarget(frame.step, frame.quat_WB_wxyz, [0.0, 0.0, sysid], 0.5)
+                    c.send_setpoint(answer(frame, sysid), att)
+                assert c.status_texts and c.status_texts[-1][1] == "done"
+        except BaseException as exc:  # reported by the main thread
+            errors.append(exc)
+
+    threads = [threading.Thread(target=companion, args=(s,)) for s in (2, 3)]
+    for t in threads:
+        t.start()
+    try:
+        server.wait_for_peers(5.0)
+        server.wait_for_armed(5.0)
+        assert server.armed(2) and server.armed(3)
+        for k in range(200):
+            frames = {s: make_frame(s, k) for s in (2, 3)}
+            sps = server.exchange(frames)
+            assert set(sps) == {2, 3}
+            for s, sp in sps.items():
+                expect = answer(frames[s], s)
+                assert sp.step == k and sp.thrust_n == 100.0 * s + k
+                np.testing.assert_array_equal(sp.tau_q_nm, expect.tau_q_nm)  # float64: exact
+                np.testing.assert_array_equal(sp.tau_B_nm, expect.tau_B_nm)
+                assert server.attitude_targets[s].step == k
+                assert server.attitude_targets[s].rates_rad_s[2] == pytest.approx(s)
+    finally:
+        server.close("done")
+        for t in threads:
+            t.join(5.0)
+    assert not errors, errors
+    assert received == {2: list(range(200)), 3: list(range(200))}
+    assert server.stats.stale_setpoints == server.stats.unknown_sysid == server.stats.bad_frames == 0
+
+
+def test_missing_peer_raises_naming_it_within_timeout():
+    server = server_for([2, 3, 4])
+    server.open()
+    client = CompanionClient(3, sim=url(server))
+    t = threading.Thread(target=client.connect, args=(5.0,))
+    t.start()
+    t0 = time.monotonic()
+    try:
+        with pytest.raises(PeerMissingError) as err:
+            server.wait_for_peers(0.5)
+        assert time.monotonic() - t0 < 2.0
+        assert err.value.sysids == (2, 4)
+        assert "sysid 2" in str(err.value) and "sysid 4" in str(err.value) and "sysid 3" not in str(err.value)
+    finally:
+        t.join(5.0)
+        server.close()
+        client.close()
+
+
+def test_simulator_unreachable_names_address():
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:  # bound, never answers
+        silent.bind(("127.0.0.1", 0))
+        address = f"udp:127.0.0.1:{silent.getsockname()[1]}"
+        client = CompanionClient(2, sim=address)
+        t0 = time.monotonic()
+        with pytest.raises(SimulatorUnreachableError) as err:
+            client.connect(0.6)
+        assert 0.5 < time.monotonic() - t0 < 2.0
+        assert address in str(err.value)
+        assert len(_drain(silent)) >= 2  # it kept saying HEARTBEAT at ~2 Hz
+        client.close()
+
+
+def _drain(sock):
+    sock.setblocking(False)
+    out = []
+    with contextlib.suppress(BlockingIOError):
+        while True:
+            out.append(sock.recv(65535))
+    return out
+
+
+def test_companion_that_stops_answering_raises_peer_timeout():
+    with linked([2, 3], timeout_s=0.3) as (server, clients):
+        for s, c in clients.items():  # both answer step 0 (pre-queued in the socket)
+            c.send_setpoint(answer(make_frame(s, 0), s))
+        assert set(server.exchange({s: make_frame(s, 0) for s in clients})) == {2, 3}
+        clients[2].send_setpoint(answer(make_frame(2, 1), 2))  # sysid 3 goes silent
+        t0 = time.monotonic()
+        with pytest.raises(PeerTimeoutError) as err:
+            server.exchange({s: make_frame(s, 1) for s in clients})
+        assert 0.25 < time.monotonic() - t0 < 1.5
+        assert (err.value.sysid, err.value.step, err.value.missing) == (3, 1, (3,))
+
+
+def test_stale_duplicate_wrong_step_and_unknown_sysid_are_ignored_and_counted():
+    with linked([2]) as (server, clients):
+        c = clients[2]
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as raw:
+            enc9 = codec.Encoder(9, 191)
+            sp = lambda step, thrust: TorqueSetpoint(step, thrust, [0, 0, 0], [])  # noqa: E731
+            c.send_setpoint(sp(4, -1.0))  # stale
+            c.send_setpoint(sp(6, -2.0))  # a step not sent yet
+            raw.sendto(enc9.pack(codec.setpoint_messages(sp(5, -3.0))), server.address)  # sysid 9: unknown
+            c.send_setpoint(sp(5, 55.0))  # the real answer
+            c.send_setpoint(sp(5, -4.0))  # duplicate
+            got = server.exchange({2: make_frame(2, 5)})
+        assert got[2].step == 5 and got[2].thrust_n == 55.0
+        st = server.stats
+        assert (st.stale_setpoints, st.wrong_step_setpoints, st.duplicate_setpoints, st.unknown_sysid) == (1, 1, 1, 1)
+        assert server.peer_address(2) == ("127.0.0.1", c.local_address[1])
+        assert c.recv_frame(1.0).step == 5
+
+
+def test_unknown_sysid_does_not_steal_a_peer_address():
+    with linked([2]) as (server, clients):
+        before = server.peer_address(2)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as raw:
+            raw.sendto(codec.Encoder(9, 191).pack([mav.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3)]), server.address)
+            clients[2].send_setpoint(TorqueSetpoint(0, 1.0, [0, 0, 0], []))
+            server.exchange({2: make_frame(2, 0)})
+        assert server.peer_address(2) == before and server.stats.unknown_sysid == 1
+
+
+def test_non_finite_setpoint_is_a_protocol_error_naming_the_sysid():
+    with linked([2]) as (server, clients):
+        bad = mav.MAVLink_am_torque_setpoint_message(0, float("nan"), [0.0] * 3, 0, [0.0] * 8, 0)
+        clients[2]._send([bad])  # bypass the encoder's own finite check
+        with pytest.raises(PeerProtocolError) as err:
+            server.exchange({2: make_frame(2, 0)})
+        assert err.value.sysid == 2 and "thrust_n" in str(err.value)
+
+
+def test_shutdown_flag_makes_recv_frame_return_none():
+    with linked([2]) as (server, clients):
+        c = clients[2]
+        c.send_setpoint(answer(make_frame(2, 0), 2))
+        server.exchange({2: make_frame(2, 0)})
+        assert c.recv_frame(1.0).step == 0
+        server.close("scenario finished", error=False)
+        assert c.recv_frame(1.0) is None
+        assert c.recv_frame(0.0) is None  # stays ended, no timeout
+        assert c.status_texts[-1] == (mav.MAV_SEVERITY_NOTICE, "scenario finished")
+
+
+def test_recv_frame_times_out_when_simulator_is_silent():
+    with linked([2]) as (_server, clients):
+        t0 = time.monotonic()
+        with pytest.raises(SimulatorTimeoutError):
+            clients[2].recv_frame(0.2)
+        assert time.monotonic() - t0 < 1.0
+
+
+def test_failsafe_flag_reaches_the_companion():
+    with linked([2]) as (server, clients):
+        frame = make_frame(2, 0)
+        frame = SensorFrame(**{**frame.__dict__, "flags": StepFlag.FAILSAFE})
+        clients[2].send_setpoint(answer(frame, 2))
+        server.exchange({2: frame})
+        assert clients[2].recv_frame(1.0).flags == StepFlag.FAILSAFE
+
+
+def test_server_follows_a_peer_to_its_latest_address():
+    """A companion whose source address changes (restart, NAT rebinding) is followed."""
+    with linked([2]) as (server, clients):
+        old = clients[2]
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as moved:
+            moved.bind(("127.0.0.1", 0))
+            moved.settimeout(1.0)
+            enc = codec.Encoder(2, 191)
+            moved.sendto(enc.pack(codec.setpoint_messages(answer(make_frame(2, 0), 2))), server.address)
+            server.exchange({2: make_frame(2, 0)})  # step 0 went out to the old address
+            assert old.recv_frame(1.0).step == 0
+            assert server.peer_address(2) == moved.getsockname()
+            moved.sendto(enc.pack(codec.setpoint_messages(answer(make_frame(2, 1), 2))), server.address)
+            server.exchange({2: make_frame(2, 1)})  # step 1 goes to the new address
+            msgs = codec.Decoder().feed(moved.recv(65535))
+            assert [m.get_type() for m in msgs][-1] == "AM_SIM_STEP" and msgs[-1].step == 1

@@ -1,0 +1,77 @@
+"""Value types validate shapes and ranges and are immutable."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from amlink.types import (
+    AttitudeTarget,
+    ScenarioInfo,
+    SensorFrame,
+    SetpointFlag,
+    StepFlag,
+    TorqueSetpoint,
+)
+
+
+def frame(**kw):
+    args = dict(step=3, time_s=0.003, p_WB=[0, 0, 1], quat_WB_wxyz=[1, 0, 0, 0], v_B=[0, 0, 0], w_B=[0, 0, 0],
+                q=[0.1, 0.2, 0.3], qdot=[0, 0, 0], wrench_E=np.zeros(6))  # fmt: skip
+    args.update(kw)
+    return SensorFrame(**args)
+
+
+def test_sensor_frame_copies_to_read_only_float64():
+    src = np.array([0.1, 0.2, 0.3])
+    f = frame(q=src)
+    src[0] = 99.0
+    assert f.q[0] == 0.1 and f.q.dtype == np.float64
+    with pytest.raises(ValueError):
+        f.q[0] = 1.0
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        f.step = 4
+    assert f.n_joints == 3 and not f.shutdown
+    assert frame(flags=StepFlag.SHUTDOWN | StepFlag.FAILSAFE).shutdown
+
+
+@pytest.mark.parametrize(
+    "kw",
+    [
+        dict(p_WB=[0, 0]),
+        dict(quat_WB_wxyz=[1, 0, 0]),
+        dict(wrench_E=np.zeros(5)),
+        dict(q=np.zeros(9), qdot=np.zeros(9)),  # more joints than the wire carries
+        dict(qdot=[0, 0]),  # qdot must match q
+        dict(q=np.zeros((3, 1))),
+        dict(step=-1),
+        dict(step=2**64),
+        dict(flags=256),
+    ],
+)
+def test_sensor_frame_rejects_bad_shapes_and_ranges(kw):
+    with pytest.raises(ValueError):
+        frame(**kw)
+
+
+def test_setpoint_and_attitude_validate():
+    sp = TorqueSetpoint(1, 9.81, [0, 0, 0], [], SetpointFlag.SATURATED)
+    assert sp.n_joints == 0 and sp.flags == SetpointFlag.SATURATED
+    with pytest.raises(ValueError):
+        TorqueSetpoint(1, 9.81, [0, 0], [])
+    with pytest.raises(ValueError):
+        AttitudeTarget(1, [1, 0, 0], [0, 0, 0], 0.5)
+
+
+@pytest.mark.parametrize(
+    "kw",
+    [dict(name="x" * 33), dict(name="é"), dict(name="a\x00b"), dict(rate_hz=0.0), dict(rate_hz=float("nan")),
+     dict(n_am=256), dict(seed=-1)],  # fmt: skip
+)
+def test_scenario_info_rejects_what_the_wire_cannot_carry(kw):
+    args = dict(scenario_id=1, n_am=2, name="two_am", seed=0, rate_hz=1000.0)
+    args.update(kw)
+    with pytest.raises(ValueError):
+        ScenarioInfo(**args)
