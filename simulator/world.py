@@ -1,0 +1,333 @@
+"""The PyBullet world of the paper's Sec. V: N aerial manipulators, a table and an object.
+
+`World(spec, initial)` stores only; `connect()` builds the scene in its own DIRECT client.
+Then, once per physics step (1 / spec.rate_hz):
+
+    report = world.apply(sysid, thrust_n, tau_B_nm, tau_q_nm)   # for each AM
+    world.step()
+    state, wrench = world.state(sysid), world.wrench_ee(sysid)
+
+Frames: W world (z up); B base link = quadrotor CoM; E end-effector (`ee` link: centre of
+the pad's contact face, x = outward normal). Conventions verified by tests/simulator:
+
+* PyBullet reports the base's inertial frame; `load_am` asserts it coincides with B.
+* Thrust is a force (0, 0, T) in B at B's origin and the body torque a torque in B, both
+  applied with LINK_FRAME on the base (for the base, LINK_FRAME torque is body-frame).
+  PyBullet clears external forces and joint torques after every step, so `step()`
+  re-applies the latest command: commands persist until replaced.
+* The wrist sensor on `ft_joint` reports the wrench the parent link exerts on the pad,
+  in the pad's inertial (CoM) frame, moment about the pad's CoM. `wrench_ee` turns it
+  into the wrench the environment applies on E (see there).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping
+
+import numpy as np
+import pybullet as pb
+
+from amcore.config import ScenarioSpec
+from amcore.model import AmState
+
+from . import scene
+from .mixer import JointTorqueResult, MixResult, QuadMixer, limit_joint_torques
+
+
+class WorldNotConnected(RuntimeError):
+    """A method that needs the physics client was called before `connect()` or after `close()`."""
+
+
+@dataclass(frozen=True)
+class ApplyReport:
+    """What the flight controller and the joint drivers really applied for one command."""
+
+    mix: MixResult
+    joints: JointTorqueResult
+
+    @property
+    def saturated(self) -> bool:
+        return self.mix.saturated or self.joints.saturated
+
+
+@dataclass(frozen=True)
+class PadContact:
+    """Contact force the object applies ON the pad, summed over the contact points [N, W].
+
+    normal_force_n >= 0 is the magnitude along normal_W (unit, from the object into the
+    pad); tangential_force_W is the friction part (perpendicular to normal_W); point_W the
+    normal-force-weighted mean contact point on the object [m]. n_points = 0: no contact.
+    """
+
+    normal_force_n: float
+    normal_W: np.ndarray
+    tangential_force_W: np.ndarray
+    point_W: np.ndarray
+    n_points: int
+
+    @property
+    def force_W(self) -> np.ndarray:
+        return self.normal_force_n * self.normal_W + self.tangential_force_W
+
+
+@dataclass(frozen=True)
+class AmTruth:
+    """Ground truth of one AM: base pose (p_WB [m], R_WB), end-effector pose (p_WE, R_WE),
+    the pad-object contact, and the names of other bodies the pad or the base touch."""
+
+    p_WB: np.ndarray
+    R_WB: np.ndarray
+    p_WE: np.ndarray
+    R_WE: np.ndarray
+    pad_object_contact: PadContact
+    pad_other_contacts: tuple[str, ...]
+    base_contacts: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class ObjectTruth:
+    """Object pose and velocity: p_WO [m] (CoM), quat_WO_wxyz, v_WO [m/s] and w_WO [rad/s] in W;
+    touching: names of the bodies in contact with it ("table", "ground", "am<sysid>")."""
+
+    p_WO: np.ndarray
+    quat_WO_wxyz: np.ndarray
+    v_WO: np.ndarray
+    w_WO: np.ndarray
+    touching: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """Everything the simulator knows at one instant (for logging and tests, not controllers)."""
+
+    time_s: float
+    step_index: int
+    ams: Mapping[int, AmTruth]
+    object: ObjectTruth
+
+
+_NO_CONTACT = PadContact(0.0, np.zeros(3), np.zeros(3), np.zeros(3), 0)
+
+
+def _R(quat_xyzw) -> np.ndarray:
+    """Rotation matrix of a PyBullet (x, y, z, w) quaternion."""
+    return np.array(pb.getMatrixFromQuaternion(quat_xyzw)).reshape(3, 3)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    # np.cross costs ~30x more for 3-vectors, and wrench_ee runs per AM per step
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+class World:
+    """Physics of one scenario; see the module docstring for the stepping protocol."""
+
+    def __init__(self, spec: ScenarioSpec, initial: Mapping[int, AmState]):
+        expected = sorted(a.sysid for a in spec.ams)
+        if sorted(initial) != expected:
+            raise ValueError(f"initial states given for sysids {sorted(initial)}, scenario has {expected}")
+        self.spec = spec
+        self._initial = dict(initial)
+        self._mixer = QuadMixer.from_rotors(spec.vehicle.rotors)
+        self._tau_q_max = np.array(spec.vehicle.joint_torque_max_nm, dtype=float)
+        self._client: int | None = None
+        self._ams: dict[int, scene.AmBody] = {}
+        self._commands: dict[int, tuple[float, np.ndarray, np.ndarray]] = {}
+        self._names: dict[int, str] = {}
+        self._object_id = -1
+        self._step_index = 0
+
+    # ------------------------------------------------------------------ lifecycle
+    def connect(self) -> None:
+        if self._client is not None:
+            raise RuntimeError("World.connect() called twice")
+        c = pb.connect(pb.DIRECT)
+        if c < 0:
+            raise RuntimeError("PyBullet could not start a DIRECT client")
+        self._client = c
+        pb.setPhysicsEngineParameter(fixedTimeStep=self.spec.dt_s, numSubSteps=0, deterministicOverlappingPairs=1,
+                                     physicsClientId=c)
+        pb.setGravity(0.0, 0.0, -self.spec.vehicle.gravity_mps2, physicsClientId=c)
+        self._names[scene.add_ground(c)] = "ground"
+        self._names[scene.add_table(c, self.spec.object)] = "table"
+        # The object must exist before the AMs: `_sum_contact` relies on it (friction sign).
+        self._object_id = scene.add_object(c, self.spec.object)
+        self._names[self._object_id] = "object"
+        n = self.spec.vehicle.n_joints
+        for a in self.spec.ams:
+            am = scene.load_am(c, self.spec.vehicle, friction=self.spec.object.lateral_friction)
+            scene.reset_am(c, am, self._initial[a.sysid])
+            self._ams[a.sysid] = am
+            self._names[am.body_id] = f"am{a.sysid}"
+            self._commands[a.sysid] = (0.0, np.zeros(3), np.zeros(n))
+        self._step_index = 0
+
+    def close(self) -> None:
+        if self._client is not None:
+            pb.disconnect(physicsClientId=self._client)
+            self._client = None
+
+    def __enter__(self) -> "World":
+        self.connect()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _c(self) -> int:
+        if self._client is None:
+            raise WorldNotConnected("World is not connected: call connect() first")
+        return self._client
+
+    def _am(self, sysid: int) -> scene.AmBody:
+        self._c()
+        try:
+            return self._ams[sysid]
+        except KeyError:
+            raise KeyError(f"no AM with sysid {sysid} (world has {sorted(self._ams)})") from None
+
+    # ------------------------------------------------------------------ time
+    @property
+    def dt_s(self) -> float:
+        return self.spec.dt_s
+
+    @property
+    def step_index(self) -> int:
+        return self._step_index
+
+    @property
+    def time_s(self) -> float:
+        return self._step_index * self.spec.dt_s
+
+    @property
+    def sysids(self) -> tuple[int, ...]:
+        return tuple(a.sysid for a in self.spec.ams)
+
+    def total_mass_kg(self, sysid: int) -> float:
+        """Mass of one AM as PyBullet loaded it [kg]."""
+        return self._am(sysid).total_mass_kg
+
+    def tool_mass_kg(self, sysid: int) -> float:
+        """Mass beyond the wrist sensor (pad and ee marker) that `wrench_ee` compensates [kg]."""
+        return self._am(sysid).tool_mass_kg
+
+    # ------------------------------------------------------------------ actuation
+    def apply(self, sysid: int, thrust_n: float, tau_B_nm, tau_q_nm) -> ApplyReport:
+        """Command total thrust T [N] along +z_B, body torque tau_B [N m] (in B, about the
+        base CoM) and joint torques tau_q [N m]. Mixed and limited like the real vehicle;
+        the applied values (see the report) act from the next `step()` until replaced."""
+        self._am(sysid)
+        mix = self._mixer.mix(float(thrust_n), tau_B_nm)
+        joints = limit_joint_torques(tau_q_nm, self._tau_q_max)
+        self._commands[sysid] = (mix.applied_thrust_n, mix.applied_tau_B_nm, joints.applied_nm)
+        return ApplyReport(mix=mix, joints=joints)
+
+    def step(self) -> None:
+        """Apply every AM's latest command and advance one physics step."""
+        c = self._c()
+        for sysid, am in self._ams.items():
+            thrust, tau_B, tau_q = self._commands[sysid]
+            pb.applyExternalForce(am.body_id, -1, [0.0, 0.0, thrust], [0.0, 0.0, 0.0], pb.LINK_FRAME,
+                                  physicsClientId=c)
+            pb.applyExternalTorque(am.body_id, -1, list(tau_B), pb.LINK_FRAME, physicsClientId=c)
+            pb.setJointMotorControlArray(am.body_id, list(am.arm_joint_ids), pb.TORQUE_CONTROL, forces=list(tau_q),
+                                         physicsClientId=c)
+        pb.stepSimulation(physicsClientId=c)
+        self._step_index += 1
+
+    # ------------------------------------------------------------------ sensing
+    def state(self, sysid: int) -> AmState:
+        """Exact state of one AM (velocities in B, see `amcore.model.AmState`)."""
+        c, am = self._c(), self._am(sysid)
+        p, quat = pb.getBasePositionAndOrientation(am.body_id, physicsClientId=c)
+        v_W, w_W = pb.getBaseVelocity(am.body_id, physicsClientId=c)
+        R = _R(quat)
+        joints = pb.getJointStates(am.body_id, list(am.arm_joint_ids), physicsClientId=c)
+        return AmState(p_WB=np.array(p), R_WB=R, v_B=R.T @ np.array(v_W), w_B=R.T @ np.array(w_W),
+                       q=np.array([j[0] for j in joints]), qdot=np.array([j[1] for j in joints]))
+
+    def wrench_ee(self, sysid: int) -> np.ndarray:
+        """(6,) [f_E [N]; m_E [N m]]: wrench the environment applies on the end-effector,
+        expressed in E, moment about E's origin, as a wrist F/T sensor on ft_joint reports it.
+
+        Like an F/T driver with a known tool, the weight of the tool (pad + ee marker,
+        `tool_mass_kg`) is removed. The tool's inertial wrench (0.03 kg times its
+        acceleration, plus its tiny rotational inertia terms) is not: it remains as
+        sensor error, as on the real sensor (e.g. 0.03 N per 1 m/s^2 of pad acceleration).
+        Before the first `step()` nothing has been measured and the result is zero.
+        """
+        c, am = self._c(), self._am(sysid)
+        if self._step_index == 0:
+            return np.zeros(6)
+        reaction = np.array(pb.getJointState(am.body_id, am.ft_joint_id, physicsClientId=c)[2])
+        f_s, m_s = reaction[0:3], reaction[3:6]
+        links = pb.getLinkStates(am.body_id, [am.pad_link_id, am.ee_link_id, *am.tool_link_ids],
+                                 computeForwardKinematics=1, physicsClientId=c)
+        pad, ee, tool = links[0], links[1], links[2:]
+        R_WP, c_pad = _R(pad[1]), np.array(pad[0])  # pad's inertial frame: the sensor's frame
+        R_WE, p_WE = _R(ee[5]), np.array(ee[4])  # ee URDF link frame {E}
+        c_tool = sum(m * np.array(s[0]) for m, s in zip(am.tool_link_masses_kg, tool)) / am.tool_mass_kg
+        F_grav = np.array([0.0, 0.0, -am.tool_mass_kg * self.spec.vehicle.gravity_mps2])
+        # Pad (quasi-static): f_sensor + f_env + m g = m a  ->  f_env = -f_sensor - m g (+ m a).
+        f_env_W = -R_WP @ f_s - F_grav
+        m_env_cpad_W = -R_WP @ m_s - _cross(c_tool - c_pad, F_grav)
+        m_env_E_W = m_env_cpad_W + _cross(c_pad - p_WE, f_env_W)
+        return np.concatenate([R_WE.T @ f_env_W, R_WE.T @ m_env_E_W])
+
+    def ground_truth(self) -> GroundTruth:
+        c = self._c()
+        ams = {sysid: self._am_truth(am) for sysid, am in self._ams.items()}
+        p, quat = pb.getBasePositionAndOrientation(self._object_id, physicsClientId=c)
+        v, w = pb.getBaseVelocity(self._object_id, physicsClientId=c)
+        x, y, z, qw = quat
+        touching = pb.getContactPoints(bodyA=self._object_id, physicsClientId=c)
+        obj = ObjectTruth(p_WO=np.array(p), quat_WO_wxyz=np.array([qw, x, y, z]), v_WO=np.array(v), w_WO=np.array(w),
+                          touching=self._names_of(pt[2] for pt in touching))
+        return GroundTruth(time_s=self.time_s, step_index=self.step_index, ams=ams, object=obj)
+
+    def _am_truth(self, am: scene.AmBody) -> AmTruth:
+        c = self._c()
+        p, quat = pb.getBasePositionAndOrientation(am.body_id, physicsClientId=c)
+        ee = pb.getLinkState(am.body_id, am.ee_link_id, computeForwardKinematics=1, physicsClientId=c)
+        pad_points = pb.getContactPoints(bodyA=am.body_id, linkIndexA=am.pad_link_id, physicsClientId=c)
+        base_points = pb.getContactPoints(bodyA=am.body_id, linkIndexA=-1, physicsClientId=c)
+        on_object = pb.getContactPoints(bodyA=self._object_id, bodyB=am.body_id, linkIndexB=am.pad_link_id,
+                                        physicsClientId=c)
+        return AmTruth(p_WB=np.array(p), R_WB=_R(quat), p_WE=np.array(ee[4]), R_WE=_R(ee[5]),
+                       pad_object_contact=_sum_contact(on_object),
+                       pad_other_contacts=self._names_of(pt[2] for pt in pad_points if pt[2] != self._object_id),
+                       base_contacts=self._names_of(pt[2] for pt in base_points))
+
+    def _names_of(self, body_ids) -> tuple[str, ...]:
+        return tuple(sorted({self._names.get(b, f"body{b}") for b in body_ids}))
+
+
+def _sum_contact(points) -> PadContact:
+    """Sum PyBullet contact points between the object (body A) and a pad (body B) into the
+    force the object applies on the pad.
+
+    Verified conventions (tests/simulator/test_world_sensors.py, the squeeze tests): contactNormalOnB points
+    from B into A and A receives +normalForce along it. The friction pair
+    (lateralFriction_k, lateralFrictionDir_k) is the force on the first body of Bullet's
+    internal contact manifold, which is NOT swapped when a query names the bodies the other
+    way round; the object is created before every AM (lower broadphase id), so it is that
+    first body and A receives +sum_k lateralFriction_k lateralFrictionDir_k. The pad gets
+    the opposite of both.
+    """
+    if not points:
+        return _NO_CONTACT
+    F_n = np.zeros(3)  # on the pad
+    F_t = np.zeros(3)
+    weighted_point = np.zeros(3)
+    total_normal = 0.0
+    for pt in points:
+        F_n -= pt[9] * np.array(pt[7])
+        F_t -= pt[10] * np.array(pt[11]) + pt[12] * np.array(pt[13])
+        weighted_point += pt[9] * np.array(pt[5])
+        total_normal += pt[9]
+    magnitude = float(np.linalg.norm(F_n))
+    normal = F_n / magnitude if magnitude > 0.0 else -np.array(points[0][7])
+    F_t = F_t - (F_t @ normal) * normal
+    point = weighted_point / total_normal if total_normal > 0.0 else np.mean([pt[5] for pt in points], axis=0)
+    return PadContact(normal_force_n=magnitude, normal_W=normal, tangential_force_W=F_t, point_W=point,
+                      n_points=len(points))

@@ -1,0 +1,160 @@
+"""Wrist F/T convention, contact ground truth, end-effector pose and the resting object."""
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from amcore.so3 import Rz
+from simulator.scene import table_geometry
+
+from .sim_testing import at_rest, facing_object, far_apart, hold_arm, hold_base, p_BE, push_link, push_object
+
+
+def test_ee_pose_is_the_urdf_link_frame(spec, model, make_world):
+    """ground_truth's p_WE, R_WE agree with pinocchio's forward kinematics of state()."""
+    w = make_world(far_apart(spec))
+    for _ in range(50):
+        w.step()
+    gt = w.ground_truth()
+    data = model.pin_model.createData()
+    for s in w.sysids:
+        x = w.state(s)
+        pin.framesForwardKinematics(model.pin_model, data, x.pin_q())
+        oMe = data.oMf[model.ee_frame_id]
+        np.testing.assert_allclose(gt.ams[s].p_WE, oMe.translation, atol=1e-9)
+        np.testing.assert_allclose(gt.ams[s].R_WE, oMe.rotation, atol=1e-9)
+        np.testing.assert_allclose(gt.ams[s].p_WB, x.p_WB, atol=1e-12)
+
+
+@pytest.mark.parametrize("force_W, offset_E", [
+    ([0.0, 0.0, 0.0], [0.0, 0.0, 0.0]),  # tool weight only: must read zero
+    ([-4.0, 1.0, 2.0], [0.0, 0.0, 0.0]),  # force at the ee origin
+    ([1.5, -3.0, -1.0], [0.0, 0.03, -0.02]),  # force off the origin: moment about E
+])
+def test_ft_wrench_is_what_the_environment_applies_on_E(spec, model, make_world, force_W, offset_E):
+    """Base held, arm held by a joint PD, a known force pushes the pad; once static, the
+    sensor must report exactly that force (in E) and its moment about E's origin."""
+    sysid = spec.ams[0].sysid
+    initial = far_apart(spec)
+    q_ref = np.array(spec.vehicle.q_nominal_rad)
+    initial[sysid] = at_rest([-2.0, 0.0, 3.0], Rz(0.7) @ pin.rpy.rpyToMatrix(0.2, -0.1, 0.0), q_ref)
+    w = make_world(initial)
+    hold_base(w, sysid)
+    force_W = np.array(force_W)
+    for _ in range(1500):
+        hold_arm(w, sysid, q_ref, model)
+        ee = w.ground_truth().ams[sysid]
+        point_W = ee.p_WE + ee.R_WE @ np.array(offset_E)
+        push_link(w, sysid, "pad", force_W, point_W)
+        w.step()
+    assert np.linalg.norm(w.state(sysid).qdot) < 1e-4  # static: no inertial wrench on the pad
+    ee = w.ground_truth().ams[sysid]
+    expected = np.concatenate([ee.R_WE.T @ force_W, ee.R_WE.T @ np.cross(ee.R_WE @ np.array(offset_E), force_W)])
+    np.testing.assert_allclose(w.wrench_ee(sysid), expected, atol=2e-4)
+
+
+@pytest.fixture
+def squeezed(spec, model, make_world):
+    """Both AMs held facing the box, pads 1 cm inside its faces; the box is then pushed up
+    by its weight plus 4 N and sideways by 1 N: it leaves the table and the pads hold it by
+    friction."""
+    q_ref = np.array(spec.vehicle.q_nominal_rad)
+    w = make_world(facing_object(spec, model, depth_m=0.01))
+    for s in w.sysids:
+        hold_base(w, s)
+    weight = spec.object.mass_kg * spec.vehicle.gravity_mps2
+    for k in range(2000):
+        for s in w.sysids:
+            hold_arm(w, s, q_ref, model, stiffness=(60.0, 15.0, 3.0), damping=(2.0, 0.5, 0.04))
+        if k >= 500:
+            push_object(w, [0.0, 1.0, weight + 4.0])
+        w.step()
+    return w
+
+
+def test_contact_ground_truth_reports_the_squeeze(spec, squeezed):
+    w = squeezed
+    gt = w.ground_truth()
+    centre = np.array(spec.object.position_m)
+    for a in spec.ams:
+        contact = gt.ams[a.sysid].pad_object_contact
+        u = np.array([np.cos(np.deg2rad(a.azimuth_deg)), np.sin(np.deg2rad(a.azimuth_deg)), 0.0])
+        assert contact.n_points > 0
+        assert contact.normal_force_n > 1.0
+        np.testing.assert_allclose(contact.normal_W, u, atol=0.02)  # from the object into the pad
+        assert abs(contact.tangential_force_W @ contact.normal_W) < 1e-9
+        assert abs((contact.point_W - centre) @ u - 0.5 * spec.object.size_m[0]) < 2e-3  # on the face
+        assert gt.ams[a.sysid].pad_other_contacts == ()
+    # static and off the table: the pads' friction balances the 4 N up-push and the 1 N side
+    # push (as forces on the pads: +z, +y), their normal forces balance each other
+    assert gt.object.touching == tuple(f"am{a.sysid}" for a in spec.ams)
+    assert np.linalg.norm(gt.object.v_WO) < 1e-4
+    total = sum(gt.ams[s].pad_object_contact.force_W for s in w.sysids)
+    np.testing.assert_allclose(total, [0.0, 1.0, 4.0], atol=0.05)
+
+
+def test_ft_sensor_agrees_with_contact_ground_truth(squeezed):
+    """Two independent measurements of the same force: wrist sensor and contact solver."""
+    w = squeezed
+    gt = w.ground_truth()
+    for s in w.sysids:
+        am = gt.ams[s]
+        f_W = am.R_WE @ w.wrench_ee(s)[:3]
+        np.testing.assert_allclose(f_W, am.pad_object_contact.force_W, atol=0.02 * np.linalg.norm(f_W))
+        assert w.wrench_ee(s)[0] < -1.0  # pushing: the environment pushes E back along -x_E
+
+
+def test_object_rests_on_the_table(spec, make_world):
+    table = table_geometry(spec.object)
+    assert table.top_z_m == pytest.approx(spec.object.position_m[2] - spec.object.half_height_m, abs=1e-12)
+    assert table.half_extents_m[0] < 0.5 * spec.object.size_m[0]
+    w = make_world(far_apart(spec))
+    for _ in range(1000):
+        w.step()
+    first = w.ground_truth().object
+    np.testing.assert_allclose(first.p_WO, spec.object.position_m, atol=1e-3)
+    for _ in range(1000):
+        w.step()
+    last = w.ground_truth().object
+    assert np.linalg.norm(last.p_WO - first.p_WO) < 1e-5
+    assert np.linalg.norm(last.v_WO) < 1e-4 and np.linalg.norm(last.w_WO) < 1e-3
+    assert abs(last.quat_WO_wxyz[0]) > 1.0 - 1e-8
+
+
+def test_ams_pass_through_each_other_but_pads_touch_the_ground(spec, model, make_world):
+    q = np.array([1.0472, -1.0472, 0.0])
+    pad_half_height = 0.04  # the pad is an 8 cm square, its face vertical when sum(q) = 0
+    base_z = pad_half_height - 0.005 - p_BE(model, q)[2]
+    # both AMs at the same spot (they would fly apart if they collided), pads 5 mm in the ground
+    initial = {a.sysid: at_rest([-1.5, 0.0, base_z], np.eye(3), q) for a in spec.ams}
+    w = make_world(initial)
+    w.step()
+    gt = w.ground_truth()
+    for s in w.sysids:
+        assert gt.ams[s].pad_other_contacts == ("ground",)
+        assert gt.ams[s].pad_object_contact.n_points == 0
+        assert not any(name.startswith("am") for name in gt.ams[s].base_contacts)
+    a, b = (w.state(s) for s in w.sysids)
+    np.testing.assert_allclose(a.p_WB, b.p_WB, atol=1e-12)
+
+
+def test_ten_am_ring_around_a_cylinder(spec, make_world):
+    """The paper's 10-AM layout: pads 2 cm off the cylinder, nothing touches, object rests."""
+    from simulator.bench_world import GAP_M, Q_BENCH, ring_placement, ten_am_spec
+
+    ten = ten_am_spec(spec)
+    w = make_world(ring_placement(ten, Q_BENCH, GAP_M), scenario=ten)
+    assert len(w.sysids) == 10
+    assert w.wrench_ee(w.sysids[0]).tolist() == [0.0] * 6  # nothing measured before the first step
+    for _ in range(20):
+        w.step()
+    gt = w.ground_truth()
+    centre = np.array(ten.object.position_m)
+    for s in w.sysids:
+        am = gt.ams[s]
+        gap = np.linalg.norm((am.p_WE - centre)[:2]) - ten.object.radius_m
+        assert gap == pytest.approx(GAP_M, abs=2e-3)  # 20 ms of free fall moves it 2 mm down only
+        assert am.pad_object_contact.n_points == 0 and am.pad_other_contacts == () and am.base_contacts == ()
+    assert gt.object.touching == ("table",)
+    np.testing.assert_allclose(gt.object.p_WO, centre, atol=1e-3)
