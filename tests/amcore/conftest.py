@@ -1,30 +1,15 @@
 """Shared fixtures: the paper's vehicle, random states, flow along a constant body twist."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pinocchio as pin
 import pytest
 
-from amcore.config import load_scenario
 from amcore.control import ControllerParams
 from amcore.mission import am_mission
-from amcore.model import AmState, build_model, create_data
+from amcore.model import AmState, create_data
 from amcore.so3 import exp_so3
 
-ROOT = Path(__file__).resolve().parents[2]
-SCENARIO = ROOT / "configs" / "scenarios" / "two_am_comp.toml"
-
-
-@pytest.fixture(scope="session")
-def spec():
-    return load_scenario(SCENARIO)
-
-
-@pytest.fixture(scope="session")
-def model(spec):
-    return build_model(spec.vehicle)
 
 
 @pytest.fixture(scope="session")

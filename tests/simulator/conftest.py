@@ -1,26 +1,11 @@
 """Shared fixtures of the simulator tests: the scenario, the pinocchio model, a world factory."""
 from __future__ import annotations
 
-from pathlib import Path
 
 import pytest
 
-from amcore.config import load_scenario
-from amcore.model import build_model
 from simulator.world import World
 
-REPO = Path(__file__).resolve().parents[2]
-SCENARIO = REPO / "configs" / "scenarios" / "two_am_comp.toml"
-
-
-@pytest.fixture(scope="session")
-def spec():
-    return load_scenario(SCENARIO)
-
-
-@pytest.fixture(scope="session")
-def model(spec):
-    return build_model(spec.vehicle)
 
 
 @pytest.fixture
