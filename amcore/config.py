@@ -83,6 +83,12 @@ class ControllerOptions:
     compensate_Lambda_y_dot: bool = False
     force_filter_hz: float = 30.0  # cutoff of the 2nd-order low-pass on the measured wrench
     force_filter_zeta: float = 1.0
+    # Feed the filtered wrench's rates into f_d's derivatives (hence Omega_d, Omegadot_d).
+    # Off by default: a real wrist sensor also measures the tool's inertial force, and the
+    # filter's second derivative passes the raw reading straight through (gain w^2), which
+    # closes a one-step loop sensor -> Omega_d -> body torque -> tool acceleration -> sensor
+    # that PyBullet shows diverging at 2 steps per period. Off treats F_e as slowly varying.
+    force_rate_feedforward: bool = False
 
 
 @dataclass(frozen=True)
@@ -353,3 +359,27 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
     _positive(f"{where}: [scenario].rate_hz", spec.rate_hz)
     _positive(f"{where}: [scenario].duration_s", spec.duration_s)
     return spec
+
+
+def scenario_id(spec: ScenarioSpec) -> int:
+    """A 32-bit fingerprint of everything that defines a run (AM_SCENARIO.scenario_id).
+
+    Computed from the parsed scenario and vehicle (not file paths or formatting) plus the
+    URDF's bytes, so a simulator and a companion on different hosts agree exactly when
+    they load the same scenario, and a companion started with another one is told so.
+    """
+    import hashlib
+    import json
+    import zlib
+
+    def plain(x):
+        if dataclasses.is_dataclass(x):
+            return {f.name: plain(getattr(x, f.name)) for f in dataclasses.fields(x) if f.name != "path"}
+        if isinstance(x, Path):
+            return hashlib.sha256(x.read_bytes()).hexdigest() if x.is_file() else str(x)
+        if isinstance(x, (tuple, list)):
+            return [plain(v) for v in x]
+        return x
+
+    text = json.dumps(plain(spec), sort_keys=True, separators=(",", ":"))
+    return zlib.crc32(text.encode("utf-8"))

@@ -40,6 +40,7 @@ from .so3 import cross, hat, vee
 from .task import TaskFrame, task_terms
 
 E3 = np.array([0.0, 0.0, 1.0])
+_ZERO3 = np.zeros(3)
 
 
 @dataclass(frozen=True)
@@ -80,6 +81,7 @@ class ControllerParams:
     damping_max: float
     force_compensation: bool
     compensate_Lambda_y_dot: bool
+    force_rate_feedforward: bool
     wrench_filter: LowPass2
     task_frame: TaskFrame
     components: tuple[str, ...]
@@ -96,6 +98,7 @@ class ControllerParams:
             y_err_max=np.array(s.y_err_max) if s.y_err_max else np.full(n, np.inf),
             sigma_damping=s.sigma_damping, damping_max=s.damping_max,
             force_compensation=o.force_compensation, compensate_Lambda_y_dot=o.compensate_Lambda_y_dot,
+            force_rate_feedforward=o.force_rate_feedforward,
             wrench_filter=LowPass2(o.force_filter_hz, o.force_filter_zeta),
             task_frame=task_frame, components=v.task.components,
         )
@@ -187,7 +190,11 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     dt = 0.0 if memory.t_s is None else t_s - memory.t_s
     filt = lowpass_update(p.wrench_filter, memory.wrench, raw_W, dt)
     filt_dd = lowpass_accel(p.wrench_filter, filt, raw_W)
-    F_W, F_W_d, F_W_dd = filt.x[0:3], filt.xdot[0:3], filt_dd[0:3]
+    F_W = filt.x[0:3]
+    if p.force_rate_feedforward:
+        F_W_d, F_W_dd = filt.xdot[0:3], filt_dd[0:3]
+    else:  # F_e treated as slowly varying in f_d's derivatives (see ControllerOptions)
+        F_W_d = F_W_dd = _ZERO3
     wrench_E_f = np.concatenate([R_WE.T @ filt.x[0:3], R_WE.T @ filt.x[3:6]])
     F_xi = tm.T_inv.T @ (tk.J_e.T @ wrench_E_f)
     s = 1.0 if p.force_compensation else 0.0

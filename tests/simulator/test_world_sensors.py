@@ -66,7 +66,7 @@ def squeezed(spec, model, make_world):
     weight = spec.object.mass_kg * spec.vehicle.gravity_mps2
     for k in range(2000):
         for s in w.sysids:
-            hold_arm(w, s, q_ref, model, stiffness=(60.0, 15.0, 3.0), damping=(2.0, 0.5, 0.04))
+            hold_arm(w, s, q_ref, model, stiffness=(180.0, 45.0, 9.0), damping=(3.5, 0.9, 0.07))
         if k >= 500:
             push_object(w, [0.0, 1.0, weight + 4.0])
         w.step()

@@ -1,0 +1,136 @@
+"""Companion process of one AM: runs the paper's controller against a flight controller
+(here the SITL simulator) over MAVLink, in lockstep.
+
+    companion --sysid 4 [--sim udp:127.0.0.1:14550] [--config configs/scenarios/two_am_comp.toml]
+
+It loads its own [[am]] entry of the scenario, computes its own references (approach,
+grasp, lift, hover, timed on simulation time) and never sees another AM's state. It
+checks that the simulator runs the same scenario (AM_SCENARIO.scenario_id), arms, answers
+every sensor frame with a torque setpoint, and exits 0 when the simulator ends the run
+or on SIGINT/SIGTERM. Exit codes: 2 bad configuration, 3 scenario mismatch, 1 link failure.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import time
+from pathlib import Path
+
+from amcore.config import ConfigError, load_scenario, scenario_id
+from amcore.control import ControllerMemory, ControllerParams, step
+from amcore.mission import am_mission
+from amcore.model import build_model, create_data
+from amlink.errors import LinkError
+from amlink.lockstep import CompanionClient
+
+from .adapter import setpoint_from_result, state_from_frame
+from .outcome import Outcome
+
+DEFAULT_SCENARIO = Path(__file__).resolve().parents[1] / "configs" / "scenarios" / "two_am_comp.toml"
+
+
+class _Stop(Exception):
+    pass
+
+
+def _on_signal(signum, _frame):
+    raise _Stop(signal.Signals(signum).name)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="companion", description=__doc__.splitlines()[0])
+    ap.add_argument("--sysid", type=int, required=True, help="this AM's MAVLink system id (its [[am]] entry)")
+    ap.add_argument("--sim", default="udp:127.0.0.1:14550", help="simulator endpoint udp:HOST:PORT")
+    ap.add_argument("--config", type=Path, default=DEFAULT_SCENARIO, help="scenario TOML")
+    ap.add_argument("--connect-timeout", type=float, default=30.0, help="seconds to wait for the simulator")
+    ap.add_argument("--frame-timeout", type=float, default=10.0, help="seconds without a sensor frame = link lost")
+    ap.add_argument("--outcome", type=Path, default=None, help="write a per-phase error summary (JSON) here")
+    a = ap.parse_args(argv)
+    tag = f"companion[{a.sysid}]"
+    try:
+        spec = load_scenario(a.config)
+        am = spec.am(a.sysid)
+    except ConfigError as exc:
+        print(f"{tag}: error: {exc}", file=sys.stderr)
+        return 2
+    model = build_model(spec.vehicle)
+    data = create_data(model)
+    mission = am_mission(spec, am, model)
+    params = ControllerParams.from_vehicle(spec.vehicle, mission.frame)
+    thrust_max = spec.vehicle.rotors.thrust_max_n * spec.vehicle.rotors.count
+    ms = spec.mission
+    outcome = Outcome(a.sysid, ("approach", "grasp", "hover"),
+                      (ms.grasp_end_s + ms.lift_move_s + 1.0, ms.hover_end_s))
+    my_id = scenario_id(spec)
+
+    signal.signal(signal.SIGTERM, _on_signal)
+    signal.signal(signal.SIGINT, _on_signal)
+    client = CompanionClient(a.sysid, a.sim)
+    steps, why = 0, "simulator ended the run"
+    try:
+        info = client.connect(timeout_s=a.connect_timeout)
+        if info.scenario_id != my_id or info.name != spec.name:
+            print(f"{tag}: error: the simulator runs scenario '{info.name}' (id {info.scenario_id}), this companion "
+                  f"was started with '{spec.name}' (id {my_id}, {a.config}); start both with the same --config",
+                  file=sys.stderr)
+            return 3
+        client.arm(timeout_s=5.0)
+        print(f"{tag}: connected to {a.sim}, scenario '{info.name}', armed", file=sys.stderr, flush=True)
+        memory = ControllerMemory()
+        next_snap = [("approach_end", ms.approach_end_s), ("grasp_end", ms.grasp_end_s),
+                     ("settle_check", spec.duration_s - 2.0)]
+        next_snap.sort(key=lambda x: x[1])
+        last = None
+        t0 = time.perf_counter()
+        while True:
+            frame = client.recv_frame(timeout_s=a.frame_timeout)
+            if frame is None:
+                break
+            t = frame.time_s
+            res = step(model, data, params, state_from_frame(frame), mission.reference(t), frame.wrench_E, memory, t)
+            memory = res.memory
+            sp, att = setpoint_from_result(frame.step, res, thrust_max)
+            client.send_setpoint(sp, att)
+            outcome.add(t, mission.phase(t), res.diagnostics)
+            while next_snap and t >= next_snap[0][1] - 0.5 * spec.dt_s:
+                outcome.snapshot(next_snap.pop(0)[0], t, res.diagnostics)
+            steps += 1
+            last = (t, res.diagnostics)
+        if last is not None:
+            outcome.snapshot("end", *last)
+        wall = time.perf_counter() - t0
+    except _Stop as stop:
+        why = f"stopped by {stop}"
+        wall = None
+    except LinkError as exc:
+        print(f"{tag}: error: {exc}", file=sys.stderr)
+        _write(a.outcome, outcome, error=str(exc))
+        return 1
+    finally:
+        client.close()
+    failure = [text for sev, text in client.status_texts if sev <= 3]  # MAV_SEVERITY_ERROR or worse
+    if failure:
+        print(f"{tag}: error: the simulator ended the run: {failure[-1]}", file=sys.stderr)
+        _write(a.outcome, outcome, error=failure[-1])
+        return 1
+    _write(a.outcome, outcome)
+    rate = f", {steps / wall:.0f} steps/s" if wall else ""
+    print(f"{tag}: {why} after {steps} steps{rate}", file=sys.stderr)
+    return 0
+
+
+def _write(path: Path | None, outcome: Outcome, error: str | None = None) -> None:
+    if path is None:
+        return
+    d = outcome.to_dict()
+    d["error"] = error
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(d, indent=1))
+    tmp.replace(path)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

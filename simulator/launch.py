@@ -1,0 +1,197 @@
+"""Run a whole scenario: the simulator and one companion process per AM, wired over
+MAVLink/UDP on loopback, with a progress bar and a run folder holding the outcome.
+
+    am-run [configs/scenarios/two_am_comp.toml] [--run-dir runs/NAME] [--duration S]
+
+The run folder gets outcome.json (simulator ground truth), am<sysid>.json (each
+companion's controller errors per phase) and every process's log. Exit code: 0 when every
+process ended cleanly, 2 bad configuration, 1 otherwise.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import select
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from amcore.config import ConfigError, load_scenario
+
+from .main import DEFAULT_SCENARIO
+
+
+def _command(name: str) -> list[str]:
+    """The console script next to this interpreter, else `python -m <package>`."""
+    exe = shutil.which(name, path=str(Path(sys.executable).parent))
+    return [exe] if exe else [sys.executable, "-m", name]
+
+
+class _Bar:
+    def __init__(self, enabled: bool) -> None:
+        self.enabled, self.tty = enabled, sys.stderr.isatty()
+        self._last_decile = -1
+
+    def show(self, t: float, duration: float, rtf: float) -> None:
+        if not self.enabled:
+            return
+        frac = min(1.0, t / duration) if duration else 1.0
+        if self.tty:
+            bar = "#" * int(30 * frac) + "." * (30 - int(30 * frac))
+            print(f"\r[{bar}] sim {t:6.2f}/{duration:.1f} s  {rtf:5.2f}x real time", end="", file=sys.stderr, flush=True)
+        elif int(10 * frac) > self._last_decile:
+            self._last_decile = int(10 * frac)
+            print(f"sim {t:6.2f}/{duration:.1f} s  {rtf:5.2f}x real time", file=sys.stderr, flush=True)
+
+    def end(self) -> None:
+        if self.enabled and self.tty:
+            print(file=sys.stderr)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="am-run", description=__doc__.splitlines()[0])
+    ap.add_argument("scenario", nargs="?", type=Path, default=DEFAULT_SCENARIO, help="scenario TOML")
+    ap.add_argument("--run-dir", type=Path, default=None, help="run folder (default runs/<name>-<time>)")
+    ap.add_argument("--duration", type=float, default=None, help="override the scenario's duration [s]")
+    ap.add_argument("--no-progress", action="store_true", help="no progress display")
+    ap.add_argument("--startup-timeout", type=float, default=120.0, help="seconds for all processes to connect")
+    a = ap.parse_args(argv)
+    try:
+        spec = load_scenario(a.scenario)
+    except ConfigError as exc:
+        print(f"am-run: error: {exc}", file=sys.stderr)
+        return 2
+    run_dir = (a.run_dir or Path("runs") / f"{spec.name}-{time.strftime('%Y%m%d-%H%M%S')}").resolve()
+    run_dir.mkdir(parents=True, exist_ok=True)
+    cfg = str(Path(a.scenario).resolve())
+    sim_cmd = _command("simulator") + ["--config", cfg, "--bind", "udp:127.0.0.1:0", "--run-dir", str(run_dir),
+                                       "--progress", "jsonl", "--peer-timeout", str(a.startup_timeout)]
+    if a.duration is not None:
+        sim_cmd += ["--duration", str(a.duration)]
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    procs: dict[str, subprocess.Popen] = {}
+    logs = []
+    bar = _Bar(not a.no_progress)
+    print(f"am-run: scenario '{spec.name}' with {len(spec.ams)} AMs; run folder {run_dir}", file=sys.stderr)
+    try:
+        log = open(run_dir / "simulator.log", "w")
+        logs.append(log)
+        sim = procs["simulator"] = subprocess.Popen(sim_cmd, stdout=subprocess.PIPE, stderr=log, env=env, text=True)
+        bind = None
+        deadline = time.monotonic() + a.startup_timeout
+        while bind is None:
+            line = sim.stdout.readline() if _readable(sim.stdout, deadline) else ""
+            if not line:
+                raise RuntimeError(f"the simulator did not start (exit {sim.poll()}); see {run_dir / 'simulator.log'}")
+            ev = json.loads(line)
+            if ev.get("event") == "ready":
+                bind = ev["bind"]
+        for am in spec.ams:
+            clog = open(run_dir / f"companion-{am.sysid}.log", "w")
+            logs.append(clog)
+            procs[f"companion {am.sysid}"] = subprocess.Popen(
+                _command("companion") + ["--sysid", str(am.sysid), "--sim", bind, "--config", cfg,
+                                         "--outcome", str(run_dir / f"am{am.sysid}.json"),
+                                         "--connect-timeout", str(a.startup_timeout)],
+                stdout=clog, stderr=subprocess.STDOUT, env=env)
+        failed = _follow(sim, procs, bar)
+    except KeyboardInterrupt:
+        failed = ["interrupted"]
+    except RuntimeError as exc:
+        print(f"am-run: error: {exc}", file=sys.stderr)
+        failed = ["start-up"]
+    finally:
+        bar.end()
+        _stop_all(procs)
+        for f in logs:
+            f.close()
+    for name, p in procs.items():
+        if p.returncode != 0 and name not in failed:
+            failed.append(name)
+    _print_summary(run_dir, spec, procs)
+    if failed:
+        print(f"am-run: FAILED: {', '.join(failed)} (logs in {run_dir})", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _readable(stream, deadline: float) -> bool:
+    return bool(select.select([stream], [], [], max(0.0, deadline - time.monotonic()))[0])
+
+
+def _follow(sim: subprocess.Popen, procs: dict[str, subprocess.Popen], bar: _Bar) -> list[str]:
+    """Show progress until the simulator exits; stop early if any process fails."""
+    while True:
+        if _readable(sim.stdout, time.monotonic() + 0.2):
+            line = sim.stdout.readline()
+            if not line:
+                sim.wait()
+                return []
+            ev = json.loads(line)
+            if ev.get("event") == "progress":
+                bar.show(ev["t"], ev["duration"], ev["rtf"])
+        for name, p in procs.items():
+            code = p.poll()
+            if code not in (None, 0) and p is not sim:
+                return [name]
+
+
+def _stop_all(procs: dict[str, subprocess.Popen], grace_s: float = 10.0) -> None:
+    deadline = time.monotonic() + grace_s
+    # companions end on the simulator's SHUTDOWN; give them the grace period before signalling
+    for p in procs.values():
+        try:
+            p.wait(timeout=max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            p.send_signal(signal.SIGTERM)
+    for p in procs.values():
+        try:
+            p.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+
+
+def _print_summary(run_dir: Path, spec, procs) -> None:
+    path = run_dir / "outcome.json"
+    if not path.is_file():
+        return
+    o = json.loads(path.read_text())
+    obj = o["object"]
+    rtf = o.get("real_time_factor") or 0.0
+    print(f"\n{spec.name}: {o['status']}; {o['sim_time_s']:.2f} s simulated, {rtf:.2f}x real time", file=sys.stderr)
+    hl = obj.get("hover_min_lift_m")
+    print(f"object: final lift {obj['final_lift_m'] * 100:.1f} cm"
+          + (f", hover-window min {hl * 100:.1f} cm" if hl is not None else "")
+          + (f", touching {obj['touching_in_hover']}" if obj["touching_in_hover"] else ""), file=sys.stderr)
+    share = spec.object.mass_kg * spec.vehicle.gravity_mps2 / len(spec.ams)
+    print(f"{'sysid':>5} {'|r~c| t=5s':>11} {'|eR| t=5s':>10} {'|r~c| end':>10} {'|eR| end':>9} {'F/T up':>8} "
+          f"{'share':>7} {'normal':>7} {'slip':>7} {'sat':>6}", file=sys.stderr)
+    for am in spec.ams:
+        g = o["ams"][str(am.sysid)]
+        c = {}
+        cp = run_dir / f"am{am.sysid}.json"
+        if cp.is_file():
+            c = json.loads(cp.read_text())
+        a5, end = c.get("at", {}).get("approach_end", {}), c.get("at", {}).get("end", {})
+        up = -g["hover_mean_ft_force_W_n"][2]
+
+        def mm(x):
+            return f"{x * 1e3:.2f}mm" if x is not None else "-"
+
+        def rad(x):
+            return f"{x:.4f}" if x is not None else "-"
+        print(f"{am.sysid:>5} {mm(a5.get('r_c_err')):>11} {rad(a5.get('e_R')):>10} {mm(end.get('r_c_err')):>10} "
+              f"{rad(end.get('e_R')):>9} {up:7.2f}N {share:6.2f}N {g['hover_mean_normal_force_n']:6.2f}N "
+              f"{g['slip_max_m'] * 1e3:5.2f}mm {g['saturated_steps']:>6}", file=sys.stderr)
+    print(f"(F/T up: mean vertical force the wrist sensor measures in the hover window "
+          f"{o['hover_window_s'][0]:.0f}-{o['hover_window_s'][1]:.0f} s; share: m_obj g / N; slip: pad "
+          f"relative to the object since t = {o['slip_from_s']:.0f} s)", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

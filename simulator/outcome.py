@@ -1,0 +1,115 @@
+"""Physical outcome of a run, from the simulator's ground truth (pure: numpy only).
+
+Fed `GroundTruth` samples (and the wrist sensor's reading) during the run, it reports what
+the paper's Fig. 3 and the issue's acceptance checks need:
+- object: rest height, lift above rest (final; min and mean over the hover window);
+- per AM, over the hover window (the settled part of lift-and-hover): mean pad-object normal
+  and tangential force [N, W] and the mean force the wrist sensor measures on the
+  end-effector [N, W]; slip = largest displacement of the end-effector relative to the
+  object (in the object's frame) from the end of the grasp phase on, lift included [m];
+  crashes (base touching anything) and actuator saturation counts over the whole run.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from amcore.so3 import quat_wxyz_to_R
+
+
+class _AmAcc:
+    def __init__(self) -> None:
+        self.n = 0
+        self.normal = 0.0
+        self.tangential = np.zeros(3)
+        self.ft_force_W = np.zeros(3)
+        self.anchor_O: np.ndarray | None = None
+        self.slip_max = 0.0
+        self.base_contacts: set[str] = set()
+        self.saturated_steps = 0
+        self.first_saturation_s: float | None = None
+        self.lowest_base_z = np.inf
+
+
+class RunOutcome:
+    def __init__(self, sysids, hover_window: tuple[float, float], slip_from_s: float) -> None:
+        self.hover_window = hover_window
+        self.slip_from_s = slip_from_s
+        self.ams = {s: _AmAcc() for s in sysids}
+        self.z_rest: float | None = None
+        self.final_lift = 0.0
+        self._lift_n = 0
+        self._lift_sum = 0.0
+        self.lift_min = np.inf
+        self.object_touching_in_hover: set[str] = set()
+        self.t_last = 0.0
+
+    def saturation(self, sysid: int, t: float) -> bool:
+        """Count one saturated step; True the first time (so the caller logs it once)."""
+        a = self.ams[sysid]
+        a.saturated_steps += 1
+        if a.first_saturation_s is None:
+            a.first_saturation_s = t
+            return True
+        return False
+
+    def add(self, gt, wrench_E: dict[int, np.ndarray]) -> None:
+        """One ground-truth sample; wrench_E[sysid] = wrist reading on the ee, in E."""
+        t = gt.time_s
+        self.t_last = t
+        obj = gt.object
+        if self.z_rest is None:
+            self.z_rest = float(obj.p_WO[2])
+        lift = float(obj.p_WO[2]) - self.z_rest
+        self.final_lift = lift
+        in_hover = self.hover_window[0] <= t <= self.hover_window[1]
+        R_WO = quat_wxyz_to_R(obj.quat_WO_wxyz)
+        if in_hover:
+            self._lift_n += 1
+            self._lift_sum += lift
+            self.lift_min = min(self.lift_min, lift)
+            self.object_touching_in_hover.update(n for n in obj.touching if not n.startswith("am"))
+        for s, am in gt.ams.items():
+            a = self.ams[s]
+            a.base_contacts.update(am.base_contacts)
+            a.lowest_base_z = min(a.lowest_base_z, float(am.p_WB[2]))
+            if t >= self.slip_from_s:
+                p_O = R_WO.T @ (am.p_WE - obj.p_WO)
+                if a.anchor_O is None:
+                    a.anchor_O = p_O
+                a.slip_max = max(a.slip_max, float(np.linalg.norm(p_O - a.anchor_O)))
+            if not in_hover:
+                continue
+            a.n += 1
+            pc = am.pad_object_contact
+            a.normal += pc.normal_force_n
+            a.tangential += pc.tangential_force_W
+            a.ft_force_W += am.R_WE @ wrench_E[s][0:3]
+
+    def to_dict(self) -> dict:
+        ams = {}
+        for s, a in self.ams.items():
+            n = max(a.n, 1)
+            ams[str(s)] = {
+                "hover_samples": a.n,
+                "hover_mean_normal_force_n": a.normal / n,
+                "hover_mean_tangential_force_W_n": (a.tangential / n).tolist(),
+                "hover_mean_ft_force_W_n": (a.ft_force_W / n).tolist(),
+                "slip_max_m": a.slip_max,
+                "base_contacts": sorted(a.base_contacts),
+                "lowest_base_z_m": a.lowest_base_z,
+                "saturated_steps": a.saturated_steps,
+                "first_saturation_s": a.first_saturation_s,
+            }
+        return {
+            "t_last_s": self.t_last,
+            "hover_window_s": list(self.hover_window),
+            "slip_from_s": self.slip_from_s,
+            "object": {
+                "rest_z_m": self.z_rest,
+                "final_lift_m": self.final_lift,
+                "hover_min_lift_m": self.lift_min if self._lift_n else None,
+                "hover_mean_lift_m": self._lift_sum / self._lift_n if self._lift_n else None,
+                "touching_in_hover": sorted(self.object_touching_in_hover),
+            },
+            "ams": ams,
+        }

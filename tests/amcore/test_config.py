@@ -1,0 +1,77 @@
+"""Typed configuration: every scenario loads; malformed files name the file and key;
+the scenario fingerprint that companions check against the simulator's."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from amcore.config import ConfigError, load_scenario, scenario_id
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENARIOS = sorted((ROOT / "configs" / "scenarios").glob("*.toml"))
+VEHICLE = ROOT / "configs" / "vehicles" / "am3dof.toml"
+
+
+@pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
+def test_every_scenario_loads(path):
+    spec = load_scenario(path)
+    assert spec.name == path.stem
+    assert len({a.sysid for a in spec.ams}) == len(spec.ams)
+
+
+def _write(tmp_path, text: str) -> Path:
+    p = tmp_path / "s.toml"
+    p.write_text(text.replace('vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{VEHICLE}"'))
+    return p
+
+
+BASE = (ROOT / "configs" / "scenarios" / "two_am_comp.toml").read_text()
+
+
+@pytest.mark.parametrize("old,new,key", [
+    ("mass_kg = 1.0", "mass_kg = 1.0\ncolour = 3", "[object]: unknown key 'colour'"),
+    ("mass_kg = 1.0", 'mass_kg = "heavy"', "[object].mass_kg: expected a number"),
+    ("mass_kg = 1.0", "mass_kg = -1.0", "[object].mass_kg: must be > 0"),
+    ("sysid = 5", "sysid = 4", "sysid: duplicate sysid 4"),
+    ("sysid = 5", "sysid = 1", "must be in 2..255"),
+    ("squeeze_m = 0.03", "squeeze_m = [0.03]", "[mission].squeeze_m: expected a number"),
+    ("[object]", "[objekt]", "unknown table [objekt]"),
+    ("approach_end_s = 5.0", "approach_end_s = 15.0", "approach_end_s < grasp_end_s"),
+])
+def test_malformed_scenario_names_file_and_key(tmp_path, old, new, key):
+    assert old in BASE
+    p = _write(tmp_path, BASE.replace(old, new, 1))
+    with pytest.raises(ConfigError) as e:
+        load_scenario(p)
+    assert str(p) in str(e.value) and key in str(e.value)
+
+
+def test_missing_urdf_and_missing_file_are_config_errors(tmp_path):
+    v = tmp_path / "v.toml"
+    v.write_text(VEHICLE.read_text().replace('urdf = "am3dof.urdf"', 'urdf = "nowhere.urdf"'))
+    p = tmp_path / "s.toml"
+    p.write_text(BASE.replace('vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{v}"'))
+    with pytest.raises(ConfigError, match=r"urdf: file not found"):
+        load_scenario(p)
+    with pytest.raises(ConfigError, match="file not found"):
+        load_scenario(tmp_path / "absent.toml")
+
+
+def test_impossible_gains_are_rejected(tmp_path):
+    v = tmp_path / "v.toml"
+    v.write_text(VEHICLE.read_text().replace("k_R = 30.0", "k_R = 0.0").replace('urdf = "am3dof.urdf"',
+                                                                             f'urdf = "{VEHICLE.parent / "am3dof.urdf"}"'))
+    p = tmp_path / "s.toml"
+    p.write_text(BASE.replace('vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{v}"'))
+    with pytest.raises(ConfigError, match=r"\[gains\].k_R: must be > 0"):
+        load_scenario(p)
+
+
+def test_scenario_id_ignores_formatting_and_location_but_not_content(tmp_path):
+    a = scenario_id(load_scenario(ROOT / "configs" / "scenarios" / "two_am_comp.toml"))
+    moved = _write(tmp_path, "# a comment\n" + BASE.replace("mass_kg = 1.0", "mass_kg   =   1.0"))
+    assert scenario_id(load_scenario(moved)) == a
+    heavier = _write(tmp_path, BASE.replace("mass_kg = 1.0", "mass_kg = 1.01"))
+    assert scenario_id(load_scenario(heavier)) != a
+    assert scenario_id(load_scenario(ROOT / "configs" / "scenarios" / "two_am_nocomp.toml")) != a

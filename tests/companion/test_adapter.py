@@ -1,0 +1,37 @@
+"""Wire <-> controller conversions of the companion."""
+from __future__ import annotations
+
+import numpy as np
+
+from amcore.control import ControllerMemory, ControllerParams, step
+from amcore.mission import am_mission
+from amcore.model import create_data
+from amcore.so3 import R_to_quat_wxyz, exp_so3, quat_wxyz_to_R
+from amlink.types import SensorFrame
+from companion.adapter import setpoint_from_result, state_from_frame
+
+
+def test_state_from_frame_keeps_frames_and_renormalizes_the_quaternion():
+    R = exp_so3(np.array([0.1, -0.2, 0.3]))
+    q = R_to_quat_wxyz(R) * 1.0001  # float32 on the wire: not exactly unit
+    f = SensorFrame(step=3, time_s=0.003, p_WB=[1, 2, 3], quat_WB_wxyz=q, v_B=[0.1, 0, 0], w_B=[0, 0.2, 0],
+                    q=[0.1, 0.2, 0.3], qdot=[0, 0, 1], wrench_E=np.zeros(6))
+    s = state_from_frame(f)
+    np.testing.assert_allclose(s.R_WB, R, atol=1e-12)
+    np.testing.assert_allclose(s.R_WB @ s.R_WB.T, np.eye(3), atol=1e-12)
+    np.testing.assert_array_equal(s.v_B, [0.1, 0, 0])
+    np.testing.assert_array_equal(s.qdot, [0, 0, 1])
+
+
+def test_setpoint_carries_the_command_and_the_attitude_target(spec, model):
+    am = spec.ams[0]
+    m = am_mission(spec, am, model)
+    params = ControllerParams.from_vehicle(spec.vehicle, m.frame)
+    x = m.initial_state()
+    res = step(model, create_data(model), params, x, m.reference(0.3), np.zeros(6), ControllerMemory(), 0.3)
+    sp, att = setpoint_from_result(300, res, thrust_max_n=48.0)
+    assert sp.step == att.step == 300
+    assert sp.thrust_n == res.command.thrust_n
+    np.testing.assert_array_equal(sp.tau_q_nm, res.command.tau_q_nm)
+    np.testing.assert_allclose(quat_wxyz_to_R(att.quat_wxyz), res.diagnostics.R_d, atol=1e-12)
+    assert att.thrust_normalized == np.clip(res.command.thrust_n / 48.0, 0, 1)

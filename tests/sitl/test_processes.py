@@ -1,0 +1,92 @@
+"""Process behaviour of the SITL: determinism, start-up errors, missing and dead peers, signals.
+Short runs (well under a simulated second) through the console scripts."""
+from __future__ import annotations
+
+import signal
+import subprocess
+import time
+
+import pytest
+
+from .runner import SCENARIOS, Sim, am_run, companion, script
+
+pytestmark = pytest.mark.sitl
+
+
+def test_same_scenario_gives_a_bit_identical_run(tmp_path):
+    a = am_run("two_am_comp.toml", tmp_path / "a", "--duration", "0.4", timeout_s=300)
+    b = am_run("two_am_comp.toml", tmp_path / "b", "--duration", "0.4", timeout_s=300)
+    assert a.code == 0 and b.code == 0, a.stderr + b.stderr
+    assert a.outcome["steps"] == b.outcome["steps"] == 400
+    assert a.outcome["state_digest"] == b.outcome["state_digest"]
+
+
+def test_digest_sees_a_different_run(tmp_path):
+    a = am_run("two_am_comp.toml", tmp_path / "a", "--duration", "0.4", timeout_s=300)
+    b = am_run("two_am_comp.toml", tmp_path / "b", "--duration", "0.5", timeout_s=300)
+    assert a.outcome["state_digest"] != b.outcome["state_digest"]
+
+
+def test_missing_companion_is_named_and_nothing_hangs(tmp_path):
+    sim = Sim("two_am_comp.toml", tmp_path, "--peer-timeout", "3")
+    c4 = companion(4, sim.bind)
+    try:
+        t0 = time.monotonic()
+        code, err = sim.wait(timeout_s=60)
+        assert code == 1
+        assert "sysid 5" in err, err
+        assert time.monotonic() - t0 < 30
+        out, cerr = c4.communicate(timeout=30)
+        assert c4.returncode == 1, cerr  # told by the simulator that the run failed
+        assert "sysid 5" in cerr
+    finally:
+        sim.kill()
+        c4.kill()
+
+
+def test_companion_of_another_scenario_is_told_so(tmp_path):
+    sim = Sim("two_am_comp.toml", tmp_path, "--peer-timeout", "20")
+    try:
+        c = companion(4, sim.bind, "two_am_nocomp.toml")
+        out, err = c.communicate(timeout=60)
+        assert c.returncode == 3
+        assert "two_am_comp" in err and "two_am_nocomp" in err
+    finally:
+        sim.kill()
+
+
+def test_bad_config_exits_2_naming_file_and_key(tmp_path):
+    bad = tmp_path / "bad.toml"
+    text = (SCENARIOS / "two_am_comp.toml").read_text().replace("mass_kg = 1.0", "mass_kg = \"heavy\"")
+    bad.write_text(text.replace('vehicle = "../vehicles/am3dof.toml"',
+                                f'vehicle = "{SCENARIOS.parent / "vehicles" / "am3dof.toml"}"'))
+    for cmd in ([script("simulator"), "--config", str(bad)],
+                [script("companion"), "--sysid", "4", "--config", str(bad)],
+                [script("am-run"), str(bad), "--run-dir", str(tmp_path / "r")]):
+        p = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+        assert p.returncode == 2, (cmd, p.stderr)
+        assert "bad.toml" in p.stderr and "[object].mass_kg" in p.stderr
+    p = subprocess.run([script("companion"), "--sysid", "9"], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 2 and "sysid 9" in p.stderr
+
+
+def test_sigterm_stops_a_companion_cleanly_and_the_simulator_names_it(tmp_path):
+    sim = Sim("two_am_comp.toml", tmp_path, "--step-timeout", "2", "--peer-timeout", "30")
+    c4, c5 = companion(4, sim.bind), companion(5, sim.bind)
+    try:
+        for line in sim.proc.stdout:  # wait until the run is under way
+            if '"progress"' in line:
+                break
+        c5.send_signal(signal.SIGTERM)
+        out, err5 = c5.communicate(timeout=20)
+        assert c5.returncode == 0, err5
+        assert "SIGTERM" in err5
+        code, err = sim.wait(timeout_s=60)
+        assert code == 1
+        assert "sysid 5" in err, err
+        c4.communicate(timeout=30)
+    finally:
+        for p in (c4, c5):
+            if p.poll() is None:
+                p.kill()
+        sim.kill()
