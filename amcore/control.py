@@ -14,10 +14,11 @@ Details the paper leaves implicit, as implemented here:
 - f_d's derivatives use the model's CoM acceleration r_c_dd = (u_1 b_3 + F_rc)/m - g e_3
   and the measured wrench after a 2nd-order low-pass whose derivatives are exact.
 - Without force compensation (options.force_compensation = false) the controller needs
-  no F/T sensor: F_rc leaves f_d and the CoM-acceleration prediction, F_wb leaves u_2.
-  Omega_d is then the angular velocity R_d would have in free flight (F_e = 0); under
-  contact it differs from the true rate of R_d by the unmodelled D_t F_rc / m terms,
-  and the measured wrench does not influence the command at all.
+  no F/T sensor: F_rc leaves f_d, F_wb leaves u_2, and the measured wrench does not
+  influence the command at all. The CoM acceleration is then unknown under contact (the
+  free-flight model's prediction is off by F_e/m; in PyBullet that made Omega_d spurious
+  by D_t F_e / (m |f_d|) ~ 6 rad/s and the grasp fell), so f_d's derivatives keep only
+  what is measured or known: f_d' = m r_d''' - K_t e', f_d'' = m r_d''''.
 - Singularity guard (beyond the paper): the CoM error entering f_d's spring is saturated at
   safety.com_err_max_m, each task error at safety.y_err_max, and Jbar_3 is inverted by
   damped least squares once its smallest singular value drops below safety.sigma_damping.
@@ -209,11 +210,17 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     f_d = m * ref.r_c_d2 + m * g * E3 - s * F_W - p.gains_K_t @ (scale * e) - p.gains_D_t @ ed
     u1 = float(f_d @ b3)
     a_c = (u1 * b3 + s * F_W) / m - g * E3  # model CoM acceleration (F_rc only if measured)
-    edd = a_c - ref.r_c_d2
+    if p.force_compensation:
+        edd = a_c - ref.r_c_d2
+    else:  # no F/T sensor: the CoM acceleration is unknown under contact (see module doc)
+        edd = _ZERO3
     f_d_d = m * ref.r_c_d3 - p.gains_K_t @ sat(ed) - p.gains_D_t @ edd - s * F_W_d
-    u1_d = float(f_d_d @ b3 + f_d @ b3_d)
-    a_c_d = (u1_d * b3 + u1 * b3_d + s * F_W_d) / m
-    eddd = a_c_d - ref.r_c_d3
+    if p.force_compensation:
+        u1_d = float(f_d_d @ b3 + f_d @ b3_d)
+        a_c_d = (u1_d * b3 + u1 * b3_d + s * F_W_d) / m
+        eddd = a_c_d - ref.r_c_d3
+    else:
+        eddd = _ZERO3
     f_d_dd = m * ref.r_c_d4 - p.gains_K_t @ sat(edd) - p.gains_D_t @ eddd - s * F_W_dd
     com_sat = P is not None
 

@@ -110,10 +110,14 @@ def controller_literal(model, params, st: AmState, ref, F_e: np.ndarray):
     u1 = f_d @ b3
     b3d = R @ np.cross(w, E3)
     rddot_c = (u1 * b3 + s * F_rc) / m - g * E3
-    f_dd = m * ref.r_c_d3 - Kt @ ed - Dt @ (rddot_c - ref.r_c_d2)
-    u1d = f_dd @ b3 + f_d @ b3d
-    r3_c = (u1d * b3 + u1 * b3d) / m
-    f_ddd = m * ref.r_c_d4 - Kt @ (rddot_c - ref.r_c_d2) - Dt @ (r3_c - ref.r_c_d3)
+    if params.force_compensation:
+        f_dd = m * ref.r_c_d3 - Kt @ ed - Dt @ (rddot_c - ref.r_c_d2)
+        u1d = f_dd @ b3 + f_d @ b3d
+        r3_c = (u1d * b3 + u1 * b3d) / m
+        f_ddd = m * ref.r_c_d4 - Kt @ (rddot_c - ref.r_c_d2) - Dt @ (r3_c - ref.r_c_d3)
+    else:  # no F/T sensor: terms needing the CoM acceleration are unknown (amcore.control)
+        f_dd = m * ref.r_c_d3 - Kt @ ed
+        f_ddd = m * ref.r_c_d4
     b1 = np.array([np.cos(ref.psi), np.sin(ref.psi), 0.0])
     b1d = ref.psi_d1 * np.array([-np.sin(ref.psi), np.cos(ref.psi), 0.0])
     b1dd = ref.psi_d2 * np.array([-np.sin(ref.psi), np.cos(ref.psi), 0.0]) - ref.psi_d1**2 * b1

@@ -133,7 +133,7 @@ def _R_e(model, st):
 
 def test_without_compensation_the_wrench_does_not_reach_the_command(model, mission, params):
     """Force compensation off: f_d, Omega_d and the whole command ignore the F/T reading;
-    Omega_d is the free-flight feed-forward, identical to what F_e = 0 gives."""
+    Omega_d does not depend on F_e either."""
     p_off = dataclasses.replace(params, force_compensation=False)
     rng = np.random.default_rng(5)
     st = near_reference(mission, model, 6.0, rng)
