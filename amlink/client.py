@@ -107,6 +107,7 @@ class CompanionClient:
             raise RuntimeError("CompanionClient is already connected")
         self._sim_addr = infos[0][4]
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
         sock.bind(("0.0.0.0", 0))
         self._udp = Udp(sock, self.stats, self._shim)
         heartbeat = mav.MAVLink_heartbeat_message(

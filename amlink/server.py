@@ -14,6 +14,7 @@ from amlink.limits import DEFAULT_SETPOINT_LIMITS, SetpointLimits
 from amlink.signing import check_key
 from amlink.types import AttitudeTarget, ScenarioInfo, SensorFrame, TorqueSetpoint
 from amlink.udp import (
+    REJOIN_QUIET_S,
     SENSOR_RETRY_S,
     SHUTDOWN_COPIES,
     SIM_COMPID,
@@ -30,7 +31,7 @@ _COMMAND_LONG = mav.MAVLINK_MSG_ID_COMMAND_LONG
 _ATTITUDE = mav.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET
 _SETPOINT = mav.MAVLINK_MSG_ID_AM_TORQUE_SETPOINT
 _ACCEPT = (_HEARTBEAT, _COMMAND_LONG, _ATTITUDE, _SETPOINT)  # all else: counted as ignored, not unpacked
-_MAX_BACKOFF = 8  # retry interval grows 1, 2, 4, 8, 8, ... x retry_s
+_MAX_BACKOFF = 4  # retry interval grows 1, 2, 4, 4, ... x retry_s
 
 
 @dataclass
@@ -40,6 +41,7 @@ class _Peer:
     addr: tuple[str, int] | None = None
     armed: bool = False
     lost: bool = False  # partial exchange: missed a step; not waited for until it shows life
+    last_heard: float = float("-inf")  # time.monotonic() of its last admitted packet
     last_step: int = -1
     last_time_s: float = 0.0
     batch: list | None = None  # messages of the sensor batch awaiting an answer (re-sent)
@@ -61,18 +63,19 @@ class SimServer:
             are dropped and counted (:class:`amlink.udp.LinkStats`).
         limits: plausibility bounds a setpoint must meet to be returned.
         retry_s: wall time after which an unanswered sensor batch is re-sent
-            (then 2x, 4x, 8x, 8x ... that) [s].
+            (then 2x, 4x, 4x ... that) [s].
         shim: send-path impairment hook of :class:`amlink.udp.Udp` (tests).
 
     Addresses.  A peer's address is learned from its packets.  Signing on: any
     authentic packet of sysid ``s`` moves ``s`` to the packet's source address
     (rejoin, NAT rebinding); nothing else can.  Signing off: only a HEARTBEAT
-    moves it (a companion says HEARTBEAT when it (re)connects); any other packet
-    claiming ``s`` from another address is dropped (``wrong_address``).  Without
-    signing nothing is authenticated: whoever sends HEARTBEAT with sysid ``s``
-    takes ``s`` over -- a documented weakness; run signed where that matters.
-    A HEARTBEAT from a known peer at a new address is a *rejoin*: the peer is
-    disarmed until it arms again.
+    moves it (a companion says HEARTBEAT when it (re)connects), and only once
+    ``s`` has been silent for ``REJOIN_QUIET_S`` (1 s) or is lost; any other
+    packet claiming ``s`` from another address is dropped (``wrong_address``).
+    Without signing nothing is authenticated, so whoever says HEARTBEAT as ``s``
+    first -- or while ``s`` is silent -- takes ``s`` over: a documented
+    weakness; run signed where that matters.  A HEARTBEAT from a known peer at a
+    new address is a *rejoin*: the peer is disarmed until it arms again.
     """
 
     def __init__(self, bind: str = "udp:127.0.0.1:14550", *, sysids: Sequence[int], scenario: ScenarioInfo,
@@ -318,11 +321,16 @@ class SimServer:
 
     def _admit(self, peer: _Peer, addr: tuple[str, int], mid: int) -> bool:
         """Address policy (see the class docstring); True if the packet may be used."""
+        now = time.monotonic()
         if peer.addr == addr:
+            peer.last_heard = now
             return True
-        if not (self.signing or mid == _HEARTBEAT):
+        if not self.signing and (
+            mid != _HEARTBEAT or (peer.addr is not None and not peer.lost and now - peer.last_heard < REJOIN_QUIET_S)
+        ):
             self.stats.wrong_address += 1
             return False
+        peer.last_heard = now
         if peer.addr is not None:
             self.stats.address_changes += 1
             if mid == _HEARTBEAT:

@@ -8,12 +8,13 @@ message id, CRC (with CRC_EXTRA), then -- signing on -- signed at all, a key for
 the claimed sysid; only then pymavlink's ``decode`` (signature, unpacking).
 
 Signing uses pymavlink's ``MAVLink.signing`` state (``secret_key``, ``link_id``,
-``timestamp``, ``sign_outgoing``, ``stream_timestamps``) with one correction: the
-receive-side check (``MAVLink.check_signature``) is replaced by
-:meth:`Decoder._check_signature`, which verifies the signature BEFORE it records
-the stream's timestamp.  pymavlink 2.4.x records first, so one forged packet
-carrying a huge timestamp and a wrong signature makes every later genuine
-packet of that stream look like a replay (tests/amlink/test_signing.py shows it).
+``timestamp``, ``sign_outgoing``, ``stream_timestamps``) and pymavlink signs
+outgoing frames, with one correction on the receive side:
+:meth:`Decoder._authentic` replaces ``MAVLink.check_signature`` and records a
+stream's timestamp only AFTER the signature verified.  pymavlink 2.4.x records
+it first, so one forged packet carrying a far-future timestamp and a wrong
+signature makes every later genuine packet of that stream look like a replay
+(tests/amlink/test_signing.py shows it).
 """
 
 from __future__ import annotations
@@ -44,6 +45,23 @@ class CodecError(ValueError):
 
 class EncodeError(CodecError):
     """A value cannot be put on the wire (non-finite, out of range)."""
+
+
+def frame_crc(frame: bytes) -> int:
+    """The CRC a MAVLink 2 frame (header + payload, CRC and signature optional) must carry."""
+    msgid = frame[7] | frame[8] << 8 | frame[9] << 16
+    plen = frame[1]
+    return _mcrf4xx(bytes((_CRC_EXTRA[msgid],)), _mcrf4xx(frame[1 : HEADER_LEN + plen]))
+
+
+def split_frames(datagram: bytes) -> list[bytes]:
+    """Whole MAVLink 2 frames of a well-formed datagram (tests and tools; no checks)."""
+    out, i = [], 0
+    while i + _MIN_FRAME <= len(datagram):
+        end = i + _MIN_FRAME + datagram[i + 1] + (SIGNATURE_LEN if datagram[i + 2] & IFLAG_SIGNED else 0)
+        out.append(datagram[i:end])
+        i = end
+    return out
 
 
 class _Sink:
@@ -120,7 +138,6 @@ class Decoder:
         self._accept = None if accept is None else frozenset(accept)
         self._plain = mav.MAVLink(None)
         self._parsers: dict[int, object] = {}
-        self._sig_failed = False
 
     @property
     def signing(self) -> bool:
@@ -165,12 +182,12 @@ class Decoder:
                 if parser is None:
                     c.unknown_sysid += 1
                     continue
-            self._sig_failed = False
+                if not self._authentic(parser, datagram, start, end):
+                    continue
             try:
                 msg = parser.decode(bytearray(datagram[start:end]))
             except Exception:  # MAVError, or anything odd in pymavlink's unpacking
-                if not self._sig_failed:
-                    c.bad_frames += 1
+                c.bad_frames += 1
                 continue
             out.append(msg)
         return out
@@ -184,25 +201,32 @@ class Decoder:
             p = mav.MAVLink(None)
             p.signing.secret_key = key
             p.signing.timestamp = now_timestamp()
-            p.check_signature = lambda buf, src, comp, p=p: self._check_signature(p, buf, src, comp)
+            p.check_signature = _verified  # decode() only sees frames _authentic() passed
             self._parsers[sysid] = p
         return p
 
-    def _check_signature(self, parser, msgbuf: bytearray, src_system: int, src_component: int) -> bool:
-        """Signature first, then freshness (replacement for ``MAVLink.check_signature``)."""
+    def _authentic(self, parser, data: bytes, start: int, end: int) -> bool:
+        """Freshness, then signature; records the stream's timestamp only for an authentic frame.
+
+        Replaces ``MAVLink.check_signature`` (see the module docstring).  The
+        freshness test comes first because it is cheap and rejecting changes
+        no state; a forged frame with an old timestamp is counted as replayed.
+        """
         s = parser.signing
-        expect = hashlib.sha256(s.secret_key + bytes(msgbuf[:-6])).digest()[:6]
-        if not hmac.compare_digest(expect, bytes(msgbuf[-6:])):
-            self._sig_failed = True
-            self._c.bad_signature += 1
-            return False
-        timestamp = int.from_bytes(msgbuf[-12:-6], "little")
-        stream = (msgbuf[-13], src_system, src_component)
+        timestamp = int.from_bytes(data[end - 12 : end - 6], "little")
+        stream = (data[end - 13], data[start + 5], data[start + 6])  # (link id, sysid, compid)
         last = s.stream_timestamps.get(stream)
         if (timestamp <= last) if last is not None else (timestamp + NEW_STREAM_WINDOW < s.timestamp):
-            self._sig_failed = True
             self._c.replayed += 1
+            return False
+        expect = hashlib.sha256(s.secret_key + data[start : end - 6]).digest()[:6]
+        if not hmac.compare_digest(expect, data[end - 6 : end]):
+            self._c.bad_signature += 1
             return False
         s.stream_timestamps[stream] = timestamp
         s.timestamp = max(s.timestamp, timestamp)
         return True
+
+
+def _verified(msgbuf, src_system, src_component) -> bool:
+    return True

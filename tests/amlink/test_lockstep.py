@@ -23,6 +23,7 @@ from amlink.types import AttitudeTarget, SensorFrame, StepFlag, TorqueSetpoint
 from amlink.udp import parse_endpoint
 from tests.amlink.kit import SCENARIO, answer, key_for, linked, make_frame, server_for, url
 
+
 def test_parse_endpoint_forms():
     assert parse_endpoint("udp:0.0.0.0:14550", ("udp", "udpin")) == ("0.0.0.0", 14550)
     assert parse_endpoint("udpin:127.0.0.1:0", ("udp", "udpin")) == ("127.0.0.1", 0)
@@ -258,7 +259,8 @@ def test_server_follows_a_peer_to_its_latest_address():
             assert [m.get_type() for m in msgs][-1] == "AM_SIM_STEP" and msgs[-1].step == 1
 
 
-def test_signing_off_only_heartbeat_moves_a_peer_and_a_rejoin_disarms():
+def test_signing_off_only_heartbeat_from_a_silent_peer_moves_it_and_a_rejoin_disarms(monkeypatch):
+    monkeypatch.setattr("amlink.server.REJOIN_QUIET_S", 0.2)
     with linked([2], timeout_s=0.3) as (server, clients):
         t = threading.Thread(target=clients[2].arm, args=(2.0,))
         t.start()
@@ -266,14 +268,17 @@ def test_signing_off_only_heartbeat_moves_a_peer_and_a_rejoin_disarms():
         t.join(2.0)
         assert server.armed(2)
         before = server.peer_address(2)
+        heartbeat = mav.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3)
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as moved:
             moved.bind(("127.0.0.1", 0))
             enc = codec.Encoder(2, 191)
+            moved.sendto(enc.pack([heartbeat]), server.address)  # the peer was heard just now: refused
             moved.sendto(enc.pack(codec.setpoint_messages(answer(make_frame(2, 0), 2))), server.address)
             with pytest.raises(PeerTimeoutError):
                 server.exchange({2: make_frame(2, 0)})
-            assert server.peer_address(2) == before and server.stats.wrong_address == 1
-            moved.sendto(enc.pack([mav.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3)]), server.address)
+            assert server.peer_address(2) == before and server.stats.wrong_address == 2
+            time.sleep(0.25)  # silent long enough: a restarted companion may take its sysid
+            moved.sendto(enc.pack([heartbeat]), server.address)
             moved.sendto(enc.pack(codec.setpoint_messages(answer(make_frame(2, 1), 2))), server.address)
             assert server.exchange({2: make_frame(2, 1)})[2].step == 1
             assert server.peer_address(2) == moved.getsockname()
