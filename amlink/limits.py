@@ -60,9 +60,9 @@ class SetpointLimits:
             return f"{sp.n_joints} joint torques, expected {self.n_joints}"
         if not abs(sp.thrust_n) <= self.thrust_max_n:
             return f"|thrust_n| = {abs(sp.thrust_n):.3g} > {self.thrust_max_n:.3g}"
-        if not np.all(np.abs(sp.tau_B_nm) <= self.body_torque_max_nm):
+        if not _max_abs(sp.tau_B_nm) <= self.body_torque_max_nm:
             return f"|tau_B_nm| > {self.body_torque_max_nm:.3g}"
-        if not np.all(np.abs(sp.tau_q_nm) <= self.joint_torque_max_nm):
+        if not _max_abs(sp.tau_q_nm) <= self.joint_torque_max_nm:
             return f"|tau_q_nm| > {self.joint_torque_max_nm:.3g}"
         return None
 
@@ -93,18 +93,38 @@ class SensorLimits:
 
     def violation(self, f: SensorFrame) -> str | None:
         """Why ``f`` is implausible, or ``None`` if it is within bounds."""
-        for name, arr, bound in (
-            ("p_WB", f.p_WB, self.position_max_m), ("v_B", f.v_B, self.speed_max_m_s),
-            ("w_B", f.w_B, self.rate_max_rad_s), ("q", f.q, self.joint_max_rad),
-            ("qdot", f.qdot, self.joint_rate_max_rad_s), ("force", f.wrench_E[:3], self.force_max_n),
-            ("torque", f.wrench_E[3:], self.torque_max_nm),
-        ):  # fmt: skip
-            if not np.all(np.abs(arr) <= bound):
-                return f"|{name}| > {bound:.3g}"
-        norm = float(np.sqrt(np.dot(f.quat_WB_wxyz, f.quat_WB_wxyz)))
+        n = f.n_joints
+        values = np.concatenate((f.p_WB, f.v_B, f.w_B, f.q, f.qdot, f.wrench_E))
+        bounds, names = self._bounds(n)
+        ok = np.abs(values) <= bounds  # False for NaN too
+        if not ok.all():
+            i = int(np.argmin(ok))
+            return f"|{names[i]}| > {bounds[i]:.3g}"
+        w, x, y, z = f.quat_WB_wxyz.tolist()
+        norm = math.sqrt(w * w + x * x + y * y + z * z)
         if not abs(norm - 1.0) <= self.quat_norm_tol:
             return f"quaternion norm {norm:.6g} is not 1"
         return None
+
+    def _bounds(self, n: int) -> tuple[np.ndarray, tuple[str, ...]]:
+        cache = self.__dict__.setdefault("_cache", {})  # frozen dataclass: a private memo is fine
+        if n not in cache:
+            groups = (("p_WB", 3, self.position_max_m), ("v_B", 3, self.speed_max_m_s),
+                      ("w_B", 3, self.rate_max_rad_s), ("q", n, self.joint_max_rad),
+                      ("qdot", n, self.joint_rate_max_rad_s), ("force", 3, self.force_max_n),
+                      ("torque", 3, self.torque_max_nm))  # fmt: skip
+            cache[n] = (np.array([b for _, k, b in groups for _ in range(k)]),
+                        tuple(name for name, k, _ in groups for _ in range(k)))  # fmt: skip
+        return cache[n]
+
+
+def _max_abs(arr) -> float:
+    """max |x| of a small array (NaN propagates as NaN; pure Python beats numpy at this size)."""
+    vals = arr.tolist()
+    if not vals:
+        return 0.0
+    m = max(map(abs, vals))
+    return m if m == m and not any(v != v for v in vals) else math.nan
 
 
 DEFAULT_SETPOINT_LIMITS = SetpointLimits()

@@ -92,3 +92,17 @@ def check_key(key: bytes) -> bytes:
     if not isinstance(key, (bytes, bytearray)) or len(key) != KEY_BYTES:
         raise SigningKeyError(f"a signing key must be {KEY_BYTES} bytes")
     return bytes(key)
+
+
+def keys_for_scenario(spec) -> dict[int, tuple[bytes, str]]:
+    """``{sysid: (key, source)}`` for a loaded scenario (``amcore.config.ScenarioSpec``, duck-typed).
+
+    Uses ``[[am]].signing_key_hex``, ``[link].key_file`` and the scenario name as
+    :func:`resolve_key` does; ``source == "development"`` means a public key.
+    """
+    key_path = spec.link.key_path(spec.path)
+    master = read_key_file(key_path) if key_path is not None else None
+    return {
+        am.sysid: resolve_key(am.sysid, key_hex=am.signing_key_hex, master_key=master, scenario_name=spec.name)
+        for am in spec.ams
+    }

@@ -63,7 +63,7 @@ class LinkStats:
     # signing on (amlink.wire.Decoder)
     unsigned: int = 0  # unsigned packets
     bad_signature: int = 0  # signed with another key, or altered after signing
-    replayed: int = 0  # correctly signed but not newer than its stream's last packet
+    replayed: int = 0  # not newer than its stream's last authentic packet (checked before the signature)
     # addresses and peers
     wrong_address: int = 0  # signing off: a known sysid from an address other than its peer's
     address_changes: int = 0  # server: a peer moved to a new address (rejoin or NAT rebinding)

@@ -35,7 +35,7 @@ CRC_LEN = 2
 SIGNATURE_LEN = 13  # link id (1), timestamp (6), signature (6)
 IFLAG_SIGNED = 0x01
 _MIN_FRAME = HEADER_LEN + CRC_LEN
-_CRC_EXTRA = {mid: cls.crc_extra for mid, cls in mav.mavlink_map.items()}
+_CRC_EXTRA = {mid: bytes((cls.crc_extra,)) for mid, cls in mav.mavlink_map.items()}
 _mcrf4xx = dialect.mcrf4xx
 
 
@@ -51,7 +51,7 @@ def frame_crc(frame: bytes) -> int:
     """The CRC a MAVLink 2 frame (header + payload, CRC and signature optional) must carry."""
     msgid = frame[7] | frame[8] << 8 | frame[9] << 16
     plen = frame[1]
-    return _mcrf4xx(bytes((_CRC_EXTRA[msgid],)), _mcrf4xx(frame[1 : HEADER_LEN + plen]))
+    return _mcrf4xx(bytes(frame[1 : HEADER_LEN + plen]) + _CRC_EXTRA[msgid])
 
 
 def split_frames(datagram: bytes) -> list[bytes]:
@@ -165,8 +165,7 @@ class Decoder:
             if crc_extra is None:
                 c.bad_frames += 1
                 continue
-            crc = _mcrf4xx(bytes((crc_extra,)), _mcrf4xx(datagram[start + 1 : crc_at]))
-            if crc != datagram[crc_at] | datagram[crc_at + 1] << 8:
+            if _mcrf4xx(datagram[start + 1 : crc_at] + crc_extra) != datagram[crc_at] | datagram[crc_at + 1] << 8:
                 c.bad_frames += 1
                 continue
             if accept is not None and msgid not in accept:
