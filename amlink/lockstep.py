@@ -31,6 +31,12 @@ Faults and attackers:
   use it only for tools that cannot sign.
 * Dead companions: ``SimServer.exchange(..., partial=True)`` (see there).
 
+Running with signing off (tools that cannot sign, e.g. a plain MAVLink
+inspector): put ``[link] signing = false`` in the scenario, and the mains pass
+``signing_keys=None`` / ``signing_key=None``.  Both ends must agree: a signing
+end drops every unsigned packet (counted as ``unsigned``), and an unsigned end
+accepts signed packets without checking them.
+
 All companions share the simulator's single socket; the simulator tells them
 apart by the packet's sysid.  Neither object is thread-safe; use one per thread.
 """
