@@ -151,9 +151,36 @@ class MissionSpec:
 
 
 @dataclass(frozen=True)
+class LinkSpec:
+    """[link] table: the simulator <-> companion link (see `amlink.signing`, `amlink.impair`).
+
+    - signing: MAVLink 2 signing of all lockstep traffic (default on). Keys, first match:
+      [[am]].signing_key_hex; else derived from key_file (64 hex digits, path relative to
+      the scenario); else a PUBLIC development key (integrity and anti-replay only).
+    - loss, delay_s, jitter_s, reorder, duplicate: impairment of the companion -> flight
+      controller path in simulation time (`amlink.impair.LinkImpairment`); all 0 = ideal.
+    """
+
+    signing: bool = True
+    key_file: str = ""
+    loss: float = 0.0
+    delay_s: float = 0.0
+    jitter_s: float = 0.0
+    reorder: float = 0.0
+    duplicate: float = 0.0
+
+    def key_path(self, scenario_path: Path | None) -> Path | None:
+        if not self.key_file:
+            return None
+        base = scenario_path.parent if scenario_path is not None else Path.cwd()
+        return (base / self.key_file).resolve()
+
+
+@dataclass(frozen=True)
 class AmSpec:
     sysid: int
     azimuth_deg: float  # direction from the object centre to the AM, about world z
+    signing_key_hex: str = ""  # 64 hex digits; empty: see LinkSpec
 
 
 @dataclass(frozen=True)
@@ -166,6 +193,7 @@ class ScenarioSpec:
     duration_s: float = 20.0
     rate_hz: float = 1000.0
     seed: int = 0
+    link: LinkSpec = LinkSpec()
     path: Path | None = None
 
     @property
@@ -257,6 +285,13 @@ def _positive(where: str, values) -> None:
             raise ConfigError(f"{where}: must be > 0, got {v!r}" + (f" (entry {i})" if isinstance(values, tuple) else ""))
 
 
+def _is_key_hex(text: str) -> bool:
+    try:
+        return len(bytes.fromhex(text.strip())) == 32
+    except ValueError:
+        return False
+
+
 def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     where = str(path)
     kw = _build(VehicleParams, data.get("vehicle", {}), f"{where}: [vehicle]",
@@ -313,7 +348,7 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
     path = Path(path).resolve()
     data = _read_toml(path)
     where = str(path)
-    extra = set(data) - {"scenario", "object", "mission", "am", "options", "safety"}
+    extra = set(data) - {"scenario", "object", "mission", "am", "options", "safety", "link"}
     if extra:
         raise ConfigError(f"{where}: unknown table [{sorted(extra)[0]}]")
     if "scenario" not in data:
@@ -329,7 +364,7 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
             merged.update(data[tbl])
             vdata[tbl] = merged
     vehicle = vehicle_from_dict(vdata, vpath)
-    kw = _build(ScenarioSpec, sc, f"{where}: [scenario]", skip=("vehicle", "object", "mission", "ams", "path"))
+    kw = _build(ScenarioSpec, sc, f"{where}: [scenario]", skip=("vehicle", "object", "mission", "ams", "path", "link"))
     if "object" not in data:
         raise ConfigError(f"{where}: missing table [object]")
     obj = ObjectSpec(**_build(ObjectSpec, data["object"], f"{where}: [object]"))
@@ -355,7 +390,20 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
         if a.sysid in seen:
             raise ConfigError(f"{where}: [[am]] #{i + 1}.sysid: duplicate sysid {a.sysid}")
         seen.add(a.sysid)
-    spec = ScenarioSpec(vehicle=vehicle, object=obj, mission=mission, ams=ams, path=path, **kw)
+    for i, a in enumerate(ams):
+        if a.signing_key_hex and not _is_key_hex(a.signing_key_hex):
+            raise ConfigError(f"{where}: [[am]] #{i + 1}.signing_key_hex: need 64 hex digits (32 bytes)")
+    link = LinkSpec(**_build(LinkSpec, data.get("link", {}), f"{where}: [link]"))
+    for key in ("loss", "reorder", "duplicate"):
+        if not 0.0 <= getattr(link, key) <= 1.0:
+            raise ConfigError(f"{where}: [link].{key}: must be a probability in [0, 1], got {getattr(link, key)!r}")
+    for key in ("delay_s", "jitter_s"):
+        if getattr(link, key) < 0.0:
+            raise ConfigError(f"{where}: [link].{key}: must be >= 0, got {getattr(link, key)!r}")
+    key_path = link.key_path(path)
+    if key_path is not None and not key_path.is_file():
+        raise ConfigError(f"{where}: [link].key_file: file not found: {key_path}")
+    spec = ScenarioSpec(vehicle=vehicle, object=obj, mission=mission, ams=ams, path=path, link=link, **kw)
     _positive(f"{where}: [scenario].rate_hz", spec.rate_hz)
     _positive(f"{where}: [scenario].duration_s", spec.duration_s)
     return spec

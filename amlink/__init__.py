@@ -5,7 +5,13 @@
 * :mod:`amlink.types` -- value types (numpy only): SensorFrame, TorqueSetpoint,
   AttitudeTarget, ScenarioInfo.
 * :mod:`amlink.codec` -- value types <-> MAVLink frames.
-* :mod:`amlink.lockstep` -- SimServer / CompanionClient over UDP.
+* :mod:`amlink.wire` -- datagram <-> frames (strict framing, MAVLink 2 signing).
+* :mod:`amlink.signing` -- signing keys: formats, derivation, scenario keys.
+* :mod:`amlink.limits` -- plausibility bounds on setpoints and sensor frames.
+* :mod:`amlink.lockstep` -- SimServer / CompanionClient over UDP (retransmission,
+  partial exchange, rejoin); :mod:`amlink.server`, :mod:`amlink.client`.
+* :mod:`amlink.impair` -- deterministic sim-time impairment of the control path.
+* :mod:`amlink.shim` -- seeded lossy send shim for the real sockets (tests).
 
 Importing this package does no I/O; the dialect is generated when
 :mod:`amlink.codec` (or anything that needs it) is first imported.

@@ -85,12 +85,35 @@ def main(argv: list[str] | None = None) -> None:
         (f"TorqueSetpoint+AttitudeTarget encode ({len(sp_att_bytes)} B)", enc_sp_att),
         ("TorqueSetpoint+AttitudeTarget decode", dec(sp_att_bytes)),
     ]
+    key = bytes(range(32))
+    signed_enc = codec.Encoder(2, 191, signing_key=key, link_id=2)
+    signed_dec = codec.Decoder({2: key})
+
+    def enc_sp_signed():
+        return signed_enc.pack(codec.setpoint_messages(sp))
+
+    n_signed = args.repeats + 200
+    signed_bytes = iter([enc_sp_signed() for _ in range(n_signed)])  # distinct: a repeat is a replay
+
+    def dec_sp_signed():
+        out = None
+        for m in signed_dec.feed(next(signed_bytes)):
+            out = sp_asm.push(m) or out
+        assert out is not None
+        return out
+
+    rows += [
+        (f"TorqueSetpoint encode, signed ({len(enc_sp_signed())} B)", enc_sp_signed),
+        ("TorqueSetpoint decode, signed (verify + replay check)", dec_sp_signed),
+    ]
     results = {}
     for name, fn in rows:
         for _ in range(200):  # warm-up
             fn()
         results[name] = _median_us(fn, args.repeats)
         print(f"{name:55s} median {results[name]:8.1f} us")
+    signed_cost = results[rows[-2][0]] + results[rows[-1][0]] - results[rows[2][0]] - results[rows[3][0]]
+    print(f"{'signing cost per setpoint packet (enc+dec, signed - unsigned)':55s} median {signed_cost:8.1f} us")
     total = sum(results[n] for n, _ in rows[:4])
     print(f"{'round trip (frame enc+dec + setpoint enc+dec)':55s} median {total:8.1f} us (sum of medians)")
 

@@ -26,11 +26,9 @@ float64.  Decoding rejects non-finite values with :class:`NonFiniteValueError`.
 from __future__ import annotations
 
 import math
-import struct
 from dataclasses import dataclass
 
-
-from amlink import dialect
+from amlink import wire
 from amlink.types import (
     MAX_JOINTS,
     AttitudeTarget,
@@ -40,21 +38,15 @@ from amlink.types import (
     TorqueSetpoint,
 )
 
-mav = dialect.load()
+from amlink.wire import CodecError, Decoder, EncodeError, Encoder  # noqa: F401  (re-exported)
+
+mav = wire.mav
 
 ODOM_FRAME_ID = mav.MAV_FRAME_LOCAL_ENU
 ODOM_CHILD_FRAME_ID = mav.MAV_FRAME_RESERVED_13  # formerly MAV_FRAME_BODY_FLU
 _UNKNOWN_COV = [math.nan] + [0.0] * 20  # MAVLink: NaN first element = unknown
 _ZEROS = [0.0] * MAX_JOINTS
 _H = math.sqrt(0.5)
-
-
-class CodecError(ValueError):
-    """Base class of encode/decode errors."""
-
-
-class EncodeError(CodecError):
-    """A value cannot be put on the wire (non-finite, out of range)."""
 
 
 class NonFiniteValueError(CodecError):
@@ -260,6 +252,10 @@ class SensorFrameAssembler:
     def __init__(self) -> None:
         self._odom = self._joints = self._wrench = None
 
+    def reset(self) -> None:
+        """Forget parts received so far (a new datagram starts a new batch)."""
+        self._odom = self._joints = self._wrench = None
+
     def push(self, msg) -> SensorFrame | Shutdown | None:
         mid = msg.get_msgId()  # not msg.id: STATUSTEXT has a field named "id"
         if mid == mav.MAVLINK_MSG_ID_ODOMETRY:
@@ -287,6 +283,9 @@ class SetpointAssembler:
     def __init__(self) -> None:
         self._attitude = None
 
+    def reset(self) -> None:
+        self._attitude = None
+
     def push(self, msg) -> tuple[TorqueSetpoint, AttitudeTarget | None] | None:
         mid = msg.get_msgId()  # not msg.id: STATUSTEXT has a field named "id"
         if mid == mav.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET:
@@ -296,71 +295,3 @@ class SetpointAssembler:
             sp = setpoint_from_message(msg)
             return sp, (attitude_from_message(att_msg, sp.step) if att_msg is not None else None)
         return None
-
-
-# -- byte level: one encoder/decoder per link ------------------------------------
-
-
-class _Sink:
-    """File-like target for MAVLink.send that collects frames for one datagram."""
-
-    def __init__(self) -> None:
-        self.parts: list[bytes] = []
-
-    def write(self, data: bytes) -> None:
-        self.parts.append(data)
-
-
-class Encoder:
-    """Packs messages as (sysid, compid) on one link; owns the MAVLink sequence number.
-
-    :meth:`pack` is the single place frames are serialized (hook for MAVLink 2
-    signing: set ``self.mavlink.signing``).
-    """
-
-    def __init__(self, sysid: int, compid: int) -> None:
-        self._sink = _Sink()
-        self.mavlink = mav.MAVLink(self._sink, srcSystem=sysid, srcComponent=compid)
-
-    def pack(self, msgs) -> bytes:
-        """Serialize ``msgs`` into one datagram (concatenated MAVLink 2 frames)."""
-        sink = self._sink
-        try:
-            for m in msgs:
-                self.mavlink.send(m)
-        except (struct.error, OverflowError) as exc:
-            sink.parts.clear()
-            raise EncodeError(f"cannot pack {m.msgname}: {exc}") from exc
-        data = b"".join(sink.parts)
-        sink.parts.clear()
-        return data
-
-
-class Decoder:
-    """Parses datagrams from one peer into messages (a MAVLink parser per link).
-
-    Corrupt frames are dropped and counted in ``bad_frames``; bytes of a frame
-    truncated at the end of a datagram are discarded (UDP carries whole frames).
-    """
-
-    def __init__(self) -> None:
-        self.mavlink = mav.MAVLink(None)
-        self.mavlink.robust_parsing = True
-        self.bad_frames = 0
-
-    def feed(self, datagram: bytes) -> list:
-        """All valid messages in ``datagram``, in order."""
-        p = self.mavlink
-        msgs = p.parse_buffer(datagram) or []
-        if p.buf_len() != 0:  # truncated tail: drop it, next datagram starts afresh
-            self.bad_frames += 1
-            p.buf = bytearray()
-            p.buf_index = 0
-            p.expected_length = mav.HEADER_LEN_V1 + 2
-        good = []
-        for m in msgs:
-            if isinstance(m, (mav.MAVLink_bad_data, mav.MAVLink_unknown)):
-                self.bad_frames += 1
-            else:
-                good.append(m)
-        return good

@@ -38,7 +38,12 @@ class PeerTimeoutError(LinkError):
 
 
 class PeerProtocolError(LinkError):
-    """Simulator side: a known companion sent an invalid setpoint (e.g. NaN torque)."""
+    """A known companion sent an invalid setpoint (e.g. NaN torque).
+
+    No longer raised by :meth:`SimServer.exchange`, which now drops and counts
+    such setpoints (``LinkStats.rejected_setpoints``; reason in
+    ``SimServer.last_rejection``); kept for callers that want to raise it.
+    """
 
     def __init__(self, sysid: int, reason: str):
         self.sysid = sysid

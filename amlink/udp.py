@@ -1,13 +1,17 @@
 """UDP plumbing shared by both ends of the lockstep link: endpoints, ids, counters.
 
 ``Udp.send`` and ``Udp.recv`` are the only places datagrams leave and enter a
-process -- the hook for link impairment (loss, delay, reordering) later.
+process.  ``Udp.send`` passes every datagram through an optional *send shim*
+(``shim(addr, data) -> [(addr, data), ...]``, e.g. :class:`amlink.shim.LossyShim`)
+that may drop, duplicate or hold it back -- how the tests impair the real socket
+path.
 """
 
 from __future__ import annotations
 
 import select
 import socket
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from amlink.codec import mav
@@ -17,6 +21,9 @@ SIM_COMPID = mav.MAV_COMP_ID_AUTOPILOT1
 COMPANION_COMPID = mav.MAV_COMP_ID_ONBOARD_COMPUTER
 HEARTBEAT_PERIOD_S = 0.5
 COMMAND_RETRY_S = 0.25
+SENSOR_RETRY_S = 0.025  # first re-send of an unanswered sensor batch [s wall]; doubles up to 4x
+REJOIN_QUIET_S = 1.0  # signing off: a HEARTBEAT moves a peer only after this long silent [s]
+SHUTDOWN_COPIES = 3  # the last datagram of a run is sent this many times (loss)
 STATUSTEXT_MAX = 50  # bytes in STATUSTEXT.text
 _MAX_DATAGRAM = 65535
 _MAX_DRAIN = 256  # datagrams read per wake-up before checking the clock again
@@ -43,24 +50,49 @@ class LinkStats:
 
     datagrams_rx: int = 0
     datagrams_tx: int = 0
-    bad_frames: int = 0  # CRC errors, unknown message ids, truncated frames
+    bad_frames: int = 0  # CRC errors, unknown message ids, truncated frames, junk
     unknown_sysid: int = 0  # packets from a sysid we do not talk to
     stale_setpoints: int = 0  # setpoint for a step older than the one awaited
     duplicate_setpoints: int = 0  # second setpoint for the awaited step
     wrong_step_setpoints: int = 0  # setpoint for a step not yet sent
     ignored: int = 0  # valid packets of types this endpoint does not use
+    # bad values (amlink.limits): counted, never returned or applied
+    rejected_setpoints: int = 0  # server: non-finite, out of range or wrong joint count
+    rejected_frames: int = 0  # companion: sensor batch / AM_SCENARIO invalid, wrong scenario_id
+    nonfinite_values: int = 0  # of the two above, those rejected for a NaN or infinity
+    # signing on (amlink.wire.Decoder)
+    unsigned: int = 0  # unsigned packets
+    bad_signature: int = 0  # signed with another key, or altered after signing
+    replayed: int = 0  # not newer than its stream's last authentic packet (checked before the signature)
+    # addresses and peers
+    wrong_address: int = 0  # signing off: a known sysid from an address other than its peer's
+    address_changes: int = 0  # server: a peer moved to a new address (rejoin or NAT rebinding)
+    rejoins: int = 0  # server: HEARTBEAT from a known peer at a new address
+    peers_lost: int = 0  # server, exchange(partial=True): a peer missed a step and was marked lost
+    # loss recovery
+    retransmits: int = 0  # server: batches re-sent; companion: cached setpoints re-sent
+    duplicate_frames: int = 0  # companion: sensor frames for a step already seen
+
+
+Shim = Callable[[tuple[str, int], bytes], Iterable[tuple[tuple[str, int], bytes]]]
 
 
 class Udp:
-    """One UDP socket; ``send`` and ``recv`` are the only I/O paths (impairment hook)."""
+    """One UDP socket; ``send`` and ``recv`` are the only I/O paths (``shim``: impairment hook)."""
 
-    def __init__(self, sock: socket.socket, stats: LinkStats) -> None:
+    def __init__(self, sock: socket.socket, stats: LinkStats, shim: Shim | None = None) -> None:
         self.sock = sock
         self.stats = stats
+        self.shim = shim
 
     def send(self, addr: tuple[str, int], data: bytes) -> None:
-        self.sock.sendto(data, addr)
-        self.stats.datagrams_tx += 1
+        if self.shim is None:
+            self.sock.sendto(data, addr)
+            self.stats.datagrams_tx += 1
+            return
+        for a, d in self.shim(addr, data):
+            self.sock.sendto(d, a)
+            self.stats.datagrams_tx += 1
 
     def recv(self, timeout_s: float) -> list[tuple[bytes, tuple[str, int]]]:
         """Datagrams available within ``timeout_s`` (waits for the first, drains the rest)."""

@@ -1,0 +1,276 @@
+"""Companion end of the lockstep link (see :mod:`amlink.lockstep` for the protocol)."""
+
+from __future__ import annotations
+
+import socket
+import time
+from collections import deque
+
+from amlink import codec
+from amlink.codec import mav
+from amlink.errors import CommandRejectedError, SimulatorTimeoutError, SimulatorUnreachableError
+from amlink.limits import DEFAULT_SENSOR_LIMITS, SensorLimits
+from amlink.types import AttitudeTarget, ScenarioInfo, SensorFrame, TorqueSetpoint
+from amlink.udp import (
+    COMMAND_RETRY_S,
+    COMPANION_COMPID,
+    HEARTBEAT_PERIOD_S,
+    SIM_COMPID,
+    SIM_SYSID,
+    LinkStats,
+    Shim,
+    Udp,
+    parse_endpoint,
+)
+
+_SCENARIO = mav.MAVLINK_MSG_ID_AM_SCENARIO
+_ACK = mav.MAVLINK_MSG_ID_COMMAND_ACK
+_STATUSTEXT = mav.MAVLINK_MSG_ID_STATUSTEXT
+_SIM_STEP = mav.MAVLINK_MSG_ID_AM_SIM_STEP
+_SENSOR_PART_IDS = frozenset(
+    (mav.MAVLINK_MSG_ID_ODOMETRY, mav.MAVLINK_MSG_ID_AM_JOINT_STATE, mav.MAVLINK_MSG_ID_AM_WRENCH)
+)
+_ACCEPT = (_SCENARIO, _ACK, _STATUSTEXT, _SIM_STEP, *_SENSOR_PART_IDS)
+_MAX_TEXTS = 256
+_MAX_ACKS = 64
+
+
+class CompanionClient:
+    """Companion end of the lockstep link for vehicle ``sysid``.
+
+    Args:
+        sysid: this companion's MAVLink system id (2..255).
+        sim: simulator address ``"udp:HOST:PORT"`` (or ``udpout:``).
+        compid: MAVLink component id, 191 = MAV_COMP_ID_ONBOARD_COMPUTER.
+        signing_key: ``None`` -- signing off (default at this API level).  Else this
+            vehicle's 32-byte key: everything sent is signed (link id = sysid) and
+            only packets signed by the simulator with this key are accepted.
+        limits: plausibility bounds a sensor frame must meet to be handed on.
+        shim: send-path impairment hook of :class:`amlink.udp.Udp` (tests).
+
+    Messages that arrive while waiting for something else (a sensor batch
+    while :meth:`arm` waits for its ACK, say) are kept, never dropped.
+
+    Each step's frame is handed out once.  A copy of a frame for a step already
+    handed out (the simulator re-sends a batch whose answer it did not get) is
+    not handed out again; if that step was answered, the cached answer is re-sent
+    instead -- so loss changes neither what the controller sees nor what it sends.
+
+    Signing off, once AM_SCENARIO arrived only datagrams from the address it came
+    from are read (``wrong_address`` counts the rest); signing on, the signature
+    decides and the source address does not matter.
+    """
+
+    def __init__(self, sysid: int, sim: str = "udp:127.0.0.1:14550", compid: int = COMPANION_COMPID, *,
+                 signing_key: bytes | None = None, limits: SensorLimits = DEFAULT_SENSOR_LIMITS,
+                 shim: Shim | None = None) -> None:  # fmt: skip
+        if not 2 <= sysid <= 255:
+            raise ValueError(f"sysid {sysid} must be in 2..255 (1 is the simulator)")
+        self.sysid = sysid
+        self.compid = compid
+        self.sim = sim
+        self.sim_host, self.sim_port = parse_endpoint(sim, ("udp", "udpout"))
+        self.limits = limits
+        self.stats = LinkStats()
+        self.scenario: ScenarioInfo | None = None
+        self.status_texts: deque[tuple[int, str]] = deque(maxlen=_MAX_TEXTS)  # (MAV_SEVERITY, text), latest
+        self._shim = shim
+        self._udp: Udp | None = None
+        self._sim_addr: tuple[str, int] | None = None  # where we send
+        self._sim_rx_addr: tuple[str, int] | None = None  # signing off: the only source we read
+        self._encoder = codec.Encoder(sysid, compid, signing_key=signing_key, link_id=sysid)
+        keys = None if signing_key is None else {SIM_SYSID: signing_key}
+        self._decoder = codec.Decoder(keys, accept=_ACCEPT, counters=self.stats)
+        self._frames = codec.SensorFrameAssembler()
+        self._inbox: deque[SensorFrame | codec.Shutdown] = deque()
+        self._acks: deque = deque(maxlen=_MAX_ACKS)
+        self._shutdown = False  # recv_frame has returned None
+        self._shutdown_seen = False  # a SHUTDOWN arrived; the rest of the traffic is ignored
+        self._newest_step = -1  # newest step queued or handed out
+        self._answer: tuple[int, list] | None = None  # (step, messages) of the last setpoint sent
+        self._last_time_s = 0.0
+
+    @property
+    def signing(self) -> bool:
+        return self._decoder.signing
+
+    def connect(self, timeout_s: float = 5.0) -> ScenarioInfo:
+        """Open a socket and say HEARTBEAT at 2 Hz until the simulator answers AM_SCENARIO.
+
+        Raises SimulatorUnreachableError naming the address after ``timeout_s``.
+        """
+        try:
+            infos = socket.getaddrinfo(self.sim_host, self.sim_port, socket.AF_INET, socket.SOCK_DGRAM)
+        except socket.gaierror as exc:
+            raise SimulatorUnreachableError(self.sim, 0.0, f"cannot resolve: {exc}") from exc
+        if self._udp is not None:
+            raise RuntimeError("CompanionClient is already connected")
+        self._sim_addr = infos[0][4]
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+        sock.bind(("0.0.0.0", 0))
+        self._udp = Udp(sock, self.stats, self._shim)
+        heartbeat = mav.MAVLink_heartbeat_message(
+            mav.MAV_TYPE_ONBOARD_CONTROLLER, mav.MAV_AUTOPILOT_INVALID, 0, 0, mav.MAV_STATE_ACTIVE, 3
+        )
+        deadline = time.monotonic() + timeout_s
+        next_beat = 0.0
+        try:
+            while self.scenario is None:
+                now = time.monotonic()
+                if now >= deadline:
+                    raise SimulatorUnreachableError(self.sim, timeout_s)
+                if now >= next_beat:
+                    self._send([heartbeat])
+                    next_beat = now + HEARTBEAT_PERIOD_S
+                self._pump(min(deadline, next_beat) - now)
+        except BaseException:
+            self.close()
+            raise
+        return self.scenario
+
+    @property
+    def local_address(self) -> tuple[str, int]:
+        """The ``(host, port)`` this companion's socket is bound to (after connect)."""
+        return self._require_connected().sock.getsockname()
+
+    def arm(self, timeout_s: float = 1.0, arm: bool = True) -> None:
+        """COMMAND_LONG(MAV_CMD_COMPONENT_ARM_DISARM) until COMMAND_ACK (retried every 0.25 s).
+
+        Raises CommandRejectedError if not accepted, SimulatorTimeoutError on timeout.
+        """
+        self._require_connected()
+        cmd = mav.MAV_CMD_COMPONENT_ARM_DISARM
+        deadline = time.monotonic() + timeout_s
+        next_try, confirmation = 0.0, 0
+        while True:
+            while self._acks:
+                ack = self._acks.popleft()
+                if ack.command == cmd:
+                    if ack.result != mav.MAV_RESULT_ACCEPTED:
+                        raise CommandRejectedError(cmd, ack.result)
+                    return
+            now = time.monotonic()
+            if now >= deadline:
+                raise SimulatorTimeoutError("COMMAND_ACK for ARM_DISARM", timeout_s)
+            if now >= next_try:
+                self._send([mav.MAVLink_command_long_message(
+                    SIM_SYSID, SIM_COMPID, cmd, confirmation, 1.0 if arm else 0.0, 0, 0, 0, 0, 0, 0)])  # fmt: skip
+                next_try, confirmation = now + COMMAND_RETRY_S, min(confirmation + 1, 255)
+            self._pump(min(deadline, next_try) - now)
+
+    def recv_frame(self, timeout_s: float = 1.0) -> SensorFrame | None:
+        """Next sensor frame, or None once the simulator announced shutdown.
+
+        Invalid batches (non-finite, implausible, wrong scenario) are dropped and
+        counted in :attr:`stats`, never returned.  Raises SimulatorTimeoutError
+        after ``timeout_s``.
+        """
+        self._require_connected()
+        deadline = time.monotonic() + timeout_s
+        polled = False  # poll the socket at least once, even with timeout_s = 0
+        while not self._shutdown:
+            if self._inbox:
+                item = self._inbox.popleft()
+                if isinstance(item, codec.Shutdown):
+                    self._shutdown = True
+                    break
+                self._last_time_s = item.time_s
+                return item
+            remaining = deadline - time.monotonic()
+            if remaining <= 0 and polled:
+                raise SimulatorTimeoutError("sensor frame", timeout_s)
+            self._pump(remaining)
+            polled = True
+        return None
+
+    def send_setpoint(self, setpoint: TorqueSetpoint, attitude: AttitudeTarget | None = None) -> None:
+        """Send the answer to step ``setpoint.step`` (one datagram); kept for re-sending."""
+        time_boot_ms = round(self._last_time_s * 1e3)
+        msgs = codec.setpoint_messages(setpoint, attitude, time_boot_ms, SIM_SYSID, SIM_COMPID)
+        self._send(msgs)
+        self._answer = (setpoint.step, msgs)
+
+    def close(self) -> None:
+        if self._udp is not None:
+            self._udp.close()
+            self._udp = None
+
+    def __enter__(self) -> CompanionClient:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # -- the one send path and the one receive path ------------------------------
+    def _require_connected(self) -> Udp:
+        if self._udp is None:
+            raise RuntimeError("CompanionClient is not connected; call connect() first")
+        return self._udp
+
+    def _send(self, msgs) -> None:
+        self._require_connected().send(self._sim_addr, self._encoder.pack(msgs))
+
+    def _pump(self, timeout_s: float) -> None:
+        resend = False
+        for data, addr in self._require_connected().recv(timeout_s):
+            if self._sim_rx_addr is not None and addr != self._sim_rx_addr and not self.signing:
+                self.stats.wrong_address += 1
+                continue
+            self._frames.reset()  # a sensor batch is one datagram
+            for msg in self._decoder.feed(data):
+                resend |= self._on_message(msg, addr)
+        if resend and self._answer is not None:
+            self._send(self._answer[1])  # re-encoded: a new sequence number and signing timestamp
+            self.stats.retransmits += 1
+
+    def _on_message(self, msg, addr) -> bool:
+        """Handle one message; True if it asks for the last answer again."""
+        if msg.get_srcSystem() != SIM_SYSID:
+            self.stats.unknown_sysid += 1
+            return False
+        if self._shutdown_seen:
+            self.stats.ignored += 1
+            return False
+        mid = msg.get_msgId()  # not msg.id: STATUSTEXT has a field named "id"
+        if mid == _SCENARIO:
+            if self.scenario is None:
+                try:
+                    self.scenario = codec.scenario_from_message(msg)
+                except ValueError as exc:  # NonFiniteValueError, bad name, rate <= 0
+                    self._reject(exc)
+                    return False
+                self._sim_rx_addr = addr
+        elif mid == _ACK:
+            self._acks.append(msg)
+        elif mid == _STATUSTEXT:
+            self.status_texts.append((msg.severity, msg.text))
+        elif mid == _SIM_STEP and self.scenario is not None and msg.scenario_id != self.scenario.scenario_id:
+            self.stats.rejected_frames += 1
+            self._frames.reset()
+        else:
+            try:
+                item = self._frames.push(msg)
+            except ValueError as exc:  # CodecError: non-finite, mismatched or incomplete batch
+                self._reject(exc)
+                return False
+            if item is None:
+                if mid not in _SENSOR_PART_IDS:
+                    self.stats.ignored += 1
+            elif isinstance(item, codec.Shutdown):
+                self._shutdown_seen = True
+                self._inbox.append(item)
+            elif self.limits.violation(item) is not None:
+                self.stats.rejected_frames += 1
+            elif item.step <= self._newest_step:
+                self.stats.duplicate_frames += 1
+                return self._answer is not None and self._answer[0] == item.step
+            else:
+                self._newest_step = item.step
+                self._inbox.append(item)
+        return False
+
+    def _reject(self, exc: Exception) -> None:
+        self.stats.rejected_frames += 1
+        if isinstance(exc, codec.NonFiniteValueError):
+            self.stats.nonfinite_values += 1

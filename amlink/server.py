@@ -1,0 +1,374 @@
+"""Simulator end of the lockstep link (see :mod:`amlink.lockstep` for the protocol)."""
+
+from __future__ import annotations
+
+import socket
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+from amlink import codec
+from amlink.codec import mav
+from amlink.errors import PeerMissingError, PeerTimeoutError
+from amlink.limits import DEFAULT_SETPOINT_LIMITS, SetpointLimits
+from amlink.signing import check_key
+from amlink.types import AttitudeTarget, ScenarioInfo, SensorFrame, TorqueSetpoint
+from amlink.udp import (
+    REJOIN_QUIET_S,
+    SENSOR_RETRY_S,
+    SHUTDOWN_COPIES,
+    SIM_COMPID,
+    SIM_SYSID,
+    STATUSTEXT_MAX,
+    LinkStats,
+    Shim,
+    Udp,
+    parse_endpoint,
+)
+
+_HEARTBEAT = mav.MAVLINK_MSG_ID_HEARTBEAT
+_COMMAND_LONG = mav.MAVLINK_MSG_ID_COMMAND_LONG
+_ATTITUDE = mav.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET
+_SETPOINT = mav.MAVLINK_MSG_ID_AM_TORQUE_SETPOINT
+_ACCEPT = (_HEARTBEAT, _COMMAND_LONG, _ATTITUDE, _SETPOINT)  # all else: counted as ignored, not unpacked
+_MAX_BACKOFF = 4  # retry interval grows 1, 2, 4, 4, ... x retry_s
+
+
+@dataclass
+class _Peer:
+    sysid: int
+    encoder: codec.Encoder
+    addr: tuple[str, int] | None = None
+    armed: bool = False
+    lost: bool = False  # partial exchange: missed a step; not waited for until it shows life
+    last_heard: float = float("-inf")  # time.monotonic() of its last admitted packet
+    last_step: int = -1
+    last_time_s: float = 0.0
+    batch: list | None = None  # messages of the sensor batch awaiting an answer (re-sent)
+
+
+class SimServer:
+    """Simulator end of the lockstep link: one UDP socket shared by all companions.
+
+    Args:
+        bind: ``"udp:HOST:PORT"`` or ``"udpin:HOST:PORT"``; HOST ``0.0.0.0`` serves
+            other hosts, PORT 0 picks a free port (see :attr:`address`).
+        sysids: companion system ids (2..255; 1 is the simulator).
+        scenario: what :meth:`wait_for_peers` announces in AM_SCENARIO.
+        timeout_s: default per-step answer timeout of :meth:`exchange` [s].
+        signing_keys: ``None`` -- signing off (the default at this API level; the
+            process mains turn it on from the scenario).  Else ``{sysid: 32-byte
+            key}`` for every sysid: all traffic with companion ``s`` is signed with
+            its key on link id ``s``; unsigned, wrongly signed and replayed packets
+            are dropped and counted (:class:`amlink.udp.LinkStats`).
+        limits: plausibility bounds a setpoint must meet to be returned.
+        retry_s: wall time after which an unanswered sensor batch is re-sent
+            (then 2x, 4x, 4x ... that) [s].
+        shim: send-path impairment hook of :class:`amlink.udp.Udp` (tests).
+
+    Addresses.  A peer's address is learned from its packets.  Signing on: any
+    authentic packet of sysid ``s`` moves ``s`` to the packet's source address
+    (rejoin, NAT rebinding); nothing else can.  Signing off: only a HEARTBEAT
+    moves it (a companion says HEARTBEAT when it (re)connects), and only once
+    ``s`` has been silent for ``REJOIN_QUIET_S`` (1 s) or is lost; any other
+    packet claiming ``s`` from another address is dropped (``wrong_address``).
+    Without signing nothing is authenticated, so whoever says HEARTBEAT as ``s``
+    first -- or while ``s`` is silent -- takes ``s`` over: a documented
+    weakness; run signed where that matters.  A HEARTBEAT from a known peer at a
+    new address is a *rejoin*: the peer is disarmed until it arms again.
+    """
+
+    def __init__(self, bind: str = "udp:127.0.0.1:14550", *, sysids: Sequence[int], scenario: ScenarioInfo,
+                 timeout_s: float = 1.0, signing_keys: Mapping[int, bytes] | None = None,
+                 limits: SetpointLimits = DEFAULT_SETPOINT_LIMITS, retry_s: float = SENSOR_RETRY_S,
+                 shim: Shim | None = None) -> None:  # fmt: skip
+        self.bind_host, self.bind_port = parse_endpoint(bind, ("udp", "udpin"))
+        self.sysids = tuple(sysids)
+        if not self.sysids or len(set(self.sysids)) != len(self.sysids) or not all(2 <= s <= 255 for s in self.sysids):
+            raise ValueError(f"sysids {self.sysids} must be non-empty, distinct and in 2..255 (1 is the simulator)")
+        if signing_keys is not None:
+            if set(signing_keys) != set(self.sysids):
+                raise ValueError(f"signing_keys must have exactly one key per sysid {self.sysids}")
+            signing_keys = {s: check_key(k) for s, k in signing_keys.items()}
+        if not retry_s > 0.0:
+            raise ValueError(f"retry_s must be > 0, got {retry_s}")
+        self.scenario = scenario
+        self.timeout_s = timeout_s
+        self.limits = limits
+        self.retry_s = retry_s
+        self.stats = LinkStats()
+        self.attitude_targets: dict[int, AttitudeTarget] = {}  # latest, informational
+        self.last_missing: tuple[int, ...] = ()  # sysids without a setpoint in the last exchange
+        self.last_rejection: tuple[int, str] | None = None  # (sysid, reason) of the last rejected setpoint
+        self._keys = signing_keys
+        self._shim = shim
+        self._udp: Udp | None = None
+        self._peers: dict[int, _Peer] = {}
+        self._decoder: codec.Decoder | None = None
+
+    # -- lifecycle -----------------------------------------------------------
+    def open(self) -> tuple[str, int]:
+        """Bind the socket; returns the bound ``(host, port)``."""
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+            sock.bind((self.bind_host, self.bind_port))
+        except OSError:
+            sock.close()
+            raise
+        self._udp = Udp(sock, self.stats, self._shim)
+        keys = self._keys or {}
+        self._peers = {
+            s: _Peer(s, codec.Encoder(SIM_SYSID, SIM_COMPID, signing_key=keys.get(s), link_id=s)) for s in self.sysids
+        }
+        self._decoder = codec.Decoder(self._keys, accept=_ACCEPT, counters=self.stats)
+        return self.address
+
+    @property
+    def address(self) -> tuple[str, int]:
+        return self._require_open().sock.getsockname()
+
+    @property
+    def signing(self) -> bool:
+        return self._keys is not None
+
+    def __enter__(self) -> SimServer:
+        self.open()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close("simulator exiting on error" if exc[0] else "run complete", error=exc[0] is not None)
+
+    def close(self, reason: str = "run complete", error: bool = False) -> None:
+        """Send STATUSTEXT(reason) + AM_SIM_STEP(SHUTDOWN) (3 copies) to every known peer, then close."""
+        if self._udp is None:
+            return
+        severity = mav.MAV_SEVERITY_ERROR if error else mav.MAV_SEVERITY_NOTICE
+        text = reason.encode("utf-8")[:STATUSTEXT_MAX].decode("utf-8", "ignore").encode("utf-8")
+        for peer in self._peers.values():
+            if peer.addr is None:
+                continue
+            msgs = [
+                mav.MAVLink_statustext_message(severity, text),
+                codec.shutdown_message(peer.last_step + 1, peer.last_time_s, self.scenario.scenario_id),
+            ]
+            for _ in range(SHUTDOWN_COPIES):
+                try:
+                    self._udp.send(peer.addr, peer.encoder.pack(msgs))
+                except OSError:
+                    pass  # closing anyway; the peer will time out
+        self._udp.close()
+        self._udp = None
+
+    # -- queries ---------------------------------------------------------------
+    def armed(self, sysid: int) -> bool:
+        """Armed state of companion ``sysid`` as last commanded by it (a rejoin disarms)."""
+        return self._peers[sysid].armed
+
+    def peer_address(self, sysid: int) -> tuple[str, int] | None:
+        return self._peers[sysid].addr
+
+    @property
+    def lost_peers(self) -> frozenset[int]:
+        """Sysids that missed a step of :meth:`exchange` (partial) and have not shown life since."""
+        return frozenset(s for s, p in self._peers.items() if p.lost)
+
+    # -- handshake ---------------------------------------------------------------
+    def wait_for_peers(self, timeout_s: float) -> None:
+        """Wait for a HEARTBEAT from every configured sysid (each answered with AM_SCENARIO).
+
+        Raises PeerMissingError naming the silent sysids after ``timeout_s``.
+        """
+        self._wait_until(lambda p: p.addr is not None, timeout_s, "HEARTBEAT")
+
+    def wait_for_armed(self, timeout_s: float) -> None:
+        """Wait until every companion has armed (COMMAND_LONG ARM); PeerMissingError if not."""
+        self._wait_until(lambda p: p.armed, timeout_s, "ARM command")
+
+    def _wait_until(self, ok, timeout_s: float, what: str) -> None:
+        udp = self._require_open()
+        deadline = time.monotonic() + timeout_s
+        while True:
+            missing = [s for s, p in self._peers.items() if not ok(p)]
+            if not missing:
+                return
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise PeerMissingError(missing, timeout_s, what)
+            for data, addr in udp.recv(remaining):
+                for _setpoint in self._handle(data, addr):
+                    self.stats.stale_setpoints += 1  # nothing awaited yet
+
+    # -- lockstep ----------------------------------------------------------------
+    def exchange(self, frames: dict[int, SensorFrame], timeout_s: float | None = None, *,
+                 partial: bool = False) -> dict[int, TorqueSetpoint]:  # fmt: skip
+        """Send each companion its frame, then wait for the setpoints of those steps.
+
+        All batches go out before any answer is awaited, so the companions
+        compute concurrently.  A batch still unanswered after ``retry_s`` is
+        re-sent (backing off), so a lost datagram in either direction costs a
+        retry interval, not the run.  Stale, duplicate, wrong-step, invalid and
+        unauthenticated setpoints are dropped and counted in :attr:`stats`; the
+        step keeps waiting for a valid one.
+
+        ``partial=False``: raises PeerTimeoutError(sysid, step) if a companion does
+        not answer within ``timeout_s`` (default: the constructor's), and
+        PeerMissingError if one never said hello.
+
+        ``partial=True``: never raises for a companion.  Returns the setpoints
+        that arrived; :attr:`last_missing` lists the sysids of ``frames`` without
+        one.  A companion that misses a step is marked *lost*
+        (:attr:`lost_peers`): later exchanges still send it its frame and take
+        its answer if it comes while the others are awaited, but do not wait for
+        it, so one dead companion does not slow the rest.  It is waited for again
+        once it shows life: any valid setpoint (even a late one), or an ARM
+        command (a restarted companion: HEARTBEAT from a new address, then ARM).
+        """
+        udp = self._require_open()
+        timeout = self.timeout_s if timeout_s is None else timeout_s
+        expected: dict[int, int] = {}
+        for sysid, frame in frames.items():
+            peer = self._peers.get(sysid)
+            if peer is None:
+                raise ValueError(f"sysid {sysid} is not one of {self.sysids}")
+            if peer.addr is None and not partial:
+                raise PeerMissingError([sysid], 0.0, "HEARTBEAT (call wait_for_peers first)")
+            peer.batch = codec.sensor_frame_messages(frame, self.scenario.scenario_id)
+            expected[sysid] = frame.step
+        for sysid, frame in frames.items():
+            peer = self._peers[sysid]
+            if peer.addr is not None:
+                udp.send(peer.addr, peer.encoder.pack(peer.batch))
+            peer.last_step, peer.last_time_s = frame.step, frame.time_s
+        results: dict[int, TorqueSetpoint] = {}
+        start = time.monotonic()
+        deadline, interval = start + timeout, self.retry_s
+        next_retry = start + interval
+        polled = False  # read the socket at least once, even with timeout 0
+        while True:
+            awaited = self._awaited(expected, partial)
+            if awaited.issubset(results):
+                break
+            now = time.monotonic()
+            if now >= deadline and polled:
+                if not partial:
+                    missing = sorted(awaited.difference(results))
+                    self.last_missing = tuple(missing)
+                    raise PeerTimeoutError(missing[0], expected[missing[0]], timeout, missing)
+                for s in awaited.difference(results):
+                    self._peers[s].lost = True
+                    self.stats.peers_lost += 1
+                break
+            if now >= next_retry:
+                for s in awaited.difference(results):
+                    peer = self._peers[s]
+                    if peer.addr is not None:
+                        udp.send(peer.addr, peer.encoder.pack(peer.batch))
+                        self.stats.retransmits += 1
+                interval = min(2 * interval, _MAX_BACKOFF * self.retry_s)
+                next_retry = now + interval
+            polled = True
+            for data, addr in udp.recv(min(deadline, next_retry) - now):
+                for sysid, sp, att in self._handle(data, addr):
+                    step = expected.get(sysid)
+                    if step is None or sp.step < step:
+                        self.stats.stale_setpoints += 1
+                    elif sp.step > step:
+                        self.stats.wrong_step_setpoints += 1
+                    elif sysid in results:
+                        self.stats.duplicate_setpoints += 1
+                    else:
+                        results[sysid] = sp
+                        if att is not None:
+                            self.attitude_targets[sysid] = att
+        for peer in self._peers.values():
+            peer.batch = None
+        self.last_missing = tuple(sorted(set(expected).difference(results)))
+        return results
+
+    def _awaited(self, expected: dict[int, int], partial: bool) -> set[int]:
+        if not partial:
+            return set(expected)
+        return {s for s in expected if not self._peers[s].lost and self._peers[s].addr is not None}
+
+    # -- receive path ----------------------------------------------------------
+    def _handle(self, data: bytes, addr: tuple[str, int]) -> list[tuple[int, TorqueSetpoint, AttitudeTarget | None]]:
+        """Decode one datagram; answer control messages; return its valid setpoints."""
+        out = []
+        attitude: dict[int, object] = {}  # SET_ATTITUDE_TARGET pairs with the setpoint of its datagram
+        for msg in self._decoder.feed(data):
+            peer = self._peers.get(msg.get_srcSystem())
+            if peer is None:
+                self.stats.unknown_sysid += 1
+                continue
+            mid = msg.get_msgId()  # not msg.id: STATUSTEXT has a field named "id"
+            if not self._admit(peer, addr, mid):
+                continue
+            if mid == _HEARTBEAT:
+                self._udp.send(addr, peer.encoder.pack([codec.scenario_message(self.scenario)]))
+            elif mid == _COMMAND_LONG:
+                self._on_command(peer, msg)
+            elif mid == _ATTITUDE:
+                attitude[peer.sysid] = msg
+            elif mid == _SETPOINT:
+                got = self._setpoint(peer, msg, attitude.pop(peer.sysid, None))
+                if got is not None:
+                    peer.lost = False  # it is alive
+                    out.append((peer.sysid, *got))
+            else:  # pragma: no cover - the decoder only lets _ACCEPT through
+                self.stats.ignored += 1
+        return out
+
+    def _admit(self, peer: _Peer, addr: tuple[str, int], mid: int) -> bool:
+        """Address policy (see the class docstring); True if the packet may be used."""
+        now = time.monotonic()
+        if peer.addr == addr:
+            peer.last_heard = now
+            return True
+        if not self.signing and (
+            mid != _HEARTBEAT or (peer.addr is not None and not peer.lost and now - peer.last_heard < REJOIN_QUIET_S)
+        ):
+            self.stats.wrong_address += 1
+            return False
+        peer.last_heard = now
+        if peer.addr is not None:
+            self.stats.address_changes += 1
+            if mid == _HEARTBEAT:
+                self.stats.rejoins += 1
+                peer.armed = False
+        peer.addr = addr
+        return True
+
+    def _setpoint(self, peer: _Peer, msg, att_msg):
+        try:
+            sp = codec.setpoint_from_message(msg)
+            att = codec.attitude_from_message(att_msg, sp.step) if att_msg is not None else None
+            reason = self.limits.violation(sp)
+        except codec.NonFiniteValueError as exc:
+            self.stats.nonfinite_values += 1
+            reason = str(exc)
+        except ValueError as exc:  # CodecError is one
+            reason = str(exc)
+        if reason is None:
+            return sp, att
+        self.stats.rejected_setpoints += 1
+        self.last_rejection = (peer.sysid, reason)
+        return None
+
+    def _on_command(self, peer: _Peer, msg) -> None:
+        if msg.target_system not in (0, SIM_SYSID):
+            self.stats.ignored += 1
+            return
+        if msg.command == mav.MAV_CMD_COMPONENT_ARM_DISARM:
+            peer.armed = msg.param1 >= 0.5
+            peer.lost = peer.lost and not peer.armed  # a (re)armed companion is alive
+            result = mav.MAV_RESULT_ACCEPTED
+        else:
+            result = mav.MAV_RESULT_UNSUPPORTED
+        ack = mav.MAVLink_command_ack_message(msg.command, result, 0, 0, peer.sysid, msg.get_srcComponent())
+        self._udp.send(peer.addr, peer.encoder.pack([ack]))
+
+    def _require_open(self) -> Udp:
+        if self._udp is None:
+            raise RuntimeError("SimServer is not open; call open() first")
+        return self._udp

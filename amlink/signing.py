@@ -1,0 +1,108 @@
+"""MAVLink 2 signing keys of the amstack link: formats, derivation, the timestamp clock.
+
+Pure (hashlib and time only; :func:`read_key_file` reads one file).
+
+Keys.  Each companion (sysid ``s``) shares a 32-byte secret with the simulator; the
+simulator holds all of them.  :func:`resolve_key` picks a vehicle's key, first match:
+
+1. ``key_hex`` -- 64 hex digits given for that vehicle (scenario ``[[am]].signing_key_hex``);
+2. ``master_key`` -- a scenario-wide secret (scenario ``[link].key_file``, a file of
+   64 hex digits); the vehicle's key is ``SHA-256(master || "amstack-link-v1" || s)``;
+3. otherwise a *development key* derived from the scenario name and ``s``.  It is
+   public (anyone with this source can compute it), so it still gives integrity
+   against corruption, cross-talk between runs of different scenarios and stale
+   processes, and rejects replays of old traffic, but it is no protection against
+   an attacker.  :func:`resolve_key` reports which source was used so the process
+   mains can warn about it.
+
+Timestamps follow the MAVLink 2 signing spec: units of 10 us since
+2015-01-01T00:00:00Z; :func:`now_timestamp` is the wall clock in those units.  Both
+ends must have clocks within 60 s of each other (NTP), or a new stream is taken as
+a replay of old traffic and rejected.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from pathlib import Path
+
+KEY_BYTES = 32
+MAVLINK_EPOCH_UNIX_S = 1420070400  # 2015-01-01T00:00:00Z
+NEW_STREAM_WINDOW = 6000 * 1000  # 60 s in 10 us units: as pymavlink and the MAVLink spec
+_DERIVE_TAG = b"amstack-link-v1"
+_DEV_TAG = b"amstack-dev-key-PUBLIC"
+
+
+class SigningKeyError(ValueError):
+    """A signing key is malformed or missing; the message says which and where."""
+
+
+def now_timestamp() -> int:
+    """MAVLink 2 signing timestamp of the wall clock now [10 us since 2015-01-01 UTC]."""
+    return int((time.time() - MAVLINK_EPOCH_UNIX_S) * 1e5)
+
+
+def key_from_hex(text: str, where: str = "signing key") -> bytes:
+    """32-byte key from 64 hex digits (surrounding whitespace ignored)."""
+    s = text.strip()
+    try:
+        key = bytes.fromhex(s)
+    except ValueError:
+        raise SigningKeyError(f"{where}: not hex digits") from None
+    if len(key) != KEY_BYTES:
+        raise SigningKeyError(f"{where}: need {2 * KEY_BYTES} hex digits ({KEY_BYTES} bytes), got {len(s)}")
+    return key
+
+
+def read_key_file(path: str | Path) -> bytes:
+    """A key file holds 64 hex digits (one line); keep it mode 0600."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="ascii")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SigningKeyError(f"{p}: cannot read key file: {exc}") from None
+    return key_from_hex(text, str(p))
+
+
+def derive_vehicle_key(master_key: bytes, sysid: int) -> bytes:
+    """Per-vehicle key from a scenario-wide secret: SHA-256(master || tag || sysid)."""
+    check_key(master_key)
+    return hashlib.sha256(master_key + _DERIVE_TAG + bytes([sysid])).digest()
+
+
+def development_key(scenario_name: str, sysid: int) -> bytes:
+    """The PUBLIC default key of vehicle ``sysid`` in scenario ``scenario_name`` (see module doc)."""
+    return hashlib.sha256(_DEV_TAG + scenario_name.encode("utf-8") + b"\x00" + bytes([sysid])).digest()
+
+
+def resolve_key(sysid: int, *, key_hex: str = "", master_key: bytes | None = None,
+                scenario_name: str = "") -> tuple[bytes, str]:  # fmt: skip
+    """The key of vehicle ``sysid`` and where it came from: ``"vehicle"``, ``"master"`` or ``"development"``."""
+    if not 2 <= sysid <= 255:
+        raise SigningKeyError(f"sysid {sysid} must be in 2..255")
+    if key_hex:
+        return key_from_hex(key_hex, f"signing_key_hex of sysid {sysid}"), "vehicle"
+    if master_key is not None:
+        return derive_vehicle_key(master_key, sysid), "master"
+    return development_key(scenario_name, sysid), "development"
+
+
+def check_key(key: bytes) -> bytes:
+    if not isinstance(key, (bytes, bytearray)) or len(key) != KEY_BYTES:
+        raise SigningKeyError(f"a signing key must be {KEY_BYTES} bytes")
+    return bytes(key)
+
+
+def keys_for_scenario(spec) -> dict[int, tuple[bytes, str]]:
+    """``{sysid: (key, source)}`` for a loaded scenario (``amcore.config.ScenarioSpec``, duck-typed).
+
+    Uses ``[[am]].signing_key_hex``, ``[link].key_file`` and the scenario name as
+    :func:`resolve_key` does; ``source == "development"`` means a public key.
+    """
+    key_path = spec.link.key_path(spec.path)
+    master = read_key_file(key_path) if key_path is not None else None
+    return {
+        am.sysid: resolve_key(am.sysid, key_hex=am.signing_key_hex, master_key=master, scenario_name=spec.name)
+        for am in spec.ams
+    }
