@@ -420,9 +420,11 @@ def scenario_id(spec: ScenarioSpec) -> int:
     import json
     import zlib
 
+    secret = {"path", "signing_key_hex", "key_file"}  # AM_SCENARIO is public: no key material in it
+
     def plain(x):
         if dataclasses.is_dataclass(x):
-            return {f.name: plain(getattr(x, f.name)) for f in dataclasses.fields(x) if f.name != "path"}
+            return {f.name: plain(getattr(x, f.name)) for f in dataclasses.fields(x) if f.name not in secret}
         if isinstance(x, Path):
             return hashlib.sha256(x.read_bytes()).hexdigest() if x.is_file() else str(x)
         if isinstance(x, (tuple, list)):

@@ -8,9 +8,9 @@ simulator holds all of them.  :func:`resolve_key` picks a vehicle's key, first m
 1. ``key_hex`` -- 64 hex digits given for that vehicle (scenario ``[[am]].signing_key_hex``);
 2. ``master_key`` -- a scenario-wide secret (scenario ``[link].key_file``, a file of
    64 hex digits); the vehicle's key is ``SHA-256(master || "amstack-link-v1" || s)``;
-3. otherwise a *development key* derived from the scenario name and ``s``.  It is
+3. otherwise a *development key* derived from ``s`` alone.  It is
    public (anyone with this source can compute it), so it still gives integrity
-   against corruption, cross-talk between runs of different scenarios and stale
+   against corruption, stale
    processes, and rejects replays of old traffic, but it is no protection against
    an attacker.  :func:`resolve_key` reports which source was used so the process
    mains can warn about it.
@@ -72,8 +72,13 @@ def derive_vehicle_key(master_key: bytes, sysid: int) -> bytes:
 
 
 def development_key(scenario_name: str, sysid: int) -> bytes:
-    """The PUBLIC default key of vehicle ``sysid`` in scenario ``scenario_name`` (see module doc)."""
-    return hashlib.sha256(_DEV_TAG + scenario_name.encode("utf-8") + b"\x00" + bytes([sysid])).digest()
+    """The PUBLIC default key of vehicle ``sysid`` (see module doc).
+
+    It does not depend on the scenario: a companion started with another scenario must
+    still be able to hear the simulator's AM_SCENARIO and be told that it is in the wrong
+    run (the scenario fingerprint check), rather than being silently dropped.
+    ``scenario_name`` is accepted and ignored."""
+    return hashlib.sha256(_DEV_TAG + b"\x00" + bytes([sysid])).digest()
 
 
 def resolve_key(sysid: int, *, key_hex: str = "", master_key: bytes | None = None,
@@ -106,3 +111,26 @@ def keys_for_scenario(spec) -> dict[int, tuple[bytes, str]]:
         am.sysid: resolve_key(am.sysid, key_hex=am.signing_key_hex, master_key=master, scenario_name=spec.name)
         for am in spec.ams
     }
+
+
+def keys_for_run(spec, key_file: str | Path | None = None) -> tuple[dict[int, bytes] | None, str | None]:
+    """What a process main uses: ``({sysid: key} or None when [link] signing = false, warning)``.
+
+    ``key_file`` (a command-line override of ``[link].key_file``) is a master key from
+    which every vehicle's key is derived, unless that vehicle has its own
+    ``signing_key_hex``.  The warning (or None) says when the link is unsigned or signed
+    with the public development key.
+    """
+    if not spec.link.signing:
+        return None, ("MAVLink signing is OFF ([link] signing = false): any host that can reach the "
+                      "simulator's port can command the vehicles")
+    if key_file is not None:
+        master = read_key_file(key_file)
+        return {am.sysid: resolve_key(am.sysid, key_hex=am.signing_key_hex, master_key=master)[0]
+                for am in spec.ams}, None
+    keys = keys_for_scenario(spec)
+    warning = None
+    if any(src == "development" for _, src in keys.values()):
+        warning = ("signing with the PUBLIC development key (no [link].key_file or --key-file): integrity "
+                   "and anti-replay only, no protection against an attacker")
+    return {s: k for s, (k, _) in keys.items()}, warning

@@ -22,7 +22,8 @@ from amcore.config import ConfigError, load_scenario, scenario_id
 from amcore.control import ControllerMemory, ControllerParams, step
 from amcore.mission import am_mission
 from amcore.model import build_model, create_data
-from amlink.errors import LinkError
+from amlink import signing
+from amlink.errors import LinkError, SimulatorUnreachableError
 from amlink.lockstep import CompanionClient
 
 from .adapter import setpoint_from_result, state_from_frame
@@ -46,15 +47,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--config", type=Path, default=DEFAULT_SCENARIO, help="scenario TOML")
     ap.add_argument("--connect-timeout", type=float, default=30.0, help="seconds to wait for the simulator")
     ap.add_argument("--frame-timeout", type=float, default=10.0, help="seconds without a sensor frame = link lost")
+    ap.add_argument("--key-file", type=Path, default=None,
+                    help="signing master key (64 hex digits); overrides [link].key_file of the scenario")
     ap.add_argument("--outcome", type=Path, default=None, help="write a per-phase error summary (JSON) here")
     a = ap.parse_args(argv)
     tag = f"companion[{a.sysid}]"
     try:
         spec = load_scenario(a.config)
         am = spec.am(a.sysid)
-    except ConfigError as exc:
+        keys, warning = signing.keys_for_run(spec, a.key_file)
+    except (ConfigError, signing.SigningKeyError) as exc:
         print(f"{tag}: error: {exc}", file=sys.stderr)
         return 2
+    if warning:
+        print(f"{tag}: warning: {warning}", file=sys.stderr)
     model = build_model(spec.vehicle)
     data = create_data(model)
     mission = am_mission(spec, am, model)
@@ -67,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
 
     signal.signal(signal.SIGTERM, _on_signal)
     signal.signal(signal.SIGINT, _on_signal)
-    client = CompanionClient(a.sysid, a.sim)
+    client = CompanionClient(a.sysid, a.sim, signing_key=None if keys is None else keys[a.sysid])
     steps, why = 0, "simulator ended the run"
     try:
         info = client.connect(timeout_s=a.connect_timeout)
@@ -105,7 +111,10 @@ def main(argv: list[str] | None = None) -> int:
         why = f"stopped by {stop}"
         wall = None
     except LinkError as exc:
-        print(f"{tag}: error: {exc}", file=sys.stderr)
+        hint = ""
+        if isinstance(exc, SimulatorUnreachableError) and keys is not None:
+            hint = " (is it running, and does it use the same signing key? unsigned or wrongly signed packets are dropped)"
+        print(f"{tag}: error: {exc}{hint}", file=sys.stderr)
         _write(a.outcome, outcome, error=str(exc))
         return 1
     finally:

@@ -68,7 +68,8 @@ def main(argv: list[str] | None = None) -> int:
     run_dir = (a.run_dir or Path("runs") / f"{spec.name}-{time.strftime('%Y%m%d-%H%M%S')}").resolve()
     run_dir.mkdir(parents=True, exist_ok=True)
     cfg = str(Path(a.scenario).resolve())
-    sim_cmd = _command("simulator") + ["--config", cfg, "--bind", "udp:127.0.0.1:0", "--run-dir", str(run_dir),
+    key_args = _fresh_key(spec, run_dir)
+    sim_cmd = _command("simulator") + key_args + ["--config", cfg, "--bind", "udp:127.0.0.1:0", "--run-dir", str(run_dir),
                                        "--progress", "jsonl", "--peer-timeout", str(a.startup_timeout)]
     if a.duration is not None:
         sim_cmd += ["--duration", str(a.duration)]
@@ -94,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
             clog = open(run_dir / f"companion-{am.sysid}.log", "w")
             logs.append(clog)
             procs[f"companion {am.sysid}"] = subprocess.Popen(
-                _command("companion") + ["--sysid", str(am.sysid), "--sim", bind, "--config", cfg,
+                _command("companion") + key_args + ["--sysid", str(am.sysid), "--sim", bind, "--config", cfg,
                                          "--outcome", str(run_dir / f"am{am.sysid}.json"),
                                          "--connect-timeout", str(a.startup_timeout)],
                 stdout=clog, stderr=subprocess.STDOUT, env=env)
@@ -117,6 +118,18 @@ def main(argv: list[str] | None = None) -> int:
         print(f"am-run: FAILED: {', '.join(failed)} (logs in {run_dir})", file=sys.stderr)
         return 1
     return 0
+
+
+def _fresh_key(spec, run_dir: Path) -> list[str]:
+    """A random signing master key for this run (mode 0600 in the run folder), unless the
+    scenario names its own keys or turns signing off."""
+    if not spec.link.signing or spec.link.key_file or any(am.signing_key_hex for am in spec.ams):
+        return []
+    path = run_dir / "link.key"
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as fh:
+        fh.write(os.urandom(32).hex() + "\n")
+    return ["--key-file", str(path)]
 
 
 def _readable(stream, deadline: float) -> bool:

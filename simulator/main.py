@@ -27,7 +27,10 @@ from amcore.config import ConfigError, load_scenario, scenario_id
 from amcore.mission import am_mission
 from amcore.model import build_model
 from amcore.so3 import R_to_quat_wxyz
+from amlink import signing
 from amlink.errors import LinkError
+from amlink.impair import ImpairedLink, LinkImpairment
+from amlink.limits import SetpointLimits
 from amlink.lockstep import SimServer
 from amlink.types import ScenarioInfo, SensorFrame
 
@@ -85,14 +88,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--duration", type=float, default=None, help="override [scenario].duration_s")
     ap.add_argument("--peer-timeout", type=float, default=60.0, help="seconds to wait for every companion at start")
     ap.add_argument("--step-timeout", type=float, default=5.0, help="seconds a companion may take to answer a step")
+    ap.add_argument("--key-file", type=Path, default=None,
+                    help="signing master key (64 hex digits); overrides [link].key_file of the scenario")
     ap.add_argument("--progress", choices=("bar", "jsonl", "none"), default=None,
                     help="progress display (default: bar on a terminal, else none)")
     a = ap.parse_args(argv)
     try:
         spec = load_scenario(a.config)
-    except ConfigError as exc:
+        keys, warning = signing.keys_for_run(spec, a.key_file)
+    except (ConfigError, signing.SigningKeyError) as exc:
         print(f"simulator: error: {exc}", file=sys.stderr)
         return 2
+    if warning:
+        print(f"simulator: warning: {warning}", file=sys.stderr)
     duration = spec.duration_s if a.duration is None else a.duration
     if not duration > 0:
         print(f"simulator: error: --duration must be > 0, got {duration}", file=sys.stderr)
@@ -112,7 +120,12 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGINT, _on_signal)
 
     world = World(spec, initial)
-    server = SimServer(a.bind, sysids=sysids, scenario=info, timeout_s=a.step_timeout)
+    v = spec.vehicle
+    limits = SetpointLimits.for_vehicle(v.rotors.count * v.rotors.thrust_max_n, max(v.joint_torque_max_nm), v.n_joints)
+    server = SimServer(a.bind, sysids=sysids, scenario=info, timeout_s=a.step_timeout, signing_keys=keys,
+                       limits=limits)
+    impairment = LinkImpairment.for_scenario(spec)
+    fc_links = {s: ImpairedLink(impairment, stream=s) for s in sysids}  # what each flight controller receives
     status, code, k = "run complete", 0, 0
     told = status  # what the companions hear (STATUSTEXT carries 50 bytes)
     n_steps = int(round(duration * spec.rate_hz))
@@ -139,7 +152,10 @@ def main(argv: list[str] | None = None) -> int:
             if k % TRUTH_EVERY == 0:
                 outcome.add(world.ground_truth(), wrenches)
             setpoints = server.exchange(frames)
-            for s, sp in setpoints.items():
+            for s in sysids:
+                sp = fc_links[s].step(k, setpoints.get(s))
+                if sp is None:  # nothing has reached this flight controller yet: keep the last command
+                    continue
                 rep = world.apply(s, sp.thrust_n, sp.tau_B_nm, sp.tau_q_nm)
                 if rep.saturated and outcome.saturation(s, t):
                     print(f"simulator: t={t:.3f} s sysid {s}: command saturated (thrust {sp.thrust_n:.2f} N, "

@@ -54,7 +54,7 @@ def test_key_formats_and_resolution(tmp_path):
     d4, src = signing.resolve_key(4, scenario_name="two_am_comp")
     assert src == "development" and len(d4) == 32
     assert d4 != signing.resolve_key(5, scenario_name="two_am_comp")[0]
-    assert d4 != signing.resolve_key(4, scenario_name="other")[0]
+    assert d4 == signing.resolve_key(4, scenario_name="other")[0]  # so a wrong-scenario companion is told so
 
 
 def test_encoder_timestamp_follows_the_wall_clock_and_grows_per_frame():

@@ -90,3 +90,23 @@ def test_sigterm_stops_a_companion_cleanly_and_the_simulator_names_it(tmp_path):
             if p.poll() is None:
                 p.kill()
         sim.kill()
+
+
+def test_companion_with_the_wrong_signing_key_is_not_served(tmp_path):
+    key_a, key_b = tmp_path / "a.key", tmp_path / "b.key"
+    key_a.write_text("11" * 32)
+    key_b.write_text("22" * 32)
+    sim = Sim("two_am_comp.toml", tmp_path, "--peer-timeout", "4", "--key-file", str(key_a))
+    c4 = companion(4, sim.bind, "two_am_comp.toml", "--key-file", str(key_a))
+    c5 = companion(5, sim.bind, "two_am_comp.toml", "--key-file", str(key_b), "--connect-timeout", "6")
+    try:
+        code, err = sim.wait(timeout_s=60)
+        assert code == 1
+        assert "sysid 5" in err and "sysid 4" not in err.split("link failure")[-1], err
+        out, err5 = c5.communicate(timeout=30)
+        assert c5.returncode == 1, err5  # never heard AM_SCENARIO: its HEARTBEATs were dropped unsigned-by-us
+    finally:
+        for p in (c4, c5):
+            if p.poll() is None:
+                p.kill()
+        sim.kill()
