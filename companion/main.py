@@ -78,9 +78,11 @@ def main(argv: list[str] | None = None) -> int:
     try:
         info = client.connect(timeout_s=a.connect_timeout)
         if info.scenario_id != my_id or info.name != spec.name:
+            same = " (same name, different content: the files differ between hosts or were edited)" \
+                if info.name == spec.name else ""
             print(f"{tag}: error: the simulator runs scenario '{info.name}' (id {info.scenario_id}), this companion "
-                  f"was started with '{spec.name}' (id {my_id}, {a.config}); start both with the same --config",
-                  file=sys.stderr)
+                  f"was started with '{spec.name}' (id {my_id}, {a.config}){same}; start both with the same "
+                  f"scenario and vehicle files", file=sys.stderr)
             return 3
         client.arm(timeout_s=5.0)
         print(f"{tag}: connected to {a.sim}, scenario '{info.name}', armed", file=sys.stderr, flush=True)

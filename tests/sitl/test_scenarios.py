@@ -89,11 +89,16 @@ def test_two_am_nocomp_grasp_holds_with_bounded_nonzero_offsets(nocomp):
     assert obj["touching_in_hover"] == []
     for c in nocomp.companions.values():
         end, before = c["at"]["end"], c["at"]["settle_check"]
-        assert 5e-3 < end["r_c_err"] < 0.3  # bounded, not zero: nothing compensates the contact force
-        assert 0.01 < end["e_R"] < 0.5
-        # settled: the offset no longer changes over the last seconds
-        assert end["r_c_err"] == pytest.approx(before["r_c_err"], rel=0.1)
-        assert end["e_R"] == pytest.approx(before["e_R"], rel=0.1)
+        # bounded, not zero: nothing compensates the squeeze, the CoM spring takes it (9 N / K_t)
+        assert 0.05 < end["r_c_err"] < 0.3
+        # the attitude offset stays small here (the contact moment on the decoupled attitude
+        # coordinates is small for this arm), but bounded: no saturation, no tumbling
+        assert end["e_R"] < 0.05
+        # settled: the offsets no longer change over the last two seconds
+        assert end["r_c_err"] == pytest.approx(before["r_c_err"], rel=0.05)
+        assert abs(end["e_R"] - before["e_R"]) < 1e-3
+    for a in nocomp.outcome["ams"].values():
+        assert a["saturated_steps"] == 0
 
 
 def test_two_am_compensation_reduces_the_offsets(comp, nocomp):
