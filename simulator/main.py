@@ -34,6 +34,7 @@ from amlink.limits import SetpointLimits
 from amlink.lockstep import SimServer
 from amlink.types import ScenarioInfo, SensorFrame
 
+from .failsafe import Failsafe
 from .outcome import RunOutcome
 from .world import World
 
@@ -87,7 +88,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--run-dir", type=Path, default=None, help="folder for outcome.json (default runs/<name>-<time>)")
     ap.add_argument("--duration", type=float, default=None, help="override [scenario].duration_s")
     ap.add_argument("--peer-timeout", type=float, default=60.0, help="seconds to wait for every companion at start")
-    ap.add_argument("--step-timeout", type=float, default=5.0, help="seconds a companion may take to answer a step")
+    ap.add_argument("--step-timeout", type=float, default=5.0,
+                    help="seconds a companion may stay silent before its vehicle goes to failsafe")
     ap.add_argument("--key-file", type=Path, default=None,
                     help="signing master key (64 hex digits); overrides [link].key_file of the scenario")
     ap.add_argument("--progress", choices=("bar", "jsonl", "none"), default=None,
@@ -127,6 +129,9 @@ def main(argv: list[str] | None = None) -> int:
     impairment = LinkImpairment.for_scenario(spec)
     fc_links = {s: ImpairedLink(impairment, stream=s) for s in sysids}  # what each flight controller receives
     status, code, k = "run complete", 0, 0
+    events: list[dict] = []
+    completed = False  # the run reached its end (a vehicle in failsafe makes the code 1, not the run an error)
+    failsafes: dict[int, Failsafe] = {}
     told = status  # what the companions hear (STATUSTEXT carries 50 bytes)
     n_steps = int(round(duration * spec.rate_hz))
     try:
@@ -151,8 +156,23 @@ def main(argv: list[str] | None = None) -> int:
                 digest.update(f.p_WB.tobytes() + f.quat_WB_wxyz.tobytes() + f.q.tobytes() + f.wrench_E.tobytes())
             if k % TRUTH_EVERY == 0:
                 outcome.add(world.ground_truth(), wrenches)
-            setpoints = server.exchange(frames)
+            setpoints = server.exchange(frames, partial=True)
+            lost = server.lost_peers
             for s in sysids:
+                if s in lost or (s in failsafes and s not in setpoints):
+                    if s not in failsafes:
+                        failsafes[s] = Failsafe(model, world.state(s), t)
+                        events.append({"t": t, "sysid": s, "event": "lost", "failsafe": "hold, then land"})
+                        print(f"simulator: t={t:.3f} s sysid {s}: companion silent for {a.step_timeout:g} s; "
+                              f"flight controller failsafe: hold, then land", file=sys.stderr, flush=True)
+                    c = failsafes[s].command(t, world.state(s))
+                    world.apply(s, c.thrust_n, c.tau_B_nm, c.tau_q_nm)
+                    continue
+                if s in failsafes:  # the companion is back (rejoined and armed): it flies again
+                    del failsafes[s]
+                    events.append({"t": t, "sysid": s, "event": "rejoined"})
+                    print(f"simulator: t={t:.3f} s sysid {s}: companion back, failsafe ended", file=sys.stderr,
+                          flush=True)
                 sp = fc_links[s].step(k, setpoints.get(s))
                 if sp is None:  # nothing has reached this flight controller yet: keep the last command
                     continue
@@ -165,6 +185,10 @@ def main(argv: list[str] | None = None) -> int:
             progress.update(world.time_s)
         outcome.add(world.ground_truth(), {s: world.wrench_ee(s) for s in sysids})
         progress.update(world.time_s, force=True)
+        if failsafes:
+            status, code = f"run complete; in failsafe at the end: sysid {', '.join(map(str, sorted(failsafes)))}", 1
+            told = f"run complete; failsafe: sysid {', '.join(map(str, sorted(failsafes)))}"
+            completed = True
     except _Stop as stop:
         status, code = f"interrupted by {stop}", 130
         told = status
@@ -172,13 +196,14 @@ def main(argv: list[str] | None = None) -> int:
         status, code, told = f"link failure: {exc}", 1, str(exc)
         print(f"\nsimulator: error: {exc}", file=sys.stderr)
     finally:
-        server.close(told, error=code != 0)
+        server.close(told, error=code != 0 and not completed)
         world.close()
     wall = time.perf_counter() - progress.t_wall0
     result = {"scenario": spec.name, "scenario_id": info.scenario_id, "status": status, "exit_code": code,
               "steps": k + 1 if code == 0 else k, "sim_time_s": world.time_s if world else None, "wall_s": wall,
               "real_time_factor": (world.time_s / wall) if wall > 0 else None,
-              "state_digest": digest.hexdigest(), "link": vars(server.stats), **outcome.to_dict()}
+              "state_digest": digest.hexdigest(), "link": vars(server.stats), "events": events,
+              "failsafe_at_end": sorted(failsafes), **outcome.to_dict()}
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "outcome.json").write_text(json.dumps(result, indent=1))
     progress.event(event="done", status=status, exit_code=code, outcome=str(run_dir / "outcome.json"))

@@ -2,6 +2,7 @@
 Short runs (well under a simulated second) through the console scripts."""
 from __future__ import annotations
 
+import json
 import signal
 import subprocess
 import time
@@ -70,24 +71,69 @@ def test_bad_config_exits_2_naming_file_and_key(tmp_path):
     assert p.returncode == 2 and "sysid 9" in p.stderr
 
 
-def test_sigterm_stops_a_companion_cleanly_and_the_simulator_names_it(tmp_path):
-    sim = Sim("two_am_comp.toml", tmp_path, "--step-timeout", "2", "--peer-timeout", "30")
-    c4, c5 = companion(4, sim.bind), companion(5, sim.bind)
+def _wait_for(stream, text: str, limit: int = 100000) -> str:
+    for _ in range(limit):
+        line = stream.readline()
+        if not line:
+            raise AssertionError(f"stream ended before {text!r}")
+        if text in line:
+            return line
+    raise AssertionError(f"{text!r} not seen")
+
+
+def test_sigterm_stops_a_companion_cleanly_and_its_vehicle_goes_to_failsafe(tmp_path):
+    sim = Sim("two_am_comp.toml", tmp_path, "--step-timeout", "2", "--peer-timeout", "30", "--duration", "5")
+    c4, c5 = companion(4, sim.bind, "two_am_comp.toml", "--outcome", str(tmp_path / "am4.json")), companion(5, sim.bind)
     try:
-        for line in sim.proc.stdout:  # wait until the run is under way
-            if '"progress"' in line:
-                break
+        _wait_for(sim.proc.stdout, '"progress"')  # the run is under way
         c5.send_signal(signal.SIGTERM)
         out, err5 = c5.communicate(timeout=20)
         assert c5.returncode == 0, err5
         assert "SIGTERM" in err5
-        code, err = sim.wait(timeout_s=60)
-        assert code == 1
-        assert "sysid 5" in err, err
+        line = _wait_for(sim.proc.stderr, "failsafe")
+        assert "sysid 5" in line
+        code, err = sim.wait(timeout_s=120)
+        assert code == 1  # a vehicle ended the run in failsafe
+        assert "in failsafe at the end: sysid 5" in err
         c4.communicate(timeout=30)
+        assert c4.returncode == 0  # the other companion flew on, undisturbed, to the end
+        o = json.loads((tmp_path / "outcome.json").read_text())
+        assert [e["event"] for e in o["events"]] == ["lost"] and o["failsafe_at_end"] == [5]
+        assert o["ams"]["5"]["base_contacts"] == []  # held in the air, did not crash
+        am4 = json.loads((tmp_path / "am4.json").read_text())
+        assert am4["at"]["end"]["r_c_err"] < 5e-3
     finally:
         for p in (c4, c5):
             if p.poll() is None:
+                p.kill()
+        sim.kill()
+
+
+def test_sigkilled_companion_is_detected_and_a_restarted_one_rejoins(tmp_path):
+    sim = Sim("two_am_comp.toml", tmp_path, "--step-timeout", "2", "--peer-timeout", "30", "--duration", "6")
+    c4, c5 = companion(4, sim.bind), companion(5, sim.bind)
+    c5b = None
+    try:
+        _wait_for(sim.proc.stdout, '"progress"')
+        c5.kill()
+        t_kill = time.monotonic()
+        _wait_for(sim.proc.stderr, "failsafe")
+        assert time.monotonic() - t_kill < 10  # detected within the step timeout (+ load)
+        c5b = companion(5, sim.bind, "two_am_comp.toml", "--outcome", str(tmp_path / "am5.json"))
+        line = _wait_for(sim.proc.stderr, "companion back")
+        assert "sysid 5" in line
+        code, err = sim.wait(timeout_s=180)
+        assert code == 0, err
+        o = json.loads((tmp_path / "outcome.json").read_text())
+        assert [e["event"] for e in o["events"]] == ["lost", "rejoined"]
+        assert o["failsafe_at_end"] == []
+        c5b.communicate(timeout=30)
+        assert c5b.returncode == 0
+        am5 = json.loads((tmp_path / "am5.json").read_text())
+        assert am5["at"]["end"]["r_c_err"] < 0.05  # flying its reference again
+    finally:
+        for p in (c4, c5, c5b):
+            if p is not None and p.poll() is None:
                 p.kill()
         sim.kill()
 
