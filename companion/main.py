@@ -19,15 +19,11 @@ import time
 from pathlib import Path
 
 from amcore.config import ConfigError, load_scenario, scenario_id
-from amcore.control import ControllerMemory, ControllerParams, step
-from amcore.mission import am_mission
-from amcore.model import build_model, create_data
 from amlink import signing
 from amlink.errors import LinkError, SimulatorUnreachableError
 from amlink.lockstep import CompanionClient
 
-from .adapter import setpoint_from_result, state_from_frame
-from .outcome import Outcome
+from .pilot import Pilot
 
 DEFAULT_SCENARIO = Path(__file__).resolve().parents[1] / "configs" / "scenarios" / "two_am_comp.toml"
 
@@ -54,27 +50,20 @@ def main(argv: list[str] | None = None) -> int:
     tag = f"companion[{a.sysid}]"
     try:
         spec = load_scenario(a.config)
-        am = spec.am(a.sysid)
+        spec.am(a.sysid)  # ConfigError if this sysid is not in the scenario
         keys, warning = signing.keys_for_run(spec, a.key_file)
     except (ConfigError, signing.SigningKeyError) as exc:
         print(f"{tag}: error: {exc}", file=sys.stderr)
         return 2
     if warning:
         print(f"{tag}: warning: {warning}", file=sys.stderr)
-    model = build_model(spec.vehicle)
-    data = create_data(model)
-    mission = am_mission(spec, am, model)
-    params = ControllerParams.from_vehicle(spec.vehicle, mission.frame)
-    thrust_max = spec.vehicle.rotors.thrust_max_n * spec.vehicle.rotors.count
-    ms = spec.mission
-    outcome = Outcome(a.sysid, ("approach", "grasp", "hover"),
-                      (ms.grasp_end_s + ms.lift_move_s + 1.0, ms.hover_end_s))
+    pilot = Pilot(spec, a.sysid)
     my_id = scenario_id(spec)
 
     signal.signal(signal.SIGTERM, _on_signal)
     signal.signal(signal.SIGINT, _on_signal)
     client = CompanionClient(a.sysid, a.sim, signing_key=None if keys is None else keys[a.sysid])
-    steps, why = 0, "simulator ended the run"
+    why = "simulator ended the run"
     try:
         info = client.connect(timeout_s=a.connect_timeout)
         if info.scenario_id != my_id or info.name != spec.name:
@@ -86,28 +75,13 @@ def main(argv: list[str] | None = None) -> int:
             return 3
         client.arm(timeout_s=5.0)
         print(f"{tag}: connected to {a.sim}, scenario '{info.name}', armed", file=sys.stderr, flush=True)
-        memory = ControllerMemory()
-        next_snap = [("approach_end", ms.approach_end_s), ("grasp_end", ms.grasp_end_s),
-                     ("settle_check", spec.duration_s - 2.0)]
-        next_snap.sort(key=lambda x: x[1])
-        last = None
         t0 = time.perf_counter()
         while True:
             frame = client.recv_frame(timeout_s=a.frame_timeout)
             if frame is None:
                 break
-            t = frame.time_s
-            res = step(model, data, params, state_from_frame(frame), mission.reference(t), frame.wrench_E, memory, t)
-            memory = res.memory
-            sp, att = setpoint_from_result(frame.step, res, thrust_max)
+            sp, att, _ = pilot.step(frame)
             client.send_setpoint(sp, att)
-            outcome.add(t, mission.phase(t), res.diagnostics)
-            while next_snap and t >= next_snap[0][1] - 0.5 * spec.dt_s:
-                outcome.snapshot(next_snap.pop(0)[0], t, res.diagnostics)
-            steps += 1
-            last = (t, res.diagnostics)
-        if last is not None:
-            outcome.snapshot("end", *last)
         wall = time.perf_counter() - t0
     except _Stop as stop:
         why = f"stopped by {stop}"
@@ -117,29 +91,28 @@ def main(argv: list[str] | None = None) -> int:
         if isinstance(exc, SimulatorUnreachableError) and keys is not None:
             hint = " (is it running, and does it use the same signing key? unsigned or wrongly signed packets are dropped)"
         print(f"{tag}: error: {exc}{hint}", file=sys.stderr)
-        _write(a.outcome, outcome, error=str(exc))
+        _write(a.outcome, pilot.summary(error=str(exc)))
         return 1
     finally:
         client.close()
     failure = [text for sev, text in client.status_texts if sev <= 3]  # MAV_SEVERITY_ERROR or worse
     if failure:
         print(f"{tag}: error: the simulator ended the run: {failure[-1]}", file=sys.stderr)
-        _write(a.outcome, outcome, error=failure[-1])
+        _write(a.outcome, pilot.summary(error=failure[-1]))
         return 1
-    _write(a.outcome, outcome)
+    _write(a.outcome, pilot.summary())
+    steps = pilot.steps
     rate = f", {steps / wall:.0f} steps/s" if wall else ""
     print(f"{tag}: {why} after {steps} steps{rate}", file=sys.stderr)
     return 0
 
 
-def _write(path: Path | None, outcome: Outcome, error: str | None = None) -> None:
+def _write(path: Path | None, summary: dict) -> None:
     if path is None:
         return
-    d = outcome.to_dict()
-    d["error"] = error
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(d, indent=1))
+    tmp.write_text(json.dumps(summary, indent=1))
     tmp.replace(path)
 
 

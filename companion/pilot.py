@@ -1,0 +1,58 @@
+"""One AM's decentralized controller, fed sensor frames, answering setpoints (no I/O).
+
+`Pilot(spec, sysid)` builds the AM's model, its own mission references from its [[am]]
+entry, and the paper's controller; `pilot.step(frame)` returns the torque setpoint and
+attitude target for that frame, and keeps the per-phase error summary
+(`companion.outcome`). The companion process wraps it in the MAVLink link; the
+in-process runner (`simulator.inprocess`) calls it directly.
+"""
+from __future__ import annotations
+
+from amcore.config import ScenarioSpec
+from amcore.control import ControllerMemory, ControllerParams, StepResult, step
+from amcore.mission import am_mission
+from amcore.model import build_model, create_data
+from amlink.types import AttitudeTarget, SensorFrame, TorqueSetpoint
+
+from .adapter import setpoint_from_result, state_from_frame
+from .outcome import Outcome
+
+
+class Pilot:
+    def __init__(self, spec: ScenarioSpec, sysid: int, model=None) -> None:
+        self.spec = spec
+        self.am = spec.am(sysid)
+        self.model = model if model is not None else build_model(spec.vehicle)
+        self.data = create_data(self.model)
+        self.mission = am_mission(spec, self.am, self.model)
+        self.params = ControllerParams.from_vehicle(spec.vehicle, self.mission.frame)
+        self.memory = ControllerMemory()
+        self.thrust_max_n = spec.vehicle.rotors.thrust_max_n * spec.vehicle.rotors.count
+        ms = spec.mission
+        self.outcome = Outcome(sysid, ("approach", "grasp", "hover"), (ms.grasp_end_s + ms.lift_move_s + 1.0,
+                                                                      ms.hover_end_s))
+        self._snaps = sorted([("approach_end", ms.approach_end_s), ("grasp_end", ms.grasp_end_s),
+                              ("settle_check", spec.duration_s - 2.0)], key=lambda x: x[1])
+        self.last: tuple[float, object] | None = None
+        self.steps = 0
+
+    def step(self, frame: SensorFrame) -> tuple[TorqueSetpoint, AttitudeTarget, StepResult]:
+        t = frame.time_s
+        res = step(self.model, self.data, self.params, state_from_frame(frame), self.mission.reference(t),
+                   frame.wrench_E, self.memory, t)
+        self.memory = res.memory
+        sp, att = setpoint_from_result(frame.step, res, self.thrust_max_n)
+        d = res.diagnostics
+        self.outcome.add(t, self.mission.phase(t), d)
+        while self._snaps and t >= self._snaps[0][1] - 0.5 * self.spec.dt_s:
+            self.outcome.snapshot(self._snaps.pop(0)[0], t, d)
+        self.last = (t, d)
+        self.steps += 1
+        return sp, att, res
+
+    def summary(self, error: str | None = None) -> dict:
+        if self.last is not None and "end" not in self.outcome.at:
+            self.outcome.snapshot("end", *self.last)
+        d = self.outcome.to_dict()
+        d["error"] = error
+        return d

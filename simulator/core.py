@@ -1,0 +1,111 @@
+"""The simulator's per-step work, independent of how setpoints travel (no sockets).
+
+`SitlCore` owns the PyBullet world, each AM's flight-controller emulation (the link as the
+flight controller sees it, `amlink.impair`, and the failsafe after companion loss,
+`simulator.failsafe`), the ground-truth outcome and a digest of every state. The UDP
+simulator main and the in-process runner (`simulator.inprocess`) both drive it:
+
+    frames = core.frames(k)                  # sensor frames of step k, one per AM
+    setpoints = <the companions answer>      # dict sysid -> TorqueSetpoint (some may miss)
+    core.actuate(k, setpoints, lost)         # flight controllers apply them (or failsafe)
+    core.step()
+"""
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Callable, Collection, Mapping
+
+import numpy as np
+
+from amcore.config import ScenarioSpec
+from amcore.mission import am_mission
+from amcore.model import build_model
+from amcore.so3 import R_to_quat_wxyz
+from amlink.impair import ImpairedLink, LinkImpairment
+from amlink.types import SensorFrame, TorqueSetpoint
+
+from .failsafe import Failsafe
+from .outcome import RunOutcome
+from .world import World
+
+TRUTH_EVERY = 10  # ground-truth sample period for the outcome [steps]
+
+
+class SitlCore:
+    def __init__(self, spec: ScenarioSpec, log: Callable[[str], None] = lambda _msg: None) -> None:
+        self.spec, self.log = spec, log
+        self.model = build_model(spec.vehicle)
+        self.sysids = [am.sysid for am in spec.ams]
+        self.world = World(spec, {am.sysid: am_mission(spec, am, self.model).initial_state() for am in spec.ams})
+        ms = spec.mission
+        self.outcome = RunOutcome(self.sysids, (ms.grasp_end_s + ms.lift_move_s + 1.0, ms.hover_end_s),
+                                  slip_from_s=ms.grasp_end_s)
+        impairment = LinkImpairment.for_scenario(spec)
+        self.fc_links = {s: ImpairedLink(impairment, stream=s) for s in self.sysids}
+        self.failsafes: dict[int, Failsafe] = {}
+        self.events: list[dict] = []
+        self.digest = hashlib.sha256()
+        self._wrenches: dict[int, np.ndarray] = {}
+
+    def connect(self) -> None:
+        self.world.connect()
+
+    def close(self) -> None:
+        self.world.close()
+
+    @property
+    def time_s(self) -> float:
+        return self.world.time_s
+
+    def frames(self, k: int) -> dict[int, SensorFrame]:
+        """Step k's sensor frames (exact state, wrist F/T reading); samples ground truth."""
+        w, t = self.world, self.world.time_s
+        out = {}
+        for s in self.sysids:
+            st = w.state(s)
+            self._wrenches[s] = w.wrench_ee(s)
+            f = out[s] = SensorFrame(step=k, time_s=t, p_WB=st.p_WB, quat_WB_wxyz=R_to_quat_wxyz(st.R_WB), v_B=st.v_B,
+                                     w_B=st.w_B, q=st.q, qdot=st.qdot, wrench_E=self._wrenches[s])
+            self.digest.update(f.p_WB.tobytes() + f.quat_WB_wxyz.tobytes() + f.q.tobytes() + f.wrench_E.tobytes())
+        if k % TRUTH_EVERY == 0:
+            self.outcome.add(w.ground_truth(), self._wrenches)
+        return out
+
+    def actuate(self, k: int, setpoints: Mapping[int, TorqueSetpoint], lost: Collection[int] = ()) -> None:
+        """Each flight controller applies what reached it (zero-order hold), or its failsafe
+        while its companion is lost; a companion that answers again takes over again."""
+        w, t = self.world, self.world.time_s
+        for s in self.sysids:
+            if s in lost or (s in self.failsafes and s not in setpoints):
+                if s not in self.failsafes:
+                    self.failsafes[s] = Failsafe(self.model, w.state(s), t)
+                    self.events.append({"t": t, "sysid": s, "event": "lost", "failsafe": "hold, then land"})
+                    self.log(f"t={t:.3f} s sysid {s}: companion silent; flight controller failsafe: hold, then land")
+                c = self.failsafes[s].command(t, w.state(s))
+                w.apply(s, c.thrust_n, c.tau_B_nm, c.tau_q_nm)
+                continue
+            if s in self.failsafes:
+                del self.failsafes[s]
+                self.events.append({"t": t, "sysid": s, "event": "rejoined"})
+                self.log(f"t={t:.3f} s sysid {s}: companion back, failsafe ended")
+            sp = self.fc_links[s].step(k, setpoints.get(s))
+            if sp is None:  # nothing has reached this flight controller yet: keep the last command
+                continue
+            rep = w.apply(s, sp.thrust_n, sp.tau_B_nm, sp.tau_q_nm)
+            if rep.saturated and self.outcome.saturation(s, t):
+                self.log(f"t={t:.3f} s sysid {s}: command saturated (thrust {sp.thrust_n:.2f} N, tau_B "
+                         f"{np.round(sp.tau_B_nm, 3)}, tau_q {np.round(sp.tau_q_nm, 3)}); counted in outcome.json, "
+                         f"further ones not printed")
+
+    def step(self) -> None:
+        self.world.step()
+
+    def finish(self) -> dict:
+        """Final ground-truth sample; the outcome as a dict."""
+        w = self.world
+        self.outcome.add(w.ground_truth(), {s: w.wrench_ee(s) for s in self.sysids})
+        return {"state_digest": self.digest.hexdigest(), "events": self.events,
+                "failsafe_at_end": sorted(self.failsafes),
+                "fc_link": {str(s): {**vars(link.channel.stats), "stale": link.hold.stale}
+                            for s, link in self.fc_links.items()},
+                **self.outcome.to_dict()}

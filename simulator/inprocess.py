@@ -1,0 +1,63 @@
+"""The SITL without processes or sockets: the same `SitlCore` (world, flight controllers,
+failsafe, outcome) and the same `companion.pilot.Pilot` per AM, called in one loop.
+
+For experiments that need many runs (link-impairment sweeps, parameter studies) and for
+checking that the multi-process SITL adds nothing but transport: with an ideal link both
+produce the same `state_digest`.
+
+    python -m simulator.inprocess configs/scenarios/two_am_comp.toml [--duration S]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Callable
+
+from amcore.config import ConfigError, ScenarioSpec, load_scenario
+from companion.pilot import Pilot
+
+from .core import SitlCore
+
+
+def run(spec: ScenarioSpec, duration_s: float | None = None,
+        lost: Callable[[float], set[int]] = lambda _t: set()) -> dict:  # fmt: skip
+    """Run a scenario in-process; `lost(t)` -> sysids whose companion is silent at t (tests)."""
+    core = SitlCore(spec)
+    pilots = {s: Pilot(spec, s, model=core.model) for s in core.sysids}
+    n = int(round((spec.duration_s if duration_s is None else duration_s) * spec.rate_hz))
+    core.connect()
+    t0 = time.perf_counter()
+    try:
+        for k in range(n):
+            frames = core.frames(k)
+            gone = lost(core.time_s)
+            setpoints = {s: pilots[s].step(f)[0] for s, f in frames.items() if s not in gone}
+            core.actuate(k, setpoints, gone)
+            core.step()
+        result = core.finish()
+    finally:
+        core.close()
+    wall = time.perf_counter() - t0
+    return {"scenario": spec.name, "steps": n, "sim_time_s": n * spec.dt_s, "wall_s": wall,
+            "real_time_factor": n * spec.dt_s / wall, **result,
+            "companions": {s: p.summary() for s, p in pilots.items()}}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m simulator.inprocess", description=__doc__.splitlines()[0])
+    ap.add_argument("scenario")
+    ap.add_argument("--duration", type=float, default=None)
+    a = ap.parse_args(argv)
+    try:
+        spec = load_scenario(a.scenario)
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps(run(spec, a.duration), indent=1, default=str))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
