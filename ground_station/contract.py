@@ -10,6 +10,7 @@
                                      /sim/object/state            amstack.ObjectTruth (as received)
     <p>/sim/event               ->   /sim/event                   amstack.Event (as received)
                                      /events                      foxglove.Log
+    <p>/telemetry/<name>        ->   /telemetry/<name>            amstack.PublisherStats (as received)
     (derived, scene_rate_hz)    ->   /scene                       foxglove.SceneUpdate: object, AM bases, arms, pads, contact forces
     (recorder, every flush)     ->   /recorder/stats              amstack.RecorderStats
     anything else under <p>/    ->   /unknown/<key>               (no schema) as received
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass, field
 
 from telemetry.schema import SCHEMAS as PAYLOAD_SCHEMAS, Channel, Keys, peek_header
@@ -69,6 +71,10 @@ def am_log_topic(sysid: int) -> str:
     return f"/am/{sysid}/events"
 
 
+def publisher_topic(name: str) -> str:
+    return f"/telemetry/{name}"
+
+
 def base_frame(sysid: int) -> str:
     return f"am{sysid}/base"
 
@@ -100,6 +106,13 @@ class KeyStats:
     reordered: int = 0
     restarts: int = 0
 
+    def close(self, issued: int) -> None:
+        """The publisher's final count: seq numbers 0..issued-1 were issued. Those after the
+        last one received are lost at the tail of the key (no later sample shows the gap)."""
+        if issued - 1 > self.last_seq:
+            self.missing += issued - 1 - self.last_seq
+            self.last_seq = issued - 1
+
     def see(self, seq: int) -> None:
         self.received += 1
         if self.first_seq < 0:
@@ -129,9 +142,57 @@ def _dumps(obj) -> bytes:
     return json.dumps(obj, separators=(",", ":")).encode()
 
 
+# Fast path for the high-rate poses: our encoder writes `"name":[a,b,c]` with each number
+# in Python's shortest repr, which is valid JSON as it stands; splicing that text into the
+# Foxglove message avoids parsing and re-printing ~14 floats per sample (the recorder's
+# hottest path). Anything else (nulls, other layouts) takes the general json path.
+_ARRAY = re.compile(rb'"([A-Za-z_]+)":\[([^\[\]]*)\]')
+_NUMBERS = re.compile(rb"-?[0-9][0-9.eE+\-]*(?:,-?[0-9][0-9.eE+\-]*)*")
+_TF = (b'{"timestamp":{"sec":%d,"nsec":%d},"parent_frame_id":"world","child_frame_id":"%s",'
+       b'"translation":{"x":%s,"y":%s,"z":%s},"rotation":{"x":%s,"y":%s,"z":%s,"w":%s}}')
+_POSE = (b'{"timestamp":{"sec":%d,"nsec":%d},"frame_id":"world","pose":{"position":{"x":%s,"y":%s,"z":%s},'
+         b'"orientation":{"x":%s,"y":%s,"z":%s,"w":%s}}}')
+
+
+def _numbers(data: bytes, names: tuple[bytes, ...], sizes: tuple[int, ...]) -> list[list[bytes]] | None:
+    found = dict(_ARRAY.findall(data))
+    out = []
+    for name, n in zip(names, sizes):
+        v = found.get(name)
+        if v is None or not _NUMBERS.fullmatch(v):  # null, NaN, strings: not for splicing
+            return None
+        parts = v.split(b",")
+        if len(parts) != n:
+            return None
+        out.append(parts)
+    return out
+
+
+def _sec_nsec(t: float) -> tuple[int, int]:
+    return divmod(_ns(t), 1_000_000_000)
+
+
+def _tf_spliced(t: float, sysid: int, data: bytes) -> bytes | None:
+    v = _numbers(data, (b"p_WB", b"q_WB", b"p_WE", b"q_WE"), (3, 4, 3, 4))
+    if v is None:
+        return None
+    (pb, qb, pe, qe), (sec, nsec) = v, _sec_nsec(t)
+    base = _TF % (sec, nsec, base_frame(sysid).encode(), *pb, qb[1], qb[2], qb[3], qb[0])
+    ee = _TF % (sec, nsec, ee_frame(sysid).encode(), *pe, qe[1], qe[2], qe[3], qe[0])
+    return b'{"transforms":[' + base + b"," + ee + b"]}"
+
+
+def _pose_spliced(t: float, data: bytes) -> bytes | None:
+    v = _numbers(data, (b"p_WO", b"q_WO"), (3, 4))
+    if v is None:
+        return None
+    (p, q), (sec, nsec) = v, _sec_nsec(t)
+    return _POSE % (sec, nsec, *p, q[1], q[2], q[3], q[0])
+
+
 @dataclass
 class _SceneState:
-    truth: dict = field(default_factory=dict)  # sysid -> parsed truth payload
+    truth: dict = field(default_factory=dict)  # sysid -> raw truth payload (parsed when drawn)
     contact: dict = field(default_factory=dict)  # sysid -> raw contact bytes (parsed when drawn)
     object_geometry: dict | None = None  # run_start data["object"]
 
@@ -153,10 +214,17 @@ class Translator:
         self.run_start: dict | None = None
         self.run_end: dict | None = None
         self._next_scene_t = 0.0 if scene_rate_hz > 0 else math.inf
+        self._parsed: dict = {}  # key -> KeyMatch | None (a deployment has few keys)
         self._scene = _SceneState()
 
     def translate(self, key: str, data: bytes) -> list[Out]:
-        m = self.keys.parse(key)
+        try:
+            m = self._parsed[key]
+        except KeyError:
+            m = self.keys.parse(key)
+            if len(self._parsed) < 10_000:
+                self._parsed[key] = m
+
         head = peek_header(data)
         parsed = None
         if head is None:  # not in the contract's shape: decode to see whether it is usable at all
@@ -185,21 +253,41 @@ class Translator:
         if ch is Channel.CONTACT:
             self._scene.contact[sysid] = raw
             return [Out(contact_topic(sysid), _RAW_SCHEMA[ch], ns, raw)]
+        if ch is Channel.PUBLISHER:
+            try:
+                p = parsed if parsed is not None else json.loads(raw)
+                if p["final"]:
+                    for k, issued in p["seq_issued"].items():
+                        self.stats.setdefault(k, KeyStats()).close(int(issued))
+            except (ValueError, KeyError, TypeError, AttributeError) as exc:
+                self.malformed += 1
+                self.last_error = f"{key}: {type(exc).__name__}: {exc}"
+                return []
+            return [Out(publisher_topic(m.name), _RAW_SCHEMA[ch], ns, raw)]
         try:
-            p = parsed if parsed is not None else json.loads(raw)
             if ch is Channel.AM_TRUTH:
-                self._scene.truth[sysid] = p
-                tf = {"transforms": [fg.frame_transform(t, "world", base_frame(sysid), p["p_WB"], p["q_WB"]),
-                                     fg.frame_transform(t, "world", ee_frame(sysid), p["p_WE"], p["q_WE"])]}
-                return [Out(TF_TOPIC, "foxglove.FrameTransforms", ns, _dumps(tf))]
+                self._scene.truth[sysid] = raw
+                tf = _tf_spliced(t, sysid, raw)
+                if tf is None:  # not our encoder's layout: the slow, general way
+                    p = parsed if parsed is not None else json.loads(raw)
+                    tf = _dumps({"transforms": [
+                        fg.frame_transform(t, "world", base_frame(sysid), p["p_WB"], p["q_WB"]),
+                        fg.frame_transform(t, "world", ee_frame(sysid), p["p_WE"], p["q_WE"])]})
+                return [Out(TF_TOPIC, "foxglove.FrameTransforms", ns, tf)]
             if ch is Channel.OBJECT:
-                out = [Out(OBJECT_POSE_TOPIC, "foxglove.PoseInFrame", ns,
-                           _dumps(fg.pose_in_frame(t, "world", p["p_WO"], p["q_WO"]))),
+                pose = _pose_spliced(t, raw)
+                p = None
+                if pose is None:
+                    p = parsed if parsed is not None else json.loads(raw)
+                    pose = _dumps(fg.pose_in_frame(t, "world", p["p_WO"], p["q_WO"]))
+                out = [Out(OBJECT_POSE_TOPIC, "foxglove.PoseInFrame", ns, pose),
                        Out(OBJECT_STATE_TOPIC, _RAW_SCHEMA[ch], ns, raw)]
                 if t >= self._next_scene_t:
                     self._next_scene_t = t + self.scene_period_s
+                    p = p if p is not None else json.loads(raw)
                     out.append(Out(SCENE_TOPIC, "foxglove.SceneUpdate", ns, _dumps(self._scene_update(t, p))))
                 return out
+            p = parsed if parsed is not None else json.loads(raw)
             # events
             level, kind = p["level"], p["kind"]
             if ch is Channel.SIM_EVENT and kind == "run_start":
@@ -211,7 +299,8 @@ class Translator:
             msg = _dumps(fg.log(t, level, f"[{kind}] {p['text']}", name))
             if ch is Channel.SIM_EVENT:
                 return [Out(SIM_EVENT_TOPIC, _RAW_SCHEMA[ch], ns, raw), Out(EVENTS_TOPIC, "foxglove.Log", ns, msg)]
-            return [Out(am_event_topic(sysid), _RAW_SCHEMA[ch], ns, raw), Out(am_log_topic(sysid), "foxglove.Log", ns, msg)]
+            return [Out(am_event_topic(sysid), _RAW_SCHEMA[ch], ns, raw),
+                    Out(am_log_topic(sysid), "foxglove.Log", ns, msg)]
         except (ValueError, KeyError, TypeError, IndexError) as exc:
             self.malformed += 1
             self.last_error = f"{key}: {type(exc).__name__}: {exc}"
@@ -234,8 +323,8 @@ class Translator:
         else:
             prim = {"cubes": [{"pose": obj_pose, "size": fg.vec3(geo.get("size_m", [0.2, 0.2, 0.2])), "color": blue}]}
         entities = [fg.entity(t, "object", **prim)]
-        for sysid, tr in sorted(self._scene.truth.items()):
-            entities.append(self._am_entity(t, sysid, tr))
+        for sysid, raw in sorted(self._scene.truth.items()):
+            entities.append(self._am_entity(t, sysid, json.loads(raw)))
         return {"deletions": [], "entities": entities}
 
     def _am_entity(self, t: float, sysid: int, tr: dict) -> dict:

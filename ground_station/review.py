@@ -246,7 +246,8 @@ def format_summary(s: dict) -> str:
         lines.append(f"SALVAGED: the file was not finished ({lg['truncated_reason']}); "
                      f"read {lg['complete_chunks']} complete chunks, the rest is lost")
     if s["loss"] is not None:
-        lines.append(f"lost in transit: {s['loss']['missing']} (seq gaps), inbox overflow {s['loss']['inbox_overflow']}")
+        lines.append(f"lost in transit: {s['loss']['missing']} (seq gaps and publishers' final counts), "
+                     f"inbox overflow {s['loss']['inbox_overflow']}")
     lines.append(f"phases from {s['phase_source']}: ends {s['phase_ends_s']}")
     for name, p in s["phases"].items():
         lines.append(f"\n== {name} {p['window_s'][0]:.2f}..{p['window_s'][1]:.2f} s: object lift "
@@ -255,7 +256,8 @@ def format_summary(s: dict) -> str:
         lines.append(f"  {'AM':>4} {'|r~c| fin/max [mm]':>20} {'|e_R| fin/max [mrad]':>22} {'y~ final':>28} "
                      f"{'N fin/mean/max [N]':>22} {'|T| fin/max [N]':>16} {'F/T f_E final [N]':>24}")
         for sysid, a in p["ams"].items():
-            ce, er, cn, ct = a["com_err_m"] or {}, a["e_R_rad"] or {}, a["contact_normal_n"] or {}, a["contact_tangential_n"] or {}
+            ce, er = a["com_err_m"] or {}, a["e_R_rad"] or {}
+            cn, ct = a["contact_normal_n"] or {}, a["contact_tangential_n"] or {}
             lines.append(
                 f"  {sysid:>4} {_f(ce.get('final'), '', 1e3)+' / '+_f(ce.get('max'), '', 1e3):>20} "
                 f"{_f(er.get('final'), '', 1e3)+' / '+_f(er.get('max'), '', 1e3):>22} "
@@ -263,6 +265,7 @@ def format_summary(s: dict) -> str:
                 f"{_f(cn.get('final'))+' / '+_f(cn.get('mean'))+' / '+_f(cn.get('max')):>22} "
                 f"{_f(ct.get('final'))+' / '+_f(ct.get('max')):>16} {_f((a['ft_force_E_n'] or {}).get('final')):>24}")
         if "ee_slip_m" in p:
-            lines.append("  ee slip on the object: " + ", ".join(
-                f"am{k} final {_f(v['final'], ' mm', 1e3)} max {_f(v['max'], ' mm', 1e3)}" for k, v in p["ee_slip_m"].items()))
+            slips = [f"am{k} final {_f(v['final'], ' mm', 1e3)} max {_f(v['max'], ' mm', 1e3)}"
+                     for k, v in p["ee_slip_m"].items()]
+            lines.append("  ee slip on the object: " + ", ".join(slips))
     return "\n".join(lines)

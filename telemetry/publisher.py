@@ -5,32 +5,39 @@
     tele.publish(key, payload)              # stamps seq, enqueues; never blocks
     tele.close()                            # sends what is queued (bounded wait), closes
 
-The caller only stamps the per-key `seq` and appends to a bounded queue (~1 us). A
-background thread opens the zenoh session (retrying if it cannot, e.g. client mode
-with no router), JSON-encodes and puts. When the queue is full the sample is dropped
-and counted; the seq gap shows the loss to the recorder too.
+The caller only stamps the per-key `seq` and appends to a bounded deque (~1 us; no lock,
+no wake-up of another thread). A sender thread opens the zenoh session (retrying if it
+cannot, e.g. client mode with no router), wakes every poll_period_s, JSON-encodes what is
+queued and puts it. When the queue is full the sample is dropped and counted; its seq
+number is used up, so the recorder sees the gap too.
 
-Congestion control of the sender thread's zenoh puts is BLOCK by default: a slow
-recorder slows the thread (zenoh puts release the GIL, so the caller is not held),
-the queue fills and drops are counted here, at their source. With "drop" zenoh
-discards samples that its transmission queue cannot take, which this process cannot
-count (the recorder still sees them as seq gaps). See benchmarks/bench_telemetry.py.
+The sender's zenoh puts use congestion control BLOCK by default: a slow recorder slows
+the sender (zenoh releases the GIL while it waits, so the caller is not held), the queue
+fills and the drops are counted here, at their source. With "drop" zenoh discards what
+its transmission queue cannot take, which this process cannot count (the recorder still
+sees seq gaps). benchmarks/bench_telemetry.py measures the alternatives.
+
+Every stats_period_s, and once more at close after the queue is drained, the sender
+puts the publisher's own accounting on <prefix>/telemetry/<name> (PublisherStats: seq
+numbers issued per key, counters). From the final one the recorder also counts samples
+lost at the tail of a key, which leave no gap.
 """
 from __future__ import annotations
 
+import collections
 import logging
-import queue
+import os
+import re
+import socket
 import threading
 import time
 from dataclasses import dataclass
 from typing import Iterable, Mapping
 
-from .schema import encode
+from .schema import encode, publisher_stats_sample
 from .session import ZenohOptions, build_config
 
 log = logging.getLogger(__name__)
-
-_STOP = object()
 
 
 class TelemetryStateError(RuntimeError):
@@ -39,13 +46,14 @@ class TelemetryStateError(RuntimeError):
 
 @dataclass(frozen=True)
 class PublisherStats:
-    """Counters of one publisher since open() [messages]."""
+    """Counters of one publisher since open() [samples]. Once closed:
+    published == sent + dropped_no_session + dropped_at_close + encode_errors + send_errors."""
 
     published: int  # accepted by publish() (queued)
     sent: int  # handed to zenoh
     dropped_queue_full: int  # publish() found the queue full
     dropped_no_session: int  # queued, but the session never opened before close()
-    dropped_at_close: int  # still queued when close() gave up waiting
+    dropped_at_close: int  # still queued (or in a put) when close() gave up waiting
     encode_errors: int  # payload not JSON-serialisable (programming error; see last_error)
     send_errors: int  # zenoh put raised
     nonfinite: int  # payloads whose NaN/inf were sent as null
@@ -56,36 +64,45 @@ class PublisherStats:
 
     @property
     def dropped(self) -> int:
-        return self.dropped_queue_full + self.dropped_no_session + self.dropped_at_close + self.encode_errors + self.send_errors
+        return (self.dropped_queue_full + self.dropped_no_session + self.dropped_at_close + self.encode_errors
+                + self.send_errors)
 
 
 class TelemetryPublisher:
     """One process's telemetry sender. See the module docstring."""
 
-    def __init__(self, options: ZenohOptions | None = None, *, queue_size: int = 8192,
-                 congestion: str = "block", reopen_period_s: float = 1.0):
+    def __init__(self, options: ZenohOptions | None = None, *, name: str | None = None, queue_size: int = 8192,
+                 congestion: str = "block", poll_period_s: float = 0.001, reopen_period_s: float = 1.0,
+                 stats_period_s: float = 1.0):
+        """name: this process in <prefix>/telemetry/<name> ('am4', 'simulator'; default host-pid)."""
         if congestion not in ("block", "drop"):
             raise ValueError(f"congestion {congestion!r} must be 'block' or 'drop'")
         if queue_size < 1:
             raise ValueError("queue_size must be positive")
         self.options = options or ZenohOptions()
         self.keys = self.options.keys
+        self.name = name or re.sub(r"[^A-Za-z0-9_\-]", "-", f"{socket.gethostname()}-{os.getpid()}")
+        self._stats_key = self.keys.publisher(self.name)  # validates the name
+        self._stats_period_s = stats_period_s
+        self._last_t = 0.0
         self._queue_size = queue_size
         self._congestion = congestion
+        self._poll_s = poll_period_s
         self._reopen_period_s = reopen_period_s
-        self._q: queue.SimpleQueue = queue.SimpleQueue()
+        self._q: collections.deque = collections.deque()
         self._seq: dict[str, int] = {}
         self._thread: threading.Thread | None = None
         self._state = "new"  # new -> open -> closed
         self._session = None
+        self._cc = None
         self._publishers: dict = {}
         self._connected = threading.Event()
         self._stopping = threading.Event()
-        self._lock = threading.Lock()  # for counters the thread and close() both touch
+        self._lock = threading.Lock()  # sender thread vs close(): counters, in-flight, abandon
         self._n = dict(published=0, sent=0, dropped_queue_full=0, dropped_no_session=0, dropped_at_close=0,
                        encode_errors=0, send_errors=0, nonfinite=0, session_open_failures=0)
         self._last_error = ""
-        self._in_flight = 0  # 1 while the sender thread is inside a zenoh put
+        self._in_flight = 0  # 1 while the sender holds a sample it took from the queue
         self._abandoned = False
 
     # ------------------------------------------------------------------ lifecycle
@@ -105,25 +122,21 @@ class TelemetryPublisher:
 
     def close(self, timeout_s: float = 2.0) -> PublisherStats:
         """Send what is queued (waiting at most timeout_s), close the session, return the
-        final counters. Idempotent."""
-        if self._state == "open" and self._thread is not None:
-            self._stopping.set()
-            self._q.put(_STOP)
-            self._thread.join(timeout_s)
-            if self._thread.is_alive():
-                # stuck in a blocking put (dead subscriber): abandon what is queued and the
-                # sample in flight; if the put ever returns, the thread finds STOP and exits
-                n = self._in_flight
-                while True:
-                    try:
-                        n += self._q.get_nowait() is not _STOP
-                    except queue.Empty:
-                        break
-                self._q.put(_STOP)
-                with self._lock:
-                    self._n["dropped_at_close"] += n
-                    self._abandoned = True
-                log.warning("telemetry: close() gave up after %.1f s, %d samples not sent", timeout_s, n)
+        final counters. Idempotent. If the sender is stuck (a frozen subscriber holding a
+        blocking put), what it has not sent is counted as dropped_at_close and the daemon
+        thread is left behind."""
+        if self._state == "open":
+            self._state = "closed"
+            if self._thread is not None:
+                self._stopping.set()
+                self._thread.join(timeout_s)
+                if self._thread.is_alive():
+                    with self._lock:
+                        self._abandoned = True
+                        n = len(self._q) + self._in_flight
+                        self._q.clear()
+                        self._n["dropped_at_close"] += n
+                    log.warning("telemetry: close() gave up after %.1f s, %d samples not sent", timeout_s, n)
         self._state = "closed"
         return self.stats()
 
@@ -147,10 +160,11 @@ class TelemetryPublisher:
         n = self._seq.get(key, 0)
         self._seq[key] = n + 1
         payload["seq"] = n
-        if self._q.qsize() >= self._queue_size:
+        self._last_t = payload.get("t", self._last_t)
+        if len(self._q) >= self._queue_size:
             self._n["dropped_queue_full"] += 1
             return False
-        self._q.put((key, payload))
+        self._q.append((key, payload))
         self._n["published"] += 1
         return True
 
@@ -185,8 +199,7 @@ class TelemetryPublisher:
     def stats(self) -> PublisherStats:
         with self._lock:
             n = dict(self._n)
-        queued = 0 if self._state == "closed" else self._q.qsize()
-        return PublisherStats(**n, connected=self._connected.is_set(), queued=queued,
+        return PublisherStats(**n, connected=self._connected.is_set(), queued=len(self._q),
                               last_error=self._last_error)
 
     # ------------------------------------------------------------------ sender thread
@@ -210,29 +223,47 @@ class TelemetryPublisher:
         self._connected.set()
         return True
 
+    def _take(self):
+        with self._lock:
+            if self._abandoned or not self._q:
+                return None
+            self._in_flight = 1
+            return self._q.popleft()
+
     def _send(self, key: str, payload: Mapping) -> None:
+        outcome = "sent"
         try:
             data, replaced = encode(payload)
-        except (TypeError, ValueError) as exc:
-            self._count("encode_errors")
-            self._last_error = f"{key}: cannot encode payload: {exc}"
-            return
-        if replaced:
-            self._count("nonfinite")
-        try:
+            if replaced:
+                self._count("nonfinite")
             pub = self._publishers.get(key)
             if pub is None:
                 pub = self._publishers[key] = self._session.declare_publisher(key, congestion_control=self._cc)
-            self._in_flight = 1
             pub.put(data)
-            self._in_flight = 0
-            with self._lock:
-                if not self._abandoned:  # else close() already counted it as dropped
-                    self._n["sent"] += 1
+        except (TypeError, ValueError) as exc:
+            outcome, self._last_error = "encode_errors", f"{key}: cannot encode payload: {exc}"
         except Exception as exc:
+            outcome, self._last_error = "send_errors", f"{key}: put: {exc}"
+        with self._lock:
             self._in_flight = 0
-            self._count("send_errors")
-            self._last_error = f"{key}: put: {exc}"
+            if not self._abandoned:  # else close() counted it already
+                self._n[outcome] += 1
+
+    def _send_stats(self, final: bool) -> None:
+        with self._lock:
+            counters = dict(self._n)
+        issued = dict(self._seq)  # one C-level copy: consistent under the GIL
+        k = self._stats_key
+        n = self._seq.get(k, 0)
+        self._seq[k] = n + 1
+        payload = publisher_stats_sample(self._last_t, self.name, final, issued, counters, seq=n)
+        try:
+            pub = self._publishers.get(k)
+            if pub is None:
+                pub = self._publishers[k] = self._session.declare_publisher(k, congestion_control=self._cc)
+            pub.put(encode(payload)[0])
+        except Exception as exc:
+            self._last_error = f"{k}: put: {exc}"
 
     def _run(self) -> None:
         try:
@@ -241,26 +272,29 @@ class TelemetryPublisher:
                 # the bounded queue; publish() drops and counts once it is full
                 if self._stopping.wait(self._reopen_period_s):
                     return
+            next_stats = time.monotonic() + self._stats_period_s
             while True:
-                item = self._q.get()
-                if item is _STOP:
-                    break
-                self._send(*item)
+                item = self._take()
+                while item is not None:
+                    self._send(*item)
+                    item = self._take()
+                if self._stopping.is_set() or self._abandoned:
+                    if not self._abandoned:
+                        self._send_stats(final=True)
+                    return
+                if time.monotonic() >= next_stats:
+                    self._send_stats(final=False)
+                    next_stats = time.monotonic() + self._stats_period_s
+                self._stopping.wait(self._poll_s)
         finally:
             self._shutdown()
 
     def _shutdown(self) -> None:
-        # whatever is still queued when the session never opened is lost
-        left = 0
-        while True:
-            try:
-                item = self._q.get_nowait()
-            except queue.Empty:
-                break
-            if item is not _STOP:
-                left += 1
-        if left:
-            self._count("dropped_no_session" if self._session is None else "dropped_at_close", left)
+        with self._lock:
+            left = 0 if self._abandoned else len(self._q)
+            self._q.clear()
+            if left:
+                self._n["dropped_no_session" if self._session is None else "dropped_at_close"] += left
         if self._session is not None:
             for p in self._publishers.values():
                 try:

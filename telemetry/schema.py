@@ -10,6 +10,7 @@ Keys (prefix configurable, default "amstack"):
     <p>/sim/am/<sysid>/contact     simulator: pad-object contact      CONTACT_SCHEMA
     <p>/sim/object                 simulator: object pose, twist      OBJECT_SCHEMA
     <p>/sim/event                  simulator: run start/end, phases   EVENT_SCHEMA
+    <p>/telemetry/<name>           every publisher, 1 Hz and at close PUBLISHER_SCHEMA
 
 Every payload is one compact JSON object whose first two members are, in this order,
 "t" (simulation time [s]) and "seq" (per-key counter, 0, 1, 2, ... assigned by the
@@ -42,12 +43,14 @@ class Channel(Enum):
     CONTACT = "contact"
     OBJECT = "object"
     SIM_EVENT = "sim_event"
+    PUBLISHER = "publisher"
 
 
 @dataclass(frozen=True)
 class KeyMatch:
     channel: Channel
     sysid: int | None  # None for the simulator-wide keys
+    name: str | None = None  # the publisher's name, for Channel.PUBLISHER
 
 
 @dataclass(frozen=True)
@@ -57,7 +60,7 @@ class Keys:
     prefix: str = DEFAULT_PREFIX
 
     def __post_init__(self):
-        if not re.fullmatch(r"[A-Za-z0-9_\-]+(/[A-Za-z0-9_\-]+)*", self.prefix):
+        if not re.fullmatch(r"[A-Za-z0-9_\-.]+(/[A-Za-z0-9_\-.]+)*", self.prefix):
             raise ValueError(f"telemetry prefix {self.prefix!r} must be plain key chunks (no wildcards, no slash at the ends)")
 
     def controller(self, sysid: int) -> str:
@@ -79,6 +82,12 @@ class Keys:
     @property
     def sim_event(self) -> str:
         return f"{self.prefix}/sim/event"
+
+    def publisher(self, name: str) -> str:
+        """A TelemetryPublisher's own accounting (name: one key chunk, e.g. 'am4', 'simulator')."""
+        if not is_key_chunk(name):
+            raise ValueError(f"publisher name {name!r} must be one plain key chunk")
+        return f"{self.prefix}/telemetry/{name}"
 
     @property
     def everything(self) -> str:
@@ -103,7 +112,13 @@ class Keys:
             return KeyMatch(Channel.OBJECT, None)
         if parts == ["sim", "event"]:
             return KeyMatch(Channel.SIM_EVENT, None)
+        if len(parts) == 2 and parts[0] == "telemetry" and is_key_chunk(parts[1]):
+            return KeyMatch(Channel.PUBLISHER, None, parts[1])
         return None
+
+
+def is_key_chunk(text: str) -> bool:
+    return re.fullmatch(r"[A-Za-z0-9_\-.]+", text) is not None
 
 
 def _sysid(text: str) -> int:
@@ -194,9 +209,19 @@ EVENT_SCHEMA = _object("amstack.Event", "Run start/end, phase change, fault or n
     "data": {"type": "object", "description": "kind-specific: run_start carries the scenario"},
 }, optional=("data",))
 
+_COUNTER = {"type": "integer", "minimum": 0}
+PUBLISHER_SCHEMA = _object("amstack.PublisherStats", "A telemetry publisher's own accounting (telemetry.publisher)", {
+    "name": {"type": "string"},
+    "final": {"type": "boolean", "description": "sent at close, after the queue was drained"},
+    "seq_issued": {"type": "object", "description": "key -> seq numbers issued so far (sent or dropped)"},
+    "published": _COUNTER, "sent": _COUNTER, "dropped_queue_full": _COUNTER, "dropped_no_session": _COUNTER,
+    "dropped_at_close": _COUNTER, "encode_errors": _COUNTER, "send_errors": _COUNTER,
+})
+
 SCHEMAS: Mapping[Channel, dict] = {
     Channel.CONTROLLER: CONTROLLER_SCHEMA, Channel.AM_EVENT: EVENT_SCHEMA, Channel.AM_TRUTH: AM_TRUTH_SCHEMA,
     Channel.CONTACT: CONTACT_SCHEMA, Channel.OBJECT: OBJECT_SCHEMA, Channel.SIM_EVENT: EVENT_SCHEMA,
+    Channel.PUBLISHER: PUBLISHER_SCHEMA,
 }
 
 
@@ -320,6 +345,19 @@ def phase_event(t_s: float, phase: str, source: str) -> dict:
 
 def fault_event(t_s: float, text: str, source: str, level: str = "error") -> dict:
     return event(t_s, "fault", text, source, level=level)
+
+
+def publisher_stats_sample(t_s: float, name: str, final: bool, seq_issued: Mapping[str, int],
+                           counters: Mapping[str, int], seq: int = 0) -> dict:
+    """Payload of <p>/telemetry/<name>. With final=True the recorder counts, per key, the
+    seq numbers issued after the last one it received as missing (drops at the tail of a
+    key leave no gap to see)."""
+    out = {"t": float(t_s), "seq": int(seq), "name": name, "final": bool(final),
+           "seq_issued": {k: int(v) for k, v in seq_issued.items()}}
+    for k in ("published", "sent", "dropped_queue_full", "dropped_no_session", "dropped_at_close", "encode_errors",
+              "send_errors"):
+        out[k] = int(counters[k])
+    return out
 
 
 # ----------------------------------------------------------------------------- encoding

@@ -76,6 +76,25 @@ def test_scene_rate_and_content(capture):
     assert not any(o.topic == c.SCENE_TOPIC for o in none)
 
 
+finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
+
+
+@given(st.lists(finite, min_size=14, max_size=14), st.floats(0, 1e5), st.integers(0, 255))
+def test_spliced_poses_equal_the_general_path(v, t, sysid):
+    """The recorder's fast path (splicing the payload's number text into the Foxglove
+    message) says exactly what decoding and re-encoding would."""
+    from ground_station import foxglove as fg
+
+    am = {"p_WB": v[0:3], "q_WB": v[3:7], "p_WE": v[7:10], "q_WE": v[10:14]}
+    raw = schema.encode({"t": t, "seq": 0, "sysid": sysid, **am})[0]
+    slow = {"transforms": [fg.frame_transform(t, "world", c.base_frame(sysid), am["p_WB"], am["q_WB"]),
+                           fg.frame_transform(t, "world", c.ee_frame(sysid), am["p_WE"], am["q_WE"])]}
+    assert json.loads(c._tf_spliced(t, sysid, raw)) == slow
+    raw = schema.encode({"t": t, "seq": 0, "p_WO": v[0:3], "q_WO": v[3:7], "v_WO": v[7:10]})[0]
+    assert json.loads(c._pose_spliced(t, raw)) == fg.pose_in_frame(t, "world", v[0:3], v[3:7])
+    assert c._pose_spliced(t, raw.replace(b'"p_WO":[', b'"p_WO":[null,')) is None  # falls back
+
+
 @given(st.lists(st.booleans(), min_size=1, max_size=300))
 def test_keystats_counts_exactly_the_gaps(delivered):
     s = KeyStats()
@@ -85,6 +104,34 @@ def test_keystats_counts_exactly_the_gaps(delivered):
     if seqs:
         assert s.received == len(seqs) and s.missing == (seqs[-1] - seqs[0] + 1) - len(seqs)
         assert s.first_seq == seqs[0] and s.last_seq == seqs[-1] and s.reordered == 0
+
+
+def test_keystats_close_counts_the_tail():
+    s = KeyStats()
+    for q in (0, 1, 3):
+        s.see(q)
+    s.close(6)  # seq 4 and 5 were issued but never arrived
+    assert (s.missing, s.last_seq) == (3, 5)
+    s.close(6)  # idempotent
+    assert s.missing == 3
+    never = KeyStats()
+    never.close(4)
+    assert never.missing == 4 and never.received == 0
+
+
+def test_final_publisher_stats_add_tail_losses_and_are_logged():
+    tr = Translator(KEYS)
+    for q in range(3):
+        tr.translate(KEYS.controller(4), b'{"t":%f,"seq":%d}' % (q * 1e-3, q))
+    stats = schema.publisher_stats_sample(0.002, "am4", False, {KEYS.controller(4): 5}, dict.fromkeys(
+        ("published", "sent", "dropped_queue_full", "dropped_no_session", "dropped_at_close", "encode_errors",
+         "send_errors"), 0))
+    out = tr.translate(KEYS.publisher("am4"), schema.encode(stats)[0])
+    assert [o.topic for o in out] == ["/telemetry/am4"] and errors(json.loads(out[0].data), c.SCHEMAS[out[0].schema]) == []
+    assert tr.stats[KEYS.controller(4)].missing == 0  # not final: samples may still be on their way
+    stats.update(final=True, seq=1)
+    tr.translate(KEYS.publisher("am4"), schema.encode(stats)[0])
+    assert tr.stats[KEYS.controller(4)].missing == 2
 
 
 def test_keystats_reorder_and_restart():

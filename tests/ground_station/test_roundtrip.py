@@ -25,7 +25,7 @@ KEYS = Keys()
 
 
 def _publisher(ep, n):
-    pub = TelemetryPublisher(ZenohOptions(connect=(ep,)), queue_size=n + 100)
+    pub = TelemetryPublisher(ZenohOptions(connect=(ep,)), name="simrun", queue_size=n + 100)
     pub.open()
     assert pub.wait_for_subscriber(KEYS.sim_event, 15.0), "recorder not reachable"
     return pub
@@ -50,7 +50,9 @@ def test_recorder_got_everything_and_stopped_at_run_end(recorded, capture):
     path, pst, summary, _ = recorded
     assert pst.dropped == 0 and pst.sent == len(capture.samples)
     assert summary["stop_reason"] == "run_end"
-    assert summary["received"] == len(capture.samples) and summary["missing"] == 0
+    n_stats = len(read_log(path).messages[c.publisher_topic("simrun")])  # the publisher's own accounting
+    assert n_stats >= 1
+    assert summary["received"] == len(capture.samples) + n_stats and summary["missing"] == 0
     assert summary["inbox_overflow"] == summary["malformed"] == summary["unknown"] == 0
 
 
@@ -60,7 +62,7 @@ def test_log_holds_every_documented_topic_with_valid_schemas_and_monotonic_time(
     assert not log.truncated
     sysids = [a.sysid for a in capture.spec.ams]
     documented = {c.TF_TOPIC, c.SCENE_TOPIC, c.STATS_TOPIC, c.OBJECT_POSE_TOPIC, c.OBJECT_STATE_TOPIC,
-                  c.SIM_EVENT_TOPIC, c.EVENTS_TOPIC}
+                  c.SIM_EVENT_TOPIC, c.EVENTS_TOPIC, c.publisher_topic("simrun")}
     documented |= {c.controller_topic(s) for s in sysids} | {c.contact_topic(s) for s in sysids}
     assert set(log.messages) == documented
     for topic, msgs in log.messages.items():

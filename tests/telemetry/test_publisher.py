@@ -72,7 +72,8 @@ def test_live_subscriber_receives_every_sample_in_order():
     n = 3000
     with zenoh.open(build_config(ZenohOptions(role="recorder", listen=(ep,)))) as s:
         def on_sample(sample):
-            got.append(sample.payload.to_bytes())
+            if str(sample.key_expr) == KEYS.controller(4):
+                got.append(sample.payload.to_bytes())
             if len(got) == n:
                 done.set()
 
@@ -153,3 +154,38 @@ def test_seq_is_per_key_and_stamped_by_publish():
         pub.publish(KEYS.controller(5), p)  # the queue overflows: dropped samples still use up a seq
     pub.close(5.0)
     assert [p["seq"] for p in a] == [0, 1, 2] and [p["seq"] for p in b] == list(range(15))
+
+
+def test_final_stats_let_the_recorder_count_tail_drops_exactly():
+    """A burst into a small queue drops the newest samples: no later sample shows their
+    gap, but the publisher's final stats do. A Translator fed by a live subscriber must
+    count exactly the publisher's drops."""
+    from ground_station.contract import Translator
+
+    ep = free_endpoint()
+    tr = Translator(KEYS, scene_rate_hz=0.0)
+    lock = threading.Lock()
+    final = threading.Event()
+    with zenoh.open(build_config(ZenohOptions(role="recorder", listen=(ep,)))) as s:
+        def on_sample(sample):
+            key, data = str(sample.key_expr), sample.payload.to_bytes()
+            with lock:
+                tr.translate(key, data)
+            if key == KEYS.publisher("burst") and json.loads(data)["final"]:
+                final.set()
+
+        sub = s.declare_subscriber(KEYS.everything, on_sample)
+        pub = TelemetryPublisher(ZenohOptions(connect=(ep,)), name="burst", queue_size=50, stats_period_s=0.05)
+        pub.open()
+        assert pub.wait_for_subscriber(KEYS.controller(4), 10.0)
+        for i in range(400):
+            pub.publish(KEYS.controller(4 + i % 2), {"t": i * 1e-3, "seq": 0})
+        st = pub.close(timeout_s=10.0)
+        assert final.wait(10.0)
+        sub.undeclare()
+    assert st.dropped_queue_full > 0 and st.dropped == st.dropped_queue_full
+    with lock:
+        missing = sum(tr.stats[KEYS.controller(s)].missing for s in (4, 5))
+        received = sum(tr.stats[KEYS.controller(s)].received for s in (4, 5))
+    assert received == st.sent and missing == st.dropped_queue_full
+    assert tr.stats[KEYS.publisher("burst")].missing == 0

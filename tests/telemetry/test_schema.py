@@ -18,13 +18,16 @@ def test_every_key_parses_back_to_its_channel_and_sysid():
         k = Keys(prefix)
         cases = {k.controller(4): (Channel.CONTROLLER, 4), k.am_event(12): (Channel.AM_EVENT, 12),
                  k.am_truth(5): (Channel.AM_TRUTH, 5), k.contact(0): (Channel.CONTACT, 0),
-                 k.object: (Channel.OBJECT, None), k.sim_event: (Channel.SIM_EVENT, None)}
+                 k.object: (Channel.OBJECT, None), k.sim_event: (Channel.SIM_EVENT, None),
+                 k.publisher("am4"): (Channel.PUBLISHER, None)}
         for key, (ch, sysid) in cases.items():
             m = k.parse(key)
             assert m is not None and (m.channel, m.sysid) == (ch, sysid), key
+        assert k.parse(k.publisher("sim-1")).name == "sim-1"
     k = Keys()
     for foreign in ("other/am/4/controller", "amstack/am/x/controller", "amstack/am/4/controllers",
-                    "amstack/sim/am/4", "amstack/sim/objects", "amstack", "amstack/am/-1/event"):
+                    "amstack/sim/am/4", "amstack/sim/objects", "amstack", "amstack/am/-1/event",
+                    "amstack/telemetry", "amstack/telemetry/a/b"):
         assert k.parse(foreign) is None, foreign
 
 
@@ -54,7 +57,11 @@ def _payloads(step_result, ground_truth, spec):
     out += [(Channel.SIM_EVENT, schema.run_start_event(0.0, spec)),
             (Channel.SIM_EVENT, schema.run_end_event(20.0, "completed")),
             (Channel.SIM_EVENT, schema.phase_event(5.0, "grasp", "simulator")),
-            (Channel.AM_EVENT, schema.fault_event(3.0, "thrust saturated", "am4", level="warning"))]
+            (Channel.AM_EVENT, schema.fault_event(3.0, "thrust saturated", "am4", level="warning")),
+            (Channel.PUBLISHER, schema.publisher_stats_sample(1.0, "am4", True, {"amstack/am/4/controller": 7},
+                                                              dict(published=7, sent=7, dropped_queue_full=0,
+                                                                   dropped_no_session=0, dropped_at_close=0,
+                                                                   encode_errors=0, send_errors=0)))]
     return out
 
 
