@@ -189,3 +189,27 @@ def test_final_stats_let_the_recorder_count_tail_drops_exactly():
         received = sum(tr.stats[KEYS.controller(s)].received for s in (4, 5))
     assert received == st.sent and missing == st.dropped_queue_full
     assert tr.stats[KEYS.publisher("burst")].missing == 0
+
+
+def test_publisher_started_before_the_recorder_reaches_it_once_it_listens():
+    ep = free_endpoint()
+    pub = TelemetryPublisher(ZenohOptions(connect=(ep,)), name="early")
+    pub.open()
+    assert pub.wait_connected(5.0)  # the session opens with nobody to connect to
+    for i in range(10):
+        pub.publish(KEYS.controller(4), {"t": i * 1e-3, "seq": 0})  # nobody listens: gone, not an error
+    deadline = time.monotonic() + 5.0
+    while pub.stats().sent < 10 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    got: list[int] = []
+    with zenoh.open(build_config(ZenohOptions(role="recorder", listen=(ep,)))) as s:
+        sub = s.declare_subscriber(KEYS.controller(4), lambda x: got.append(json.loads(x.payload.to_bytes())["seq"]))
+        assert pub.wait_for_subscriber(KEYS.controller(4), 10.0)  # the background retry found the recorder
+        for i in range(10, 20):
+            pub.publish(KEYS.controller(4), {"t": i * 1e-3, "seq": 0})
+        st = pub.close(5.0)
+        deadline = time.monotonic() + 5.0
+        while len(got) < 10 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        sub.undeclare()
+    assert got == list(range(10, 20)) and st.sent == 20 and st.dropped == 0
