@@ -1,0 +1,123 @@
+"""ground-station: record telemetry to MCAP, review a recorded run.
+
+    ground-station record --out RUN.mcap [--duration S] [zenoh options]
+    ground-station review RUN.mcap [--json] [--plots DIR]
+
+record stops on SIGINT/SIGTERM, after --duration seconds of wall time, or shortly after
+the simulator's run_end event, and always finishes the file. review reads finished and
+truncated logs (a killed recorder) alike. Exit status: 0 ok, 1 runtime failure,
+2 bad input (missing file, not an MCAP, empty log, bad options).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import threading
+from pathlib import Path
+
+from telemetry.session import TelemetryConfigError, add_zenoh_arguments, options_from_args
+
+
+def _err(msg: str) -> None:
+    print(f"ground-station: error: {msg}", file=sys.stderr)
+
+
+def _record(a: argparse.Namespace) -> int:
+    from .recorder import Recorder, RecorderError
+
+    try:
+        opts = options_from_args(a, role="recorder")
+    except TelemetryConfigError as exc:
+        _err(str(exc))
+        return 2
+    if a.out.parent and not a.out.parent.exists():
+        _err(f"{a.out.parent}: no such directory")
+        return 2
+    rec = Recorder(a.out, opts, scene_rate_hz=a.scene_rate, flush_period_s=a.flush_period,
+                   compression=a.compression, linger_s=a.linger)
+    stop = threading.Event()
+
+    def on_signal(signum, _frame):
+        stop.set()
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    try:
+        rec.open()
+    except (RecorderError, TelemetryConfigError) as exc:
+        _err(str(exc))
+        return 2 if isinstance(exc, TelemetryConfigError) else 1
+    where = ", ".join(opts.listen_endpoints) or "(config file)"
+    print(f"recording {opts.keys.everything} to {a.out} (zenoh {opts.mode}, listen {where}, "
+          f"connect {', '.join(opts.connect_endpoints) or 'none'})", file=sys.stderr, flush=True)
+    try:
+        rec.run(duration_s=a.duration, stop=stop)
+    finally:
+        s = rec.close()
+    print(f"stopped ({s.stop_reason}): {s.received} samples from {s.keys} keys, {s.written} messages, "
+          f"{s.sim_time_s:.3f} s simulated, {s.bytes / 1e6:.2f} MB; lost: {s.missing} (seq gaps), "
+          f"{s.inbox_overflow} (inbox overflow), {s.malformed} malformed", file=sys.stderr)
+    if a.summary_json:
+        print(json.dumps(s.as_dict()))
+    return 0
+
+
+def _review(a: argparse.Namespace) -> int:
+    from .mcap_io import NotAnMcapError, read_log
+    from .review import NoDataError, format_summary, load_run, summarize
+
+    if not a.log.exists():
+        _err(f"{a.log}: no such file")
+        return 2
+    if a.log.is_dir():
+        _err(f"{a.log}: is a directory, not an MCAP file")
+        return 2
+    try:
+        log = read_log(a.log)
+        run = load_run(log)
+        summary = summarize(log, run)
+    except (NotAnMcapError, NoDataError) as exc:
+        _err(str(exc))
+        return 2
+    if a.plots is not None:
+        from .plots import write_plots
+
+        a.plots.mkdir(parents=True, exist_ok=True)
+        summary["plots"] = [str(p) for p in write_plots(run, a.plots)]
+    if a.json:
+        print(json.dumps(summary, indent=1))
+    else:
+        print(format_summary(summary))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="ground-station", description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("record", help="subscribe to the telemetry and write an MCAP log")
+    r.add_argument("--out", type=Path, required=True, help="MCAP file to write")
+    r.add_argument("--duration", type=float, default=None, help="stop after S seconds of wall time")
+    r.add_argument("--linger", type=float, default=0.5, help="keep recording S seconds after run_end (default 0.5)")
+    r.add_argument("--scene-rate", type=float, default=20.0, help="/scene updates per simulated second (0: none)")
+    r.add_argument("--flush-period", type=float, default=1.0, help="flush the file every S seconds (default 1)")
+    r.add_argument("--compression", choices=("zstd", "lz4", "none"), default="zstd")
+    r.add_argument("--summary-json", action="store_true", help="print the final summary as JSON on stdout")
+    add_zenoh_arguments(r, role="recorder")
+    v = sub.add_parser("review", help="summarize a recorded run per phase, optionally plot it")
+    v.add_argument("log", type=Path, help="MCAP file (a truncated one is salvaged)")
+    v.add_argument("--json", action="store_true", help="print the summary as JSON")
+    v.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write PNG plots into DIR")
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = build_parser().parse_args(argv)
+    if a.command == "record":
+        return _record(a)
+    return _review(a)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

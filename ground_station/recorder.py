@@ -1,0 +1,171 @@
+"""Recorder: subscribe to <prefix>/** on Zenoh and write one MCAP log (adapter).
+
+    rec = Recorder(out_path, ZenohOptions(role="recorder"))
+    rec.open()                      # file created, zenoh session open, subscribed
+    summary = rec.run(duration_s=None, stop=threading.Event())
+    rec.close()                     # stats + metadata written, file finished
+
+Zenoh delivers samples on its own threads; the callback only appends (key, bytes) to an
+inbox. `run` drains the inbox on the calling thread, translates per ground_station.contract
+and writes. Every flush_period_s of wall time it writes /recorder/stats and flushes the
+MCAP writer (closing the chunk), so a SIGKILL loses at most that much. `run` returns when
+`stop` is set (signal handler), after duration_s of wall time, or linger_s after the
+simulator's run_end event (late samples of other processes still get in).
+"""
+from __future__ import annotations
+
+import collections
+import json
+import threading
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from telemetry.session import ZenohOptions, build_config
+
+from .contract import Translator
+from .mcap_io import McapLogWriter
+
+
+class RecorderError(RuntimeError):
+    """The recorder could not start (output not writable, zenoh session refused)."""
+
+
+@dataclass(frozen=True)
+class RecorderSummary:
+    path: str
+    stop_reason: str
+    wall_s: float
+    received: int  # samples taken from zenoh
+    written: int  # MCAP messages (derived ones included)
+    missing: int  # seq gaps summed over keys
+    reordered: int
+    inbox_overflow: int
+    malformed: int
+    unknown: int
+    keys: int
+    sim_time_s: float
+    bytes: int
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+class Recorder:
+    def __init__(self, out_path: str | Path, options: ZenohOptions, *, scene_rate_hz: float = 20.0,
+                 flush_period_s: float = 1.0, compression: str = "zstd", chunk_size: int = 4 * 1024 * 1024,
+                 inbox_limit: int = 2_000_000, linger_s: float = 0.5):
+        self.out_path = Path(out_path)
+        self.options = options
+        self.keys = options.keys
+        self.flush_period_s = flush_period_s
+        self.linger_s = linger_s
+        self.inbox_limit = inbox_limit
+        self.translator = Translator(self.keys, scene_rate_hz=scene_rate_hz)
+        self.writer = McapLogWriter(self.out_path, compression=compression, chunk_size=chunk_size)
+        self._inbox: collections.deque = collections.deque()
+        self._overflow = 0
+        self._received = 0
+        self._session = None
+        self._subscriber = None
+        self._t0 = 0.0
+        self._stop_reason = ""
+        self._run_start_written = False
+
+    # ------------------------------------------------------------------ lifecycle
+    def open(self) -> None:
+        import zenoh
+
+        try:
+            self.writer.open()
+        except OSError as exc:
+            raise RecorderError(f"cannot create {self.out_path}: {exc.strerror or exc}") from exc
+        try:
+            self._session = zenoh.open(build_config(self.options))
+            self._subscriber = self._session.declare_subscriber(self.keys.everything, self._on_sample)
+        except Exception as exc:
+            self.writer.close()
+            raise RecorderError(f"zenoh: {exc}") from exc
+        self._t0 = time.monotonic()
+
+    def _on_sample(self, sample) -> None:
+        # zenoh's thread: keep it minimal
+        if len(self._inbox) >= self.inbox_limit:
+            self._overflow += 1
+            return
+        self._inbox.append((str(sample.key_expr), sample.payload.to_bytes()))
+
+    def run(self, duration_s: float | None = None, stop: threading.Event | None = None) -> str:
+        """Record until stopped; returns the stop reason."""
+        stop = stop or threading.Event()
+        next_flush = time.monotonic() + self.flush_period_s
+        end_at = None
+        while True:
+            now = time.monotonic()
+            if stop.is_set():
+                self._stop_reason = "signal"
+                break
+            if duration_s is not None and now - self._t0 >= duration_s:
+                self._stop_reason = "duration"
+                break
+            if end_at is None and self.translator.run_end is not None:
+                end_at = now + self.linger_s
+            if end_at is not None and now >= end_at:
+                self._stop_reason = "run_end"
+                break
+            if not self._drain(max_items=5000):
+                stop.wait(0.002)
+            if now >= next_flush:
+                self._flush()
+                next_flush = now + self.flush_period_s
+        return self._stop_reason
+
+    def _drain(self, max_items: int | None = None) -> int:
+        n = 0
+        pop, translate, write = self._inbox.popleft, self.translator.translate, self.writer.write
+        while self._inbox and (max_items is None or n < max_items):
+            key, data = pop()
+            for out in translate(key, data):
+                write(out)
+            n += 1
+        self._received += n
+        if not self._run_start_written and self.translator.run_start is not None:
+            self.writer.add_metadata("run_start", {"json": json.dumps(self.translator.run_start)})
+            self._run_start_written = True
+        return n
+
+    def _flush(self) -> None:
+        self.writer.write(self.translator.stats_out(time.monotonic() - self._t0, self._overflow))
+        self.writer.flush()
+
+    def close(self) -> RecorderSummary:
+        """Stop listening, write what arrived, the final stats and summary; finish the file."""
+        if self._subscriber is not None:
+            try:
+                self._subscriber.undeclare()
+            except Exception:
+                pass
+            self._subscriber = None
+        self._drain()
+        if self._session is not None:
+            try:
+                self._session.close()
+            except Exception:
+                pass
+            self._session = None
+        self._drain()
+        summary = self.summary()
+        self.writer.write(self.translator.stats_out(summary.wall_s, self._overflow))
+        self.writer.add_metadata("recorder_summary", {k: str(v) for k, v in summary.as_dict().items()})
+        self.writer.close()
+        return self.summary(final=True)
+
+    def summary(self, final: bool = False) -> RecorderSummary:
+        st = self.translator.stats.values()
+        size = self.out_path.stat().st_size if final and self.out_path.exists() else 0
+        return RecorderSummary(
+            path=str(self.out_path), stop_reason=self._stop_reason or "closed", wall_s=time.monotonic() - self._t0,
+            received=self._received, written=self.writer.messages, missing=sum(s.missing for s in st),
+            reordered=sum(s.reordered for s in st), inbox_overflow=self._overflow,
+            malformed=self.translator.malformed, unknown=self.translator.unknown, keys=len(self.translator.stats),
+            sim_time_s=self.translator.latest_t, bytes=size)

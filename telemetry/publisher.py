@@ -1,0 +1,308 @@
+"""TelemetryPublisher: put telemetry on Zenoh without ever blocking the caller.
+
+    tele = TelemetryPublisher(options)      # stores only
+    tele.open()                             # starts the sender thread; returns at once
+    tele.publish(key, payload)              # stamps seq, enqueues; never blocks
+    tele.close()                            # sends what is queued (bounded wait), closes
+
+The caller only stamps the per-key `seq` and appends to a bounded deque (~1 us; no lock,
+no wake-up of another thread). A sender thread opens the zenoh session (retrying if it
+cannot, e.g. client mode with no router), wakes every poll_period_s, JSON-encodes what is
+queued and puts it. When the queue is full the sample is dropped and counted; its seq
+number is used up, so the recorder sees the gap too.
+
+The sender's zenoh puts use congestion control BLOCK by default: a slow recorder slows
+the sender (zenoh releases the GIL while it waits, so the caller is not held), the queue
+fills and the drops are counted here, at their source. With "drop" zenoh discards what
+its transmission queue cannot take, which this process cannot count (the recorder still
+sees seq gaps). benchmarks/bench_telemetry.py measures the alternatives.
+
+Every stats_period_s, and once more at close after the queue is drained, the sender
+puts the publisher's own accounting on <prefix>/telemetry/<name> (PublisherStats: seq
+numbers issued per key, counters). From the final one the recorder also counts samples
+lost at the tail of a key, which leave no gap.
+"""
+from __future__ import annotations
+
+import collections
+import logging
+import os
+import re
+import socket
+import threading
+import time
+from dataclasses import dataclass
+from typing import Iterable, Mapping
+
+from .schema import encode, publisher_stats_sample
+from .session import ZenohOptions, build_config
+
+log = logging.getLogger(__name__)
+
+
+class TelemetryStateError(RuntimeError):
+    """publish() or open() called in the wrong state (before open, after close, twice)."""
+
+
+@dataclass(frozen=True)
+class PublisherStats:
+    """Counters of one publisher since open() [samples]. Once closed:
+    published == sent + dropped_no_session + dropped_at_close + encode_errors + send_errors."""
+
+    published: int  # accepted by publish() (queued)
+    sent: int  # handed to zenoh
+    dropped_queue_full: int  # publish() found the queue full
+    dropped_no_session: int  # queued, but the session never opened before close()
+    dropped_at_close: int  # still queued (or in a put) when close() gave up waiting
+    encode_errors: int  # payload not JSON-serialisable (programming error; see last_error)
+    send_errors: int  # zenoh put raised
+    nonfinite: int  # payloads whose NaN/inf were sent as null
+    session_open_failures: int
+    connected: bool  # the zenoh session is open (not: a subscriber is listening)
+    queued: int
+    last_error: str
+
+    @property
+    def dropped(self) -> int:
+        return (self.dropped_queue_full + self.dropped_no_session + self.dropped_at_close + self.encode_errors
+                + self.send_errors)
+
+
+class TelemetryPublisher:
+    """One process's telemetry sender. See the module docstring."""
+
+    def __init__(self, options: ZenohOptions | None = None, *, name: str | None = None, queue_size: int = 8192,
+                 congestion: str = "block", poll_period_s: float = 0.001, reopen_period_s: float = 1.0,
+                 stats_period_s: float = 1.0):
+        """name: this process in <prefix>/telemetry/<name> ('am4', 'simulator'; default host-pid)."""
+        if congestion not in ("block", "drop"):
+            raise ValueError(f"congestion {congestion!r} must be 'block' or 'drop'")
+        if queue_size < 1:
+            raise ValueError("queue_size must be positive")
+        self.options = options or ZenohOptions()
+        self.keys = self.options.keys
+        self.name = name or re.sub(r"[^A-Za-z0-9_\-]", "-", f"{socket.gethostname()}-{os.getpid()}")
+        self._stats_key = self.keys.publisher(self.name)  # validates the name
+        self._stats_period_s = stats_period_s
+        self._last_t = 0.0
+        self._queue_size = queue_size
+        self._congestion = congestion
+        self._poll_s = poll_period_s
+        self._reopen_period_s = reopen_period_s
+        self._q: collections.deque = collections.deque()
+        self._seq: dict[str, int] = {}
+        self._thread: threading.Thread | None = None
+        self._state = "new"  # new -> open -> closed
+        self._session = None
+        self._cc = None
+        self._publishers: dict = {}
+        self._connected = threading.Event()
+        self._stopping = threading.Event()
+        self._lock = threading.Lock()  # sender thread vs close(): counters, in-flight, abandon
+        self._n = dict(published=0, sent=0, dropped_queue_full=0, dropped_no_session=0, dropped_at_close=0,
+                       encode_errors=0, send_errors=0, nonfinite=0, session_open_failures=0)
+        self._last_error = ""
+        self._in_flight = 0  # 1 while the sender holds a sample it took from the queue
+        self._abandoned = False
+
+    # ------------------------------------------------------------------ lifecycle
+    @property
+    def enabled(self) -> bool:
+        return self.options.enabled
+
+    def open(self) -> None:
+        """Start the sender thread (which opens the zenoh session). Returns at once."""
+        if self._state != "new":
+            raise TelemetryStateError(f"open() on a publisher that is {self._state}")
+        self._state = "open"
+        if not self.enabled:
+            return
+        self._thread = threading.Thread(target=self._run, name="telemetry-publisher", daemon=True)
+        self._thread.start()
+
+    def close(self, timeout_s: float = 2.0) -> PublisherStats:
+        """Send what is queued (waiting at most timeout_s), close the session, return the
+        final counters. Idempotent. If the sender is stuck (a frozen subscriber holding a
+        blocking put), what it has not sent is counted as dropped_at_close and the daemon
+        thread is left behind."""
+        if self._state == "open":
+            self._state = "closed"
+            if self._thread is not None:
+                self._stopping.set()
+                self._thread.join(timeout_s)
+                if self._thread.is_alive():
+                    with self._lock:
+                        self._abandoned = True
+                        n = len(self._q) + self._in_flight
+                        self._q.clear()
+                        self._n["dropped_at_close"] += n
+                    log.warning("telemetry: close() gave up after %.1f s, %d samples not sent", timeout_s, n)
+        self._state = "closed"
+        return self.stats()
+
+    def __enter__(self) -> "TelemetryPublisher":
+        self.open()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ caller side
+    def publish(self, key: str, payload: dict) -> bool:
+        """Stamp payload["seq"] with this key's counter and queue it. Never blocks.
+
+        Returns False if the sample was dropped (queue full, telemetry disabled). The
+        payload must not be modified afterwards (the sender thread encodes it later)."""
+        if not self.enabled:
+            return False
+        if self._state != "open":
+            raise TelemetryStateError(f"publish() on a publisher that is {self._state}; call open() first")
+        n = self._seq.get(key, 0)
+        self._seq[key] = n + 1
+        payload["seq"] = n
+        self._last_t = payload.get("t", self._last_t)
+        if len(self._q) >= self._queue_size:
+            self._n["dropped_queue_full"] += 1
+            return False
+        self._q.append((key, payload))
+        self._n["published"] += 1
+        return True
+
+    def publish_many(self, items: Iterable[tuple[str, dict]]) -> int:
+        """publish() each (key, payload); returns how many were queued."""
+        return sum(self.publish(k, p) for k, p in items)
+
+    def wait_connected(self, timeout_s: float) -> bool:
+        """Wait until the zenoh session is open (not the same as a subscriber listening)."""
+        return self._connected.wait(timeout_s)
+
+    def wait_for_subscriber(self, key: str, timeout_s: float) -> bool:
+        """Wait until some subscriber (e.g. the recorder) matches `key`: lets a simulator
+        hold its first step until the recorder listens. False on timeout."""
+        deadline = time.monotonic() + timeout_s
+        if not self.wait_connected(timeout_s):
+            return False
+        try:
+            probe = self._session.declare_publisher(key)
+            try:
+                while not probe.matching_status.matching:
+                    if time.monotonic() >= deadline:
+                        return False
+                    time.sleep(0.02)
+                return True
+            finally:
+                probe.undeclare()
+        except Exception as exc:  # the session closed underneath us
+            self._last_error = f"matching status: {exc}"
+            return False
+
+    def stats(self) -> PublisherStats:
+        with self._lock:
+            n = dict(self._n)
+        return PublisherStats(**n, connected=self._connected.is_set(), queued=len(self._q),
+                              last_error=self._last_error)
+
+    # ------------------------------------------------------------------ sender thread
+    def _count(self, name: str, k: int = 1) -> None:
+        with self._lock:
+            self._n[name] += k
+
+    def _try_open(self) -> bool:
+        import zenoh
+
+        try:
+            self._session = zenoh.open(build_config(self.options))
+        except Exception as exc:
+            self._count("session_open_failures")
+            self._last_error = f"zenoh open: {exc}"
+            if self._n["session_open_failures"] == 1:
+                log.warning("telemetry: cannot open zenoh session (%s); retrying every %.1f s", exc,
+                            self._reopen_period_s)
+            return False
+        self._cc = zenoh.CongestionControl.BLOCK if self._congestion == "block" else zenoh.CongestionControl.DROP
+        self._connected.set()
+        return True
+
+    def _take(self):
+        with self._lock:
+            if self._abandoned or not self._q:
+                return None
+            self._in_flight = 1
+            return self._q.popleft()
+
+    def _send(self, key: str, payload: Mapping) -> None:
+        outcome = "sent"
+        try:
+            data, replaced = encode(payload)
+            if replaced:
+                self._count("nonfinite")
+            pub = self._publishers.get(key)
+            if pub is None:
+                pub = self._publishers[key] = self._session.declare_publisher(key, congestion_control=self._cc)
+            pub.put(data)
+        except (TypeError, ValueError) as exc:
+            outcome, self._last_error = "encode_errors", f"{key}: cannot encode payload: {exc}"
+        except Exception as exc:
+            outcome, self._last_error = "send_errors", f"{key}: put: {exc}"
+        with self._lock:
+            self._in_flight = 0
+            if not self._abandoned:  # else close() counted it already
+                self._n[outcome] += 1
+
+    def _send_stats(self, final: bool) -> None:
+        with self._lock:
+            counters = dict(self._n)
+        issued = dict(self._seq)  # one C-level copy: consistent under the GIL
+        k = self._stats_key
+        n = self._seq.get(k, 0)
+        self._seq[k] = n + 1
+        payload = publisher_stats_sample(self._last_t, self.name, final, issued, counters, seq=n)
+        try:
+            pub = self._publishers.get(k)
+            if pub is None:
+                pub = self._publishers[k] = self._session.declare_publisher(k, congestion_control=self._cc)
+            pub.put(encode(payload)[0])
+        except Exception as exc:
+            self._last_error = f"{k}: put: {exc}"
+
+    def _run(self) -> None:
+        try:
+            while not self._try_open():
+                # not connected (client mode without a router, bad config): samples wait in
+                # the bounded queue; publish() drops and counts once it is full
+                if self._stopping.wait(self._reopen_period_s):
+                    return
+            next_stats = time.monotonic() + self._stats_period_s
+            while True:
+                item = self._take()
+                while item is not None:
+                    self._send(*item)
+                    item = self._take()
+                if self._stopping.is_set() or self._abandoned:
+                    if not self._abandoned:
+                        self._send_stats(final=True)
+                    return
+                if time.monotonic() >= next_stats:
+                    self._send_stats(final=False)
+                    next_stats = time.monotonic() + self._stats_period_s
+                self._stopping.wait(self._poll_s)
+        finally:
+            self._shutdown()
+
+    def _shutdown(self) -> None:
+        with self._lock:
+            left = 0 if self._abandoned else len(self._q)
+            self._q.clear()
+            if left:
+                self._n["dropped_no_session" if self._session is None else "dropped_at_close"] += left
+        if self._session is not None:
+            for p in self._publishers.values():
+                try:
+                    p.undeclare()
+                except Exception:
+                    pass
+            try:
+                self._session.close()
+            except Exception as exc:
+                self._last_error = f"zenoh close: {exc}"
+        self._connected.clear()

@@ -1,0 +1,157 @@
+"""Zenoh session configuration for telemetry publishers and the recorder.
+
+Embedded default (one host, no router, no multicast):
+
+    recorder   peer, listens on  tcp/127.0.0.1:7447
+    publishers peer, connect to  tcp/127.0.0.1:7447, listen on nothing
+
+Multicast and gossip scouting are off, so nothing leaves loopback and nothing but the
+configured endpoints is tried. A publisher opened before the recorder, or with none at
+all, opens at once (scouting delay 0) and retries the connection in the background
+(every 0.25 s, backing off to 2 s); until then its samples simply have no subscriber.
+
+Across hosts: give the recorder `--zenoh-listen tcp/0.0.0.0:7447` and each publisher
+`--zenoh-connect tcp/<recorder-host>:7447`, or run a `zenohd` router and make every
+process `--zenoh-mode client --zenoh-connect tcp/<router>:7447`. TLS, authentication and
+access control are zenoh config-file features: pass the file with `--zenoh-config`
+(see docs/telemetry.md); explicit --zenoh-* options are applied on top of it.
+
+`config_items` is pure (testable without zenoh); `build_config` imports zenoh.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .schema import DEFAULT_PREFIX, Keys
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+MODES = ("peer", "client", "router")
+ROLES = ("publisher", "recorder")
+
+
+class TelemetryConfigError(ValueError):
+    """Telemetry options that cannot make a zenoh session (bad mode, unreadable config file)."""
+
+
+@dataclass(frozen=True)
+class ZenohOptions:
+    """How one process joins the telemetry network.
+
+    connect / listen: zenoh endpoints ("tcp/host:port", "tls/host:port", ...). None means
+    the role's default (see the module docstring); an empty tuple means none at all.
+    config_file: a zenoh JSON5 config (TLS, access control) used as the base.
+    """
+
+    role: str = "publisher"
+    mode: str = "peer"
+    connect: tuple[str, ...] | None = None
+    listen: tuple[str, ...] | None = None
+    config_file: Path | None = None
+    prefix: str = DEFAULT_PREFIX
+    enabled: bool = True
+    retry_init_ms: int = 250
+    retry_max_ms: int = 2000
+
+    def __post_init__(self):
+        if self.role not in ROLES:
+            raise TelemetryConfigError(f"telemetry role {self.role!r} is not one of {ROLES}")
+        if self.mode not in MODES:
+            raise TelemetryConfigError(f"zenoh mode {self.mode!r} is not one of {MODES}")
+        Keys(self.prefix)  # validates
+
+    @property
+    def keys(self) -> Keys:
+        return Keys(self.prefix)
+
+    @property
+    def connect_endpoints(self) -> tuple[str, ...]:
+        if self.connect is not None:
+            return tuple(self.connect)
+        if self.config_file is not None:
+            return ()
+        return (DEFAULT_ENDPOINT,) if self.role == "publisher" else ()
+
+    @property
+    def listen_endpoints(self) -> tuple[str, ...]:
+        if self.listen is not None:
+            return tuple(self.listen)
+        if self.config_file is not None:
+            return ()
+        return (DEFAULT_ENDPOINT,) if self.role == "recorder" else ()
+
+
+def config_items(opts: ZenohOptions) -> dict[str, Any]:
+    """The zenoh config entries (path -> JSON value) these options set.
+
+    With a config file only the explicit options are set, so the file's own endpoints,
+    scouting, TLS and ACL sections stay as written."""
+    items: dict[str, Any] = {"mode": opts.mode}
+    if opts.config_file is None or opts.connect is not None:
+        items["connect/endpoints"] = list(opts.connect_endpoints)
+    if opts.config_file is None or opts.listen is not None:
+        items["listen/endpoints"] = list(opts.listen_endpoints)
+    if opts.config_file is None:
+        items.update({
+            "scouting/multicast/enabled": False,
+            "scouting/gossip/enabled": False,
+            "scouting/delay": 0,
+            "connect/retry": {"period_init_ms": opts.retry_init_ms, "period_max_ms": opts.retry_max_ms,
+                              "period_increase_factor": 2.0},
+        })
+    return items
+
+
+def build_config(opts: ZenohOptions):
+    """A zenoh.Config for these options."""
+    import zenoh
+
+    try:
+        cfg = zenoh.Config.from_file(str(opts.config_file)) if opts.config_file is not None else zenoh.Config()
+    except Exception as exc:  # zenoh raises ZError for unreadable or invalid files
+        raise TelemetryConfigError(f"zenoh config {opts.config_file}: {exc}") from exc
+    for path, value in config_items(opts).items():
+        try:
+            cfg.insert_json5(path, json.dumps(value))
+        except Exception as exc:
+            raise TelemetryConfigError(f"zenoh config entry {path} = {value!r}: {exc}") from exc
+    return cfg
+
+
+# ----------------------------------------------------------------------------- argparse
+def add_zenoh_arguments(parser: argparse.ArgumentParser, role: str = "publisher") -> None:
+    """Add --zenoh-mode/--zenoh-connect/--zenoh-listen/--zenoh-config/--telemetry-prefix
+    (and --no-telemetry for publishers) to a process main's parser."""
+    if role not in ROLES:
+        raise TelemetryConfigError(f"telemetry role {role!r} is not one of {ROLES}")
+    g = parser.add_argument_group("telemetry (zenoh)")
+    g.add_argument("--zenoh-mode", choices=MODES, default="peer", help="zenoh session mode (default: peer)")
+    d_conn = DEFAULT_ENDPOINT if role == "publisher" else "none"
+    d_list = DEFAULT_ENDPOINT if role == "recorder" else "none"
+    g.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT",
+                   help=f"endpoint to connect to, repeatable (default: {d_conn}; 'none' for none)")
+    g.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT",
+                   help=f"endpoint to listen on, repeatable (default: {d_list}; 'none' for none)")
+    g.add_argument("--zenoh-config", type=Path, metavar="FILE",
+                   help="zenoh JSON5 config file used as the base (TLS, access control)")
+    g.add_argument("--telemetry-prefix", default=DEFAULT_PREFIX, help=f"key prefix (default: {DEFAULT_PREFIX})")
+    if role == "publisher":
+        g.add_argument("--no-telemetry", action="store_true", help="publish nothing")
+
+
+def _endpoints(values: list[str] | None) -> tuple[str, ...] | None:
+    if values is None:
+        return None
+    return tuple(v for v in values if v.lower() != "none")
+
+
+def options_from_args(args: argparse.Namespace, role: str = "publisher") -> ZenohOptions:
+    """ZenohOptions from a namespace parsed with add_zenoh_arguments(parser, role)."""
+    return ZenohOptions(
+        role=role, mode=args.zenoh_mode, connect=_endpoints(args.zenoh_connect),
+        listen=_endpoints(args.zenoh_listen), config_file=args.zenoh_config, prefix=args.telemetry_prefix,
+        enabled=not getattr(args, "no_telemetry", False),
+    )
