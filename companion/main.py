@@ -23,6 +23,10 @@ from amlink import signing
 from amlink.errors import LinkError, SimulatorUnreachableError
 from amlink.lockstep import CompanionClient
 
+from telemetry.publisher import TelemetryPublisher
+from telemetry.session import TelemetryConfigError, add_zenoh_arguments, options_from_args
+from telemetry.wiring import CompanionTelemetry
+
 from .pilot import Pilot
 
 DEFAULT_SCENARIO = Path(__file__).resolve().parents[1] / "configs" / "scenarios" / "two_am_comp.toml"
@@ -46,6 +50,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--key-file", type=Path, default=None,
                     help="signing master key (64 hex digits); overrides [link].key_file of the scenario")
     ap.add_argument("--outcome", type=Path, default=None, help="write a per-phase error summary (JSON) here")
+    ap.add_argument("--telemetry-every", type=int, default=1, help="publish the controller state every N steps")
+    add_zenoh_arguments(ap, role="publisher")
     a = ap.parse_args(argv)
     tag = f"companion[{a.sysid}]"
     try:
@@ -58,12 +64,19 @@ def main(argv: list[str] | None = None) -> int:
     if warning:
         print(f"{tag}: warning: {warning}", file=sys.stderr)
     pilot = Pilot(spec, a.sysid)
+    try:
+        tele = TelemetryPublisher(options_from_args(a), name=f"am{a.sysid}")
+        am_tele = CompanionTelemetry(tele, a.sysid, every=max(1, a.telemetry_every))
+    except (TelemetryConfigError, ValueError) as exc:
+        print(f"{tag}: error: telemetry: {exc}", file=sys.stderr)
+        return 2
     my_id = scenario_id(spec)
 
     signal.signal(signal.SIGTERM, _on_signal)
     signal.signal(signal.SIGINT, _on_signal)
     client = CompanionClient(a.sysid, a.sim, signing_key=None if keys is None else keys[a.sysid])
     why = "simulator ended the run"
+    tele.open()  # never blocks: publishes are queued, dropped and counted while nobody listens
     try:
         info = client.connect(timeout_s=a.connect_timeout)
         if info.scenario_id != my_id or info.name != spec.name:
@@ -80,8 +93,9 @@ def main(argv: list[str] | None = None) -> int:
             frame = client.recv_frame(timeout_s=a.frame_timeout)
             if frame is None:
                 break
-            sp, att, _ = pilot.step(frame)
+            sp, att, res = pilot.step(frame)
             client.send_setpoint(sp, att)
+            am_tele.step(frame.time_s, pilot.mission.phase(frame.time_s), res)
         wall = time.perf_counter() - t0
     except _Stop as stop:
         why = f"stopped by {stop}"
@@ -95,6 +109,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     finally:
         client.close()
+        tele.close()
     failure = [text for sev, text in client.status_texts if sev <= 3]  # MAV_SEVERITY_ERROR or worse
     if failure:
         print(f"{tag}: error: the simulator ended the run: {failure[-1]}", file=sys.stderr)

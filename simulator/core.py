@@ -28,12 +28,13 @@ from .failsafe import Failsafe
 from .outcome import RunOutcome
 from .world import World
 
-TRUTH_EVERY = 10  # ground-truth sample period for the outcome [steps]
+TRUTH_EVERY = 10  # ground-truth sample period for the outcome and telemetry [steps]: 100 Hz at 1 kHz
 
 
 class SitlCore:
-    def __init__(self, spec: ScenarioSpec, log: Callable[[str], None] = lambda _msg: None) -> None:
-        self.spec, self.log = spec, log
+    def __init__(self, spec: ScenarioSpec, log: Callable[[str], None] = lambda _msg: None,
+                 on_truth: Callable[[object], None] | None = None) -> None:
+        self.spec, self.log, self.on_truth = spec, log, on_truth
         self.model = build_model(spec.vehicle)
         self.sysids = [am.sysid for am in spec.ams]
         self.world = World(spec, {am.sysid: am_mission(spec, am, self.model).initial_state() for am in spec.ams})
@@ -68,7 +69,10 @@ class SitlCore:
                                      w_B=st.w_B, q=st.q, qdot=st.qdot, wrench_E=self._wrenches[s])
             self.digest.update(f.p_WB.tobytes() + f.quat_WB_wxyz.tobytes() + f.q.tobytes() + f.wrench_E.tobytes())
         if k % TRUTH_EVERY == 0:
-            self.outcome.add(w.ground_truth(), self._wrenches)
+            gt = w.ground_truth()
+            self.outcome.add(gt, self._wrenches)
+            if self.on_truth is not None:
+                self.on_truth(gt)
         return out
 
     def actuate(self, k: int, setpoints: Mapping[int, TorqueSetpoint], lost: Collection[int] = ()) -> None:

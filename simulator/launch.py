@@ -14,6 +14,7 @@ import json
 import os
 import select
 import shutil
+import socket
 import signal
 import subprocess
 import sys
@@ -58,6 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--run-dir", type=Path, default=None, help="run folder (default runs/<name>-<time>)")
     ap.add_argument("--duration", type=float, default=None, help="override the scenario's duration [s]")
     ap.add_argument("--no-progress", action="store_true", help="no progress display")
+    ap.add_argument("--no-telemetry", action="store_true", help="no Zenoh telemetry, no MCAP log, no review")
     ap.add_argument("--startup-timeout", type=float, default=120.0, help="seconds for all processes to connect")
     a = ap.parse_args(argv)
     try:
@@ -74,14 +76,26 @@ def main(argv: list[str] | None = None) -> int:
     if a.duration is not None:
         sim_cmd += ["--duration", str(a.duration)]
     env = dict(os.environ, PYTHONUNBUFFERED="1")
+    tele_args = ["--no-telemetry"] if a.no_telemetry else []
+    mcap = run_dir / "run.mcap"
     procs: dict[str, subprocess.Popen] = {}
     logs = []
     bar = _Bar(not a.no_progress)
     print(f"am-run: scenario '{spec.name}' with {len(spec.ams)} AMs; run folder {run_dir}", file=sys.stderr)
     try:
+        if not a.no_telemetry:
+            # the logger listens on a free loopback port; every publisher connects to it
+            endpoint = f"tcp/127.0.0.1:{_free_tcp_port()}"
+            tele_args = ["--zenoh-connect", endpoint]
+            rlog = open(run_dir / "recorder.log", "w")
+            logs.append(rlog)
+            procs["recorder"] = subprocess.Popen(
+                _command("ground-station") + ["record", "--out", str(mcap), "--zenoh-listen", endpoint],
+                stdout=rlog, stderr=subprocess.STDOUT, env=env)
+            _wait_listening(endpoint, procs["recorder"], time.monotonic() + a.startup_timeout)
         log = open(run_dir / "simulator.log", "w")
         logs.append(log)
-        sim = procs["simulator"] = subprocess.Popen(sim_cmd, stdout=subprocess.PIPE, stderr=log, env=env, text=True)
+        sim = procs["simulator"] = subprocess.Popen(sim_cmd + tele_args, stdout=subprocess.PIPE, stderr=log, env=env, text=True)
         bind = None
         deadline = time.monotonic() + a.startup_timeout
         while bind is None:
@@ -97,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
             procs[f"companion {am.sysid}"] = subprocess.Popen(
                 _command("companion") + key_args + ["--sysid", str(am.sysid), "--sim", bind, "--config", cfg,
                                          "--outcome", str(run_dir / f"am{am.sysid}.json"),
-                                         "--connect-timeout", str(a.startup_timeout)],
+                                         "--connect-timeout", str(a.startup_timeout)] + tele_args,
                 stdout=clog, stderr=subprocess.STDOUT, env=env)
         failed = _follow(sim, procs, bar)
     except KeyboardInterrupt:
@@ -114,6 +128,11 @@ def main(argv: list[str] | None = None) -> int:
         if p.returncode != 0 and name not in failed:
             failed.append(name)
     _print_summary(run_dir, spec, procs)
+    if not a.no_telemetry and mcap.is_file():
+        r = subprocess.run(_command("ground-station") + ["review", str(mcap), "--plots", str(run_dir / "plots")],
+                           capture_output=True, text=True, env=env)
+        print(r.stdout + r.stderr, file=sys.stderr)
+        print(f"log: {mcap}\nplots: {run_dir / 'plots'}", file=sys.stderr)
     if failed:
         print(f"am-run: FAILED: {', '.join(failed)} (logs in {run_dir})", file=sys.stderr)
         return 1
@@ -130,6 +149,25 @@ def _fresh_key(spec, run_dir: Path) -> list[str]:
     with os.fdopen(fd, "w") as fh:
         fh.write(os.urandom(32).hex() + "\n")
     return ["--key-file", str(path)]
+
+
+def _free_tcp_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _wait_listening(endpoint: str, proc: subprocess.Popen, deadline: float) -> None:
+    host, port = endpoint.split("/")[1].rsplit(":", 1)
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise RuntimeError(f"the ground-station recorder exited with {proc.returncode}")
+        try:
+            with socket.create_connection((host, int(port)), timeout=0.2):
+                return
+        except OSError:
+            time.sleep(0.05)
+    raise RuntimeError(f"the ground-station recorder is not listening on {endpoint}")
 
 
 def _readable(stream, deadline: float) -> bool:

@@ -28,6 +28,10 @@ from amlink.limits import SetpointLimits
 from amlink.lockstep import SimServer
 from amlink.types import ScenarioInfo
 
+from telemetry.publisher import TelemetryPublisher
+from telemetry.session import TelemetryConfigError, add_zenoh_arguments, options_from_args
+from telemetry.wiring import SimulatorTelemetry
+
 from .core import SitlCore
 
 DEFAULT_SCENARIO = Path(__file__).resolve().parents[1] / "configs" / "scenarios" / "two_am_comp.toml"
@@ -85,6 +89,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="signing master key (64 hex digits); overrides [link].key_file of the scenario")
     ap.add_argument("--progress", choices=("bar", "jsonl", "none"), default=None,
                     help="progress display (default: bar on a terminal, else none)")
+    add_zenoh_arguments(ap, role="publisher")
     a = ap.parse_args(argv)
     try:
         spec = load_scenario(a.config)
@@ -107,7 +112,18 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _on_signal)
     signal.signal(signal.SIGINT, _on_signal)
 
-    core = SitlCore(spec, log=lambda msg: print(f"simulator: {msg}", file=sys.stderr, flush=True))
+    try:
+        tele = TelemetryPublisher(options_from_args(a), name="simulator")
+    except (TelemetryConfigError, ValueError) as exc:
+        print(f"simulator: error: telemetry: {exc}", file=sys.stderr)
+        return 2
+    sim_tele = SimulatorTelemetry(tele, spec)
+
+    def log(msg: str) -> None:
+        print(f"simulator: {msg}", file=sys.stderr, flush=True)
+        sim_tele.fault(core.time_s, msg, level="warning")
+
+    core = SitlCore(spec, log=log, on_truth=sim_tele.truth)
     v = spec.vehicle
     limits = SetpointLimits.for_vehicle(v.rotors.count * v.rotors.thrust_max_n, max(v.joint_torque_max_nm), v.n_joints)
     server = SimServer(a.bind, sysids=sysids, scenario=info, timeout_s=a.step_timeout, signing_keys=keys,
@@ -117,6 +133,7 @@ def main(argv: list[str] | None = None) -> int:
     told = status  # what the companions hear (STATUSTEXT carries 50 bytes)
     n_steps = int(round(duration * spec.rate_hz))
     result: dict = {}
+    tele.open()
     try:
         core.connect()
         host, port = server.open()
@@ -126,6 +143,7 @@ def main(argv: list[str] | None = None) -> int:
         server.wait_for_peers(a.peer_timeout)
         server.wait_for_armed(a.peer_timeout)
         progress.t_wall0 = time.perf_counter()
+        sim_tele.start(core.time_s)
         for k in range(n_steps):
             frames = core.frames(k)
             setpoints = server.exchange(frames, partial=True)
@@ -146,6 +164,7 @@ def main(argv: list[str] | None = None) -> int:
         status, code, told = f"link failure: {exc}", 1, str(exc)
         print(f"\nsimulator: error: {exc}", file=sys.stderr)
     finally:
+        sim_tele.end(core.time_s, status, level="info" if code == 0 else "error")
         server.close(told, error=code != 0 and not completed)
         if not result:
             try:
@@ -153,6 +172,7 @@ def main(argv: list[str] | None = None) -> int:
             except Exception:  # the world never connected
                 result = {}
         core.close()
+        tele.close()
     wall = time.perf_counter() - progress.t_wall0
     sim_time = k * spec.dt_s
     result = {"scenario": spec.name, "scenario_id": info.scenario_id, "status": status, "exit_code": code,
