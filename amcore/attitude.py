@@ -6,40 +6,75 @@
 with b_1d the desired heading. Given f_d and its derivatives (and b_1d's), this returns
 R_d, Omega_d = (R_d^T Rdot_d)^vee and Omegadot_d, both in the desired frame. The paper's
 w_b,d = R_b^T R_d Omega_d (eq. ori_vel_error) and its derivative are formed in control.
+
+The arithmetic is on 3-tuples of Python floats (see amcore.vec3).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from .so3 import cross, hat, vee
+from .vec3 import Vec, dot, vee_RtX
 
 
-def _unit_derivs(a: np.ndarray, ad: np.ndarray, add: np.ndarray):
+def _unit_derivs(a: Vec, ad: Vec, add: Vec) -> tuple[Vec, Vec, Vec]:
     """u = a/|a| and its first two derivatives."""
-    n = float(np.linalg.norm(a))
-    u = a / n
-    ud = ad / n - a * (a @ ad) / n**3
-    udd = add / n - 2.0 * ad * (a @ ad) / n**3 - a * (ad @ ad + a @ add) / n**3 + 3.0 * a * (a @ ad) ** 2 / n**5
-    return u, ud, udd
+    a0, a1, a2 = a
+    d0, d1, d2 = ad
+    e0, e1, e2 = add
+    nn = a0 * a0 + a1 * a1 + a2 * a2
+    n = math.sqrt(nn)
+    n3 = n * nn
+    a_ad = a0 * d0 + a1 * d1 + a2 * d2
+    s1 = a_ad / n3
+    s2 = (d0 * d0 + d1 * d1 + d2 * d2 + a0 * e0 + a1 * e1 + a2 * e2) / n3 - 3.0 * a_ad * a_ad / (n3 * nn)
+    return ((a0 / n, a1 / n, a2 / n),
+            (d0 / n - a0 * s1, d1 / n - a1 * s1, d2 / n - a2 * s1),
+            (e0 / n - 2.0 * d0 * s1 - a0 * s2, e1 / n - 2.0 * d1 * s1 - a1 * s2, e2 / n - 2.0 * d2 * s1 - a2 * s2))
+
+
+def _cross_derivs(a: Vec, ad: Vec, add: Vec, b: Vec, bd: Vec, bdd: Vec) -> tuple[Vec, Vec, Vec]:
+    """a x b and its first two derivatives."""
+    a0, a1, a2 = a
+    d0, d1, d2 = ad
+    e0, e1, e2 = add
+    b0, b1, b2 = b
+    f0, f1, f2 = bd
+    g0, g1, g2 = bdd
+    c = (a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0)
+    cd = (d1 * b2 - d2 * b1 + (a1 * f2 - a2 * f1),
+          d2 * b0 - d0 * b2 + (a2 * f0 - a0 * f2),
+          d0 * b1 - d1 * b0 + (a0 * f1 - a1 * f0))
+    cdd = (e1 * b2 - e2 * b1 + 2.0 * (d1 * f2 - d2 * f1) + (a1 * g2 - a2 * g1),
+           e2 * b0 - e0 * b2 + 2.0 * (d2 * f0 - d0 * f2) + (a2 * g0 - a0 * g2),
+           e0 * b1 - e1 * b0 + 2.0 * (d0 * f1 - d1 * f0) + (a0 * g1 - a1 * g0))
+    return c, cd, cdd
+
+
+def desired_attitude_cols(f, fd, fdd, b1, b1d, b1dd):
+    """Columns (b_1, b_2, b_3) of R_d, Omega_d and Omegadot_d as 3-tuples (eq. Rd).
+
+    Inputs are 3-sequences of floats. Raises if |f_d| or |b_3d x b_1d| vanishes.
+    """
+    if dot(f, f) < 1e-12:
+        raise FloatingPointError("eq. Rd needs |f_d| > 0")
+    b3, b3d, b3dd = _unit_derivs(f, fd, fdd)
+    c, cd, cdd = _cross_derivs(b3, b3d, b3dd, b1, b1d, b1dd)
+    if dot(c, c) < 1e-12:
+        raise FloatingPointError("eq. Rd: heading b_1d is parallel to b_3d")
+    b2, b2d, b2dd = _unit_derivs(c, cd, cdd)
+    b1c, b1cd, b1cdd = _cross_derivs(b2, b2d, b2dd, b3, b3d, b3dd)
+    # Omega_d = vee(R^T Rdot) and Omegadot_d = vee(R^T Rddot - hat(Omega_d)^2); the square is
+    # symmetric, so vee drops it.
+    R = (b1c, b2, b3)
+    Om = vee_RtX(R, (b1cd, b2d, b3d))
+    Omd = vee_RtX(R, (b1cdd, b2dd, b3dd))
+    return (b1c, b2, b3), Om, Omd
 
 
 def desired_attitude(f, fd, fdd, b1, b1d, b1dd):
-    """(R_d, Omega_d, Omegadot_d) of eq. Rd. Raises if |f_d| or |b_3d x b_1d| vanishes."""
-    if np.linalg.norm(f) < 1e-6:
-        raise FloatingPointError("eq. Rd needs |f_d| > 0")
-    b3, b3d, b3dd = _unit_derivs(f, fd, fdd)
-    c = cross(b3, b1)
-    if np.linalg.norm(c) < 1e-6:
-        raise FloatingPointError("eq. Rd: heading b_1d is parallel to b_3d")
-    cd = cross(b3d, b1) + cross(b3, b1d)
-    cdd = cross(b3dd, b1) + 2.0 * cross(b3d, b1d) + cross(b3, b1dd)
-    b2, b2d, b2dd = _unit_derivs(c, cd, cdd)
-    b1c = cross(b2, b3)
-    b1cd = cross(b2d, b3) + cross(b2, b3d)
-    b1cdd = cross(b2dd, b3) + 2.0 * cross(b2d, b3d) + cross(b2, b3dd)
-    R = np.column_stack([b1c, b2, b3])
-    Rd = np.column_stack([b1cd, b2d, b3d])
-    Rdd = np.column_stack([b1cdd, b2dd, b3dd])
-    Om = vee(R.T @ Rd)
-    Omd = vee(R.T @ Rdd - hat(Om) @ hat(Om))
-    return R, Om, Omd
+    """(R_d, Omega_d, Omegadot_d) of eq. Rd as arrays. Raises if |f_d| or |b_3d x b_1d| vanishes."""
+    args = [x.tolist() if isinstance(x, np.ndarray) else tuple(x) for x in (f, fd, fdd, b1, b1d, b1dd)]
+    cols, Om, Omd = desired_attitude_cols(*args)
+    return np.array(cols).T.copy(), np.array(Om), np.array(Omd)

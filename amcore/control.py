@@ -28,16 +28,18 @@ Details the paper leaves implicit, as implemented here:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
+from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
-from .attitude import desired_attitude
+from . import linalg3
+from . import vec3 as v3
+from .attitude import desired_attitude_cols
 from .config import VehicleParams
 from .filters import FilterState, LowPass2, lowpass_accel, lowpass_update
 from .model import AmModel, AmState, decoupled_terms
-from .so3 import cross, hat, vee
 from .task import TaskFrame, task_terms
 
 E3 = np.array([0.0, 0.0, 1.0])
@@ -164,10 +166,17 @@ def _saturation(e: np.ndarray, limit: float) -> tuple[float, np.ndarray | None]:
     """Radial saturation sat(e) = e min(1, limit/|e|): returns (scale, P) with P = d sat / d e
     where saturated (None otherwise). Derivatives of sat(e) are taken as P e^(k): exact for the
     first, the saturation's curvature is dropped in higher ones (feed-forward only)."""
-    n = float(np.linalg.norm(e))
+    n = math.sqrt(e.dot(e))
     if n <= limit:
         return 1.0, None
     return limit / n, (np.eye(3) - np.outer(e, e) / n**2) * (limit / n)
+
+
+def _feedforward_pd(m: float, a, K, x, D, xd, f) -> v3.Vec:
+    """m a - K x - D xd - f on 3-vectors (K, D nested lists): the pattern of eq. Com_controller
+    and of its time derivatives."""
+    Kx, Dxd = v3.mv(K, x), v3.mv(D, xd)
+    return (m * a[0] - Kx[0] - Dxd[0] - f[0], m * a[1] - Kx[1] - Dxd[1] - f[1], m * a[2] - Kx[2] - Dxd[2] - f[2])
 
 
 def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmState,
@@ -176,82 +185,91 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
 
     wrench_E: the wrench [f_e; tau_e] the environment applies on the end-effector,
     expressed in {e} (an F/T sensor's reading) [N, N m].
+
+    The 3-vector chains (CoM law, eq. Rd, orientation law) run on Python floats
+    (amcore.vec3); the matrix work of eq. u3 on numpy.
     """
     p = params
     m, g = model.mass_kg, model.gravity_mps2
     need_full = p.compensate_Lambda_y_dot
     tm = decoupled_terms(model, data, state, full=need_full)
     tk = task_terms(model, data, tm, p.task_frame, p.components, full=need_full)
-    R, w = state.R_WB, state.w_B
+    R = state.R_WB
     xi = tm.xi
 
     # --- measured wrench: world-aligned at {e}, low-pass filtered (exact derivatives)
-    R_WE = tk.R_WE
-    raw_W = np.concatenate([R_WE @ wrench_E[0:3], R_WE @ wrench_E[3:6]])
+    R_WE = tk.R_WE.tolist()
+    f_E = np.asarray(wrench_E, dtype=float).tolist()
+    raw_W = np.array(v3.mv(R_WE, f_E[0:3]) + v3.mv(R_WE, f_E[3:6]))  # [R_e f_e; R_e tau_e]
     dt = 0.0 if memory.t_s is None else t_s - memory.t_s
     filt = lowpass_update(p.wrench_filter, memory.wrench, raw_W, dt)
-    filt_dd = lowpass_accel(p.wrench_filter, filt, raw_W)
     F_W = filt.x[0:3]
-    if p.force_rate_feedforward:
-        F_W_d, F_W_dd = filt.xdot[0:3], filt_dd[0:3]
-    else:  # F_e treated as slowly varying in f_d's derivatives (see ControllerOptions)
-        F_W_d = F_W_dd = _ZERO3
-    wrench_E_f = np.concatenate([R_WE.T @ filt.x[0:3], R_WE.T @ filt.x[3:6]])
-    F_xi = tm.T_inv.T @ (tk.J_e.T @ wrench_E_f)
+    x_W = filt.x.tolist()
+    wrench_E_f = np.array(v3.mtv(R_WE, x_W[0:3]) + v3.mtv(R_WE, x_W[3:6]))  # [R_e^T f; R_e^T tau]
+    F_xi = tm.T_inv.T.dot(tk.J_e.T.dot(wrench_E_f))
     s = 1.0 if p.force_compensation else 0.0
+    sF_W = v3.scale(s, x_W[0:3])
+    if p.force_rate_feedforward:
+        sF_W_d = v3.scale(s, filt.xdot.tolist()[0:3])
+        sF_W_dd = v3.scale(s, lowpass_accel(p.wrench_filter, filt, raw_W).tolist()[0:3])
+    else:  # F_e treated as slowly varying in f_d's derivatives (see ControllerOptions)
+        sF_W_d = sF_W_dd = (0.0, 0.0, 0.0)
 
     # --- CoM law, eq. Com_controller
-    b3 = R[:, 2]
-    b3_d = R @ cross(w, E3)
+    Rl = R.tolist()
+    w = state.w_B.tolist()
+    b1_B, b2_B, b3 = (Rl[0][0], Rl[1][0], Rl[2][0]), (Rl[0][1], Rl[1][1], Rl[2][1]), (Rl[0][2], Rl[1][2], Rl[2][2])
+    b3_d = v3.mv(Rl, (w[1], -w[0], 0.0))  # R (w x e3)
     e = tm.r_c - ref.r_c
-    ed = xi[0:3] - ref.r_c_d1
+    ed = (xi[0:3] - ref.r_c_d1).tolist()
     scale, P = _saturation(e, p.com_err_max)
-    sat = (lambda x: x) if P is None else (lambda x: P @ x)
-    f_d = m * ref.r_c_d2 + m * g * E3 - s * F_W - p.gains_K_t @ (scale * e) - p.gains_D_t @ ed
-    u1 = float(f_d @ b3)
-    a_c = (u1 * b3 + s * F_W) / m - g * E3  # model CoM acceleration (F_rc only if measured)
-    if p.force_compensation:
-        edd = a_c - ref.r_c_d2
-    else:  # no F/T sensor: the CoM acceleration is unknown under contact (see module doc)
-        edd = _ZERO3
-    f_d_d = m * ref.r_c_d3 - p.gains_K_t @ sat(ed) - p.gains_D_t @ edd - s * F_W_d
-    if p.force_compensation:
-        u1_d = float(f_d_d @ b3 + f_d @ b3_d)
-        a_c_d = (u1_d * b3 + u1 * b3_d + s * F_W_d) / m
-        eddd = a_c_d - ref.r_c_d3
-    else:
-        eddd = _ZERO3
-    f_d_dd = m * ref.r_c_d4 - p.gains_K_t @ sat(edd) - p.gains_D_t @ eddd - s * F_W_dd
+    Pl = None if P is None else P.tolist()
+    sat = (lambda x: x) if P is None else (lambda x: v3.mv(Pl, x))
+    K, D = p.gains_K_t.tolist(), p.gains_D_t.tolist()
+    r_d2, r_d3, r_d4 = ref.r_c_d2.tolist(), ref.r_c_d3.tolist(), ref.r_c_d4.tolist()
+    mg_e3 = (0.0, 0.0, m * g)
+    f_d = _feedforward_pd(m, r_d2, K, v3.scale(scale, e.tolist()), D, ed, v3.sub(sF_W, mg_e3))
+    u1 = v3.dot(f_d, b3)
+    a_c = v3.sub(v3.div(v3.add(v3.scale(u1, b3), sF_W), m), (0.0, 0.0, g))  # model CoM acceleration
+    # without an F/T sensor the CoM acceleration is unknown under contact (see module doc)
+    edd = v3.sub(a_c, r_d2) if p.force_compensation else (0.0, 0.0, 0.0)
+    f_d_d = _feedforward_pd(m, r_d3, K, sat(ed), D, edd, sF_W_d)
+    u1_d = v3.dot(f_d_d, b3) + v3.dot(f_d, b3_d)
+    a_c_d = v3.div(v3.add(v3.add(v3.scale(u1_d, b3), v3.scale(u1, b3_d)), sF_W_d), m)
+    eddd = v3.sub(a_c_d, r_d3) if p.force_compensation else (0.0, 0.0, 0.0)
+    f_d_dd = _feedforward_pd(m, r_d4, K, sat(edd), D, eddd, sF_W_dd)
     com_sat = P is not None
 
     # --- desired attitude, eq. Rd
-    c, sn = np.cos(ref.psi), np.sin(ref.psi)
-    b1 = np.array([c, sn, 0.0])
-    b1_d = ref.psi_d1 * np.array([-sn, c, 0.0])
-    b1_dd = ref.psi_d2 * np.array([-sn, c, 0.0]) - ref.psi_d1**2 * np.array([c, sn, 0.0])
-    R_d, Om_d, Omd_d = desired_attitude(f_d, f_d_d, f_d_dd, b1, b1_d, b1_dd)
+    c, sn = math.cos(ref.psi), math.sin(ref.psi)
+    pd1, pd2 = ref.psi_d1, ref.psi_d2
+    b1 = (c, sn, 0.0)
+    b1_d = (pd1 * -sn, pd1 * c, 0.0)
+    b1_dd = (pd2 * -sn - pd1**2 * c, pd2 * c - pd1**2 * sn, 0.0)
+    (d1, d2, d3), Om_d, Omd_d = desired_attitude_cols(f_d, f_d_d, f_d_dd, b1, b1_d, b1_dd)
 
-    # --- orientation law, eq. ori_controller
-    e_R = 0.5 * vee(R_d.T @ R - R.T @ R_d)
-    RtRd = R.T @ R_d
-    w_bd = RtRd @ Om_d
-    e_w = w - w_bd
-    wdot_bd = -cross(w, w_bd) + RtRd @ Omd_d
-    Lam_w = tm.Lambda_xi[3:6, 3:6]
+    # --- orientation law, eq. ori_controller: e_R = vee(R_d^T R_b - R_b^T R_d) / 2
+    e_R = v3.vee_RtX((d1, d2, d3), (b1_B, b2_B, b3))
+    w_bd = v3.mtv(Rl, v3.cols_mv(d1, d2, d3, Om_d))  # R_b^T R_d Omega_d
+    e_w = v3.sub(w, w_bd)
+    wdot_bd = v3.sub(v3.mtv(Rl, v3.cols_mv(d1, d2, d3, Omd_d)), v3.cross(w, w_bd))
     Gxi = tm.Gamma_xi_xi
-    u2 = Lam_w @ (wdot_bd - p.Lambda_wb_d_inv @ (p.k_R * e_R + p.k_w * e_w)) + Gxi[3:6] - s * F_xi[3:6]
+    G_w = Gxi.tolist()[3:6]
+    k_e = v3.mv(p.Lambda_wb_d_inv.tolist(), v3.add(v3.scale(p.k_R, e_R), v3.scale(p.k_w, e_w)))
+    u2 = v3.sub(v3.add(v3.mv(tm.Lambda_xi[3:6, 3:6].tolist(), v3.sub(wdot_bd, k_e)), G_w),
+                v3.scale(s, F_xi.tolist()[3:6]))
 
     # --- end-effector impedance law, eq. u3
-    Li = tm.Lambda_xi_inv
     J = tk.J
-    LiJt = Li @ J.T
-    Lambda_y = np.linalg.inv(J @ LiJt)
-    Jbar = Lambda_y @ LiJt.T  # (J^{Lambda+})^T = Lambda_y J Lambda_xi^-1
+    LiJt = tm.Lambda_xi_inv.dot(J.T)
+    Lambda_y = linalg3.inv(J.dot(LiJt))
+    Jbar = Lambda_y.dot(LiJt.T)  # (J^{Lambda+})^T = Lambda_y J Lambda_xi^-1
     y_err = tk.y - ref.y
-    y_err_s = np.clip(y_err, -p.y_err_max, p.y_err_max)
-    ydot = J @ xi
+    y_err_l = y_err.tolist()
+    y_err_s = [min(max(x, -lim), lim) for x, lim in zip(y_err_l, p.y_err_max.tolist())]  # np.clip
+    ydot = J.dot(xi)
     yd_err = ydot - ref.y_d1
-    rhs = -(Lambda_y @ (tk.Jdot_xi - ref.y_d2) + p.D_y @ yd_err + p.K_y @ y_err_s)
+    rhs = -(Lambda_y.dot(tk.Jdot_xi - ref.y_d2) + p.D_y.dot(yd_err) + p.K_y.dot(y_err_s))
     Lambda_y_dot = None
     if p.compensate_Lambda_y_dot:
         Lxi_dot = tm.Gamma_xi + tm.Gamma_xi.T
@@ -259,27 +277,34 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
         inner = Jd @ LiJt + LiJt.T @ Jd.T - LiJt.T @ Lxi_dot @ LiJt
         Lambda_y_dot = -Lambda_y @ inner @ Lambda_y
         rhs = rhs - 0.5 * Lambda_y_dot @ yd_err
-    known = Jbar[:, 0:3] @ (u1 * b3 - m * g * E3) + Jbar[:, 3:6] @ (u2 - Gxi[3:6])
+    u1_b3 = v3.scale(u1, b3)
+    known = Jbar[:, 0:6].dot(v3.sub(u1_b3, mg_e3) + v3.sub(u2, G_w))
     J3 = Jbar[:, 6:]
-    sv = np.linalg.svd(J3, compute_uv=False)
-    sigma_min = float(sv[-1])
+    sigma_min, J3_inv_b = linalg3.sigma_min_and_solve(J3, rhs - known)
     damping = 0.0
     if sigma_min >= p.sigma_damping:
-        u3 = Gxi[6:] + np.linalg.solve(J3, rhs - known)
+        if J3_inv_b is None:
+            raise np.linalg.LinAlgError("eq. u3: Jbar_3 is singular")
+        u3 = Gxi[6:] + J3_inv_b
     else:
         damping = p.damping_max**2 * (1.0 - (sigma_min / p.sigma_damping) ** 2)
         n = J3.shape[0]
         u3 = Gxi[6:] + J3.T @ np.linalg.solve(J3 @ J3.T + damping * np.eye(n), rhs - known)
 
-    u = np.concatenate([u1 * b3, u2, u3])
-    tau = tm.T.T @ u
-    F_y = Jbar @ F_xi
-    cmd = Command(thrust_n=float(tau[2]), tau_B_nm=tau[3:6].copy(), tau_q_nm=tau[6:].copy())
+    u = np.array(u1_b3 + u2 + tuple(u3.tolist()))
+    tau = tm.T.T.dot(u)
+    F_y = Jbar.dot(F_xi)
+    cmd = Command(thrust_n=tau.item(2), tau_B_nm=tau[3:6].copy(), tau_q_nm=tau[6:].copy())
+    # one array for the 3-vectors and R_d's rows (numpy's cost is per call, a flat list is cheapest)
+    vecs = np.array(f_d + e_R + e_w + w_bd + wdot_bd + Om_d + (d1[0], d2[0], d3[0], d1[1], d2[1], d3[1],
+                                                             d1[2], d2[2], d3[2])).reshape(9, 3)
     diag = Diagnostics(
-        r_c=tm.r_c, r_c_d=ref.r_c, r_c_err=e, rdot_c=xi[0:3].copy(), e_R=e_R, e_w=e_w, R_WB=R, R_d=R_d,
-        w_bd=w_bd, wdot_bd=wdot_bd, Omega_d=Om_d, f_d=f_d, y=tk.y, y_d=ref.y, y_err=y_err, ydot=ydot,
-        F_y=F_y, F_rc=F_W.copy(), wrench_E_filtered=wrench_E_f, sigma_min_J3=sigma_min, damping=damping,
-        com_err_saturated=com_sat, y_err_saturated=bool(np.any(y_err_s != y_err)), u=u, tau=tau,
-        Lambda_y=Lambda_y, Lambda_y_dot=Lambda_y_dot,
+        r_c=tm.r_c, r_c_d=ref.r_c, r_c_err=e, rdot_c=xi[0:3].copy(), e_R=vecs[1], e_w=vecs[2], R_WB=R,
+        R_d=vecs[6:9], w_bd=vecs[3], wdot_bd=vecs[4], Omega_d=vecs[5], f_d=vecs[0], y=tk.y,
+        y_d=ref.y, y_err=y_err, ydot=ydot, F_y=F_y, F_rc=F_W.copy(), wrench_E_filtered=wrench_E_f,
+        sigma_min_J3=sigma_min, damping=damping, com_err_saturated=com_sat,
+        y_err_saturated=any(map(float.__ne__, y_err_s, y_err_l)),  # the clip changed something
+        u=u, tau=tau, Lambda_y=Lambda_y,
+        Lambda_y_dot=Lambda_y_dot,
     )
     return StepResult(cmd, diag, ControllerMemory(t_s=t_s, wrench=filt))

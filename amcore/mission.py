@@ -72,11 +72,11 @@ class AmMission:
     phase_ends_s: tuple[float, float, float]
 
     def reference(self, t: float) -> Reference:
-        c = self.com_path_t.eval(t, 4)
         R = self.frame.R_WT
-        y = self.y_path.eval(t, 2)
+        c = self.com_path_t.eval_array(t, 4).dot(R.T)  # rows R c^(k)
+        y = self.y_path.eval_array(t, 2)
         return Reference(
-            r_c=self.frame.p_WT + R @ c[0], r_c_d1=R @ c[1], r_c_d2=R @ c[2], r_c_d3=R @ c[3], r_c_d4=R @ c[4],
+            r_c=self.frame.p_WT + c[0], r_c_d1=c[1], r_c_d2=c[2], r_c_d3=c[3], r_c_d4=c[4],
             psi=self.psi, psi_d1=0.0, psi_d2=0.0, y=y[0], y_d1=y[1], y_d2=y[2],
         )
 

@@ -18,12 +18,15 @@ skew-consistent (Christoffel) one; Gamma_xi's zero blocks rely on that choice.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 import pinocchio as pin
 
+from . import linalg3
+from . import vec3 as v3
 from .config import VehicleParams
-from .so3 import hat, quat_wxyz_to_R
+from .so3 import hat, quat_wxyz_to_R, quat_xyzw_of_R
 
 
 @dataclass(frozen=True)
@@ -99,13 +102,12 @@ class AmState:
         )
 
     def pin_q(self) -> np.ndarray:
-        quat = pin.Quaternion(self.R_WB)
-        quat.normalize()
-        return np.concatenate([self.p_WB, quat.coeffs(), self.q])  # coeffs are (x, y, z, w)
+        """[p_WB, quaternion (x, y, z, w) of R_WB, q]: pinocchio's free-flyer configuration."""
+        return np.array(self.p_WB.tolist() + quat_xyzw_of_R(self.R_WB) + self.q.tolist())
 
     def pin_v(self) -> np.ndarray:
         """V = [v_b, w_b, qdot] of eq. dynamics."""
-        return np.concatenate([self.v_B, self.w_B, self.qdot])
+        return np.concatenate((self.v_B, self.w_B, self.qdot))
 
 
 @dataclass
@@ -147,73 +149,77 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     """Evaluate M, C, T, T^-1, Tdot V, xi, Lambda_xi, Gamma_xi xi at `state`.
 
     Also runs pinocchio's forward kinematics, Jacobians and their time variation into
-    `data`, which `amcore.task` then reads. With full=True the matrices Tdot and Gamma_xi
-    (= T^-T (C - M T^-1 Tdot) T^-1) are formed too; the controller only needs products.
+    `data`, which `amcore.task` then reads (computeCoriolisMatrix fills data.J and data.dJ
+    as computeJointJacobiansTimeVariation does; tests/amcore/test_task.py checks it). With
+    full=True the matrices Tdot and Gamma_xi (= T^-T (C - M T^-1 Tdot) T^-1) are formed
+    too; the controller only needs products.
+
+    Lambda_xi = T^-T M T^-1 is block diagonal (eq. new_dynamics) with blocks m I, Lambda_w
+    and Lambda_rho = (N M^-1 N^T)^-1 = Z M Z^T = A, so its inverse is formed blockwise.
+    At these sizes numpy's cost is per call, not per flop, so the code below keeps the
+    number of calls low: whole block rows at once, ndarray.dot (half the cost of `@`).
     """
     pm = model.pin_model
     n, m = model.n, model.mass_kg
+    nv = n + 6
     q_pin, V = state.pin_q(), state.pin_v()
-    pin.computeJointJacobiansTimeVariation(pm, data, q_pin, V)
-    pin.updateFramePlacements(pm, data)
     M = pin.crba(pm, data, q_pin)
-    M = np.triu(M) + np.triu(M, 1).T  # crba may fill only the upper triangle
-    C = pin.computeCoriolisMatrix(pm, data, q_pin, V).copy()
+    np.copyto(M, M.T, where=_strictly_lower(nv))  # crba may fill only the upper triangle
+    C = pin.computeCoriolisMatrix(pm, data, q_pin, V)
+    pin.updateFramePlacements(pm, data)
     Mdot = C + C.T
 
     R = state.R_WB
-    w, qd = state.w_B, state.qdot
-    r_b = np.array([M[1, 5], M[2, 3], M[0, 4]]) / m  # M_vw = -m hat(r_b)
-    J_b = M[0:3, 6:] / m
-    Jdot_b = Mdot[0:3, 6:] / m
-    rdot_b = J_b @ qd
+    w = state.w_B
+    Mv_m = M[0:3] / m  # [I, -hat(r_b), J_b]; M's first block row is m times this
+    r_b = np.array([Mv_m.item(1, 5), Mv_m.item(2, 3), Mv_m.item(0, 4)])
+    J_b = Mv_m[:, 6:]
 
-    A = M[6:, 6:] - m * (J_b.T @ J_b)  # Z M Z^T
-    B = M[6:, 3:6] - J_b.T @ M[0:3, 3:6]
-    A_inv = np.linalg.inv(A)
-    N1 = A_inv @ B
-    Adot = Mdot[6:, 6:] - m * (Jdot_b.T @ J_b + J_b.T @ Jdot_b)
-    Bdot = Mdot[6:, 3:6] - Jdot_b.T @ M[0:3, 3:6] - J_b.T @ Mdot[0:3, 3:6]
-    N1dot = A_inv @ (Bdot - Adot @ N1)
+    # Z M with Z = [-J_b^T, 0, I] (eq. new_coord, in {b}) is [0, B, A]: A = Z M Z^T, N_1 = A^-1 B.
+    # Its rate Z Mdot + Zdot M gives [., Bdot, Adot] (m Jdot_b = Mdot[0:3, 6:]).
+    ZM = M[6:] - J_b.T.dot(M[0:3])
+    ZMdot = Mdot[6:] - Mdot[0:3, 6:].T.dot(Mv_m) - J_b.T.dot(Mdot[0:3])
+    A = ZM[:, 6:]
+    A_inv = linalg3.inv(A)
+    N1 = A_inv.dot(ZM[:, 3:6])
 
-    nv = n + 6
-    hr = hat(r_b)
-    Rhr = R @ hr
-    RJ = R @ J_b
-    T = np.zeros((nv, nv))
+    T = _eye(nv)
+    T[0:3] = R.dot(Mv_m)  # R [I, -hat(r_b), J_b]
     T[0:3, 0:3] = R
-    T[0:3, 3:6] = -Rhr
-    T[0:3, 6:] = RJ
-    T[3:6, 3:6] = np.eye(3)
     T[6:, 3:6] = N1
-    T[6:, 6:] = np.eye(n)
 
-    T_inv = np.zeros((nv, nv))
+    T_inv = _eye(nv)
     T_inv[0:3, 0:3] = R.T
-    T_inv[0:3, 3:6] = hr + J_b @ N1
-    T_inv[0:3, 6:] = -J_b
-    T_inv[3:6, 3:6] = np.eye(3)
     T_inv[6:, 3:6] = -N1
-    T_inv[6:, 6:] = np.eye(n)
+    T_inv[0:3, 3:] = -Mv_m[:, 3:].dot(T_inv[3:, 3:])  # [hat(r_b) + J_b N_1, -J_b]
 
-    hw = hat(w)
-    Rhw = R @ hw
-    v_b = V[0:3]
-    # d/dt of the first block row R [I, -hat(r_b), J_b], applied to V
+    # d/dt of the first block row R [I, -hat(r_b), J_b], applied to V: with s = R^T rdot_c,
+    # R (hat(w) s + [0, -hat(rdot_b), Jdot_b] V) (3-vectors: Python floats, amcore.vec3).
+    # N1dot w = A^-1 (Bdot w - Adot N_1 w) = A^-1 [Bdot, Adot] [w; -N_1 w], and
+    # [w; -N_1 w] = [I; -N_1] w is a block column of T^-1.
+    a = v3.add(v3.cross(w.tolist(), Mv_m.dot(V).tolist()), v3.div(Mdot[0:3, 3:].dot(V[3:]).tolist(), m))
     Tdot_V = np.zeros(nv)
-    Tdot_V[0:3] = Rhw @ (v_b - hr @ w + J_b @ qd) + R @ (-hat(rdot_b) @ w + Jdot_b @ qd)
-    Tdot_V[6:] = N1dot @ w
+    Tdot_V[0:3] = v3.mv(R.tolist(), a)
+    Tdot_V[6:] = A_inv.dot(ZMdot[:, 3:].dot(T_inv[3:, 3:6].dot(w)))
 
-    xi = T @ V
-    Lambda_xi = T_inv.T @ M @ T_inv
-    Lambda_xi_inv = T @ np.linalg.solve(M, T.T)
-    Gamma_xi_xi = T_inv.T @ (C @ V - M @ (T_inv @ Tdot_V))
+    xi = T.dot(V)
+    Lambda_xi = T_inv.T.dot(M).dot(T_inv)
+    Lambda_xi_inv = _mass_block_inverse(nv, m).copy()
+    Lambda_xi_inv[3:6, 3:6] = linalg3.inv(Lambda_xi[3:6, 3:6])
+    Lambda_xi_inv[6:, 6:] = A_inv
+    Gamma_xi_xi = T_inv.T.dot(C.dot(V)) - Lambda_xi.dot(Tdot_V)  # T^-T (C V - M T^-1 Tdot V)
 
     terms = DecoupledTerms(
-        M=M, C=C, V=V, R_WB=R, r_c=state.p_WB + R @ r_b, r_b=r_b, J_b=J_b, N1=N1,
+        M=M, C=C, V=V, R_WB=R, r_c=state.p_WB + R.dot(r_b), r_b=r_b, J_b=J_b, N1=N1,
         T=T, T_inv=T_inv, Tdot_V=Tdot_V, xi=xi, Lambda_xi=Lambda_xi,
         Lambda_xi_inv=Lambda_xi_inv, Gamma_xi_xi=Gamma_xi_xi, Mdot=Mdot,
     )
     if full:
+        Jdot_b = Mdot[0:3, 6:] / m
+        hr = hat(r_b)
+        rdot_b = J_b @ state.qdot
+        Rhw = R @ hat(w)
+        N1dot = A_inv @ (ZMdot[:, 3:6] - ZMdot[:, 6:] @ N1)
         Tdot = np.zeros((nv, nv))
         Tdot[0:3, 0:3] = Rhw
         Tdot[0:3, 3:6] = -Rhw @ hr - R @ hat(rdot_b)
@@ -222,6 +228,32 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
         terms.Tdot = Tdot
         terms.Gamma_xi = T_inv.T @ (C - M @ T_inv @ Tdot) @ T_inv
     return terms
+
+
+@lru_cache(maxsize=None)
+def _strictly_lower(nv: int) -> np.ndarray:
+    return np.tri(nv, k=-1, dtype=bool)
+
+
+@lru_cache(maxsize=None)
+def _identity(nv: int) -> np.ndarray:
+    out = np.eye(nv)
+    out.flags.writeable = False
+    return out
+
+
+@lru_cache(maxsize=None)
+def _mass_block_inverse(nv: int, m: float) -> np.ndarray:
+    """blockdiag(I_3 / m, 0, 0): the constant part of Lambda_xi^-1."""
+    out = np.zeros((nv, nv))
+    out[0:3, 0:3] = np.eye(3) / m
+    out.flags.writeable = False
+    return out
+
+
+def _eye(nv: int) -> np.ndarray:
+    """A fresh identity (copying a cached one costs a sixth of np.eye)."""
+    return _identity(nv).copy()
 
 
 def generalized_gravity(model: AmModel, data: pin.Data, state: AmState) -> np.ndarray:

@@ -1,12 +1,14 @@
 """Small SO(3) helpers: hat/vee (eq. hat), quaternion <-> rotation matrix, elementary rotations."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
 def hat(r: np.ndarray) -> np.ndarray:
     """Skew-symmetric matrix of r (eq. hat): hat(r) @ x == np.cross(r, x)."""
-    x, y, z = r
+    x, y, z = r.tolist() if isinstance(r, np.ndarray) else r  # Python floats: 4x faster here
     return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
@@ -25,6 +27,31 @@ def quat_wxyz_to_R(qwxyz: np.ndarray) -> np.ndarray:
             [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
         ]
     )
+
+
+def quat_xyzw_of_R(R: np.ndarray) -> list[float]:
+    """Unit quaternion [x, y, z, w] of a rotation matrix, as Eigen (and so pinocchio) builds
+    it from a matrix, on Python floats (half the cost of pin.Quaternion(R) for a 3x3)."""
+    m = R.tolist()
+    t = m[0][0] + m[1][1] + m[2][2]
+    q = [0.0, 0.0, 0.0, 0.0]
+    if t > 0.0:
+        t = math.sqrt(t + 1.0)
+        q[3] = 0.5 * t
+        t = 0.5 / t
+        q[0], q[1], q[2] = (m[2][1] - m[1][2]) * t, (m[0][2] - m[2][0]) * t, (m[1][0] - m[0][1]) * t
+    else:
+        i = 1 if m[1][1] > m[0][0] else 0
+        i = 2 if m[2][2] > m[i][i] else i
+        j, k = (i + 1) % 3, (i + 2) % 3
+        t = math.sqrt(m[i][i] - m[j][j] - m[k][k] + 1.0)
+        q[i] = 0.5 * t
+        t = 0.5 / t
+        q[3] = (m[k][j] - m[j][k]) * t
+        q[j] = (m[j][i] + m[i][j]) * t
+        q[k] = (m[k][i] + m[i][k]) * t
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    return [q[0] / n, q[1] / n, q[2] / n, q[3] / n]
 
 
 def R_to_quat_wxyz(R: np.ndarray) -> np.ndarray:
@@ -62,7 +89,7 @@ def exp_so3(w: np.ndarray) -> np.ndarray:
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a x b for 3-vectors; np.cross costs ~50x more on this size (axis handling)."""
-    a0, a1, a2 = a
-    b0, b1, b2 = b
+    """a x b for 3-vectors; np.cross costs ~25x more on this size (axis handling)."""
+    a0, a1, a2 = a.tolist() if isinstance(a, np.ndarray) else a  # Python floats: 3x faster
+    b0, b1, b2 = b.tolist() if isinstance(b, np.ndarray) else b
     return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])

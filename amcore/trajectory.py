@@ -9,20 +9,51 @@ whose velocity, acceleration and jerk vanish at both ends (C3 across segments).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 _S = np.array([0.0, 0.0, 0.0, 0.0, 35.0, -84.0, 70.0, -20.0])  # coefficients of tau^0..tau^7
 
 
-def _smoothstep(tau: float, order: int) -> float:
-    """d^order s / d tau^order at tau (tau is clamped to [0, 1])."""
-    if tau <= 0.0 or tau >= 1.0:
-        return (1.0 if tau >= 1.0 else 0.0) if order == 0 else 0.0
+def _derivative_coefficients(order: int) -> tuple[float, ...]:
+    """Coefficients of d^order s / d tau^order, highest power first (Horner order)."""
     c = _S.copy()
     for _ in range(order):
         c = c[1:] * np.arange(1, len(c))
-    return float(np.polyval(c[::-1], tau))
+    return tuple(c[::-1].tolist())
+
+
+_S_HORNER = tuple(_derivative_coefficients(k) for k in range(len(_S)))
+
+
+def _smoothstep(tau: float, order: int) -> float:
+    """d^order s / d tau^order at tau (tau is clamped to [0, 1]); Horner's scheme, as np.polyval."""
+    if tau <= 0.0 or tau >= 1.0:
+        return (1.0 if tau >= 1.0 else 0.0) if order == 0 else 0.0
+    if order >= len(_S_HORNER):
+        return 0.0
+    y = 0.0
+    for c in _S_HORNER[order]:
+        y = y * tau + c
+    return y
+
+
+def _smoothstep_derivs(tau: float, orders: int) -> list[float]:
+    """[s, ds/dtau, ..., d^orders s / dtau^orders] at tau (clamped to [0, 1]).
+
+    Up to the snap these are _smoothstep's Horner evaluations written out (bit for bit the
+    same: the trailing zero coefficients become bare multiplications by tau).
+    """
+    if orders > 4 or tau <= 0.0 or tau >= 1.0:
+        return [_smoothstep(tau, k) for k in range(orders + 1)]
+    t = tau
+    s3 = ((-4200.0 * t + 8400.0) * t - 5040.0) * t + 840.0
+    s2 = ((-840.0 * t + 2100.0) * t - 1680.0) * t + 420.0
+    s1 = ((-140.0 * t + 420.0) * t - 420.0) * t + 140.0
+    s0 = ((-20.0 * t + 70.0) * t - 84.0) * t + 35.0
+    return [s0 * t * t * t * t, s1 * t * t * t, s2 * t * t, s3 * t,
+            ((-16800.0 * t + 25200.0) * t - 10080.0) * t + 840.0][0:orders + 1]
 
 
 @dataclass(frozen=True)
@@ -44,17 +75,34 @@ class SmoothPath:
 
     def eval(self, t: float, orders: int) -> list[np.ndarray]:
         """[p, pdot, ..., p^(orders)] at time t [s]."""
-        out = [np.array(self.start, dtype=float)] + [np.zeros_like(self.start, dtype=float) for _ in range(orders)]
-        for mv in self.moves:
-            if t < mv.t0:
+        return list(self.eval_array(t, orders))
+
+    def eval_array(self, t: float, orders: int) -> np.ndarray:
+        """Rows p, pdot, ..., p^(orders) at time t [s], as one (orders + 1, dim) array.
+
+        The last move that has started gives the value (the ones before it have ended).
+        """
+        current = None
+        for seg in self._segments:
+            if t < seg[0]:
                 break
-            T = mv.t1 - mv.t0
-            tau = (t - mv.t0) / T
-            d = mv.p1 - mv.p0
-            out[0] = mv.p0 + d * _smoothstep(tau, 0)
-            for k in range(1, orders + 1):
-                out[k] = d * (_smoothstep(tau, k) / T**k)
+            current = seg
+        if current is None:
+            out = np.zeros((orders + 1, np.size(self.start)))
+            out[0] = self.start
+            return out
+        t0, T, p0, d = current
+        tau = (t - t0) / T
+        s = _smoothstep_derivs(tau, orders)
+        scale = [s[0]] + [s[k] / T**k for k in range(1, orders + 1)]
+        out = np.multiply.outer(scale, d)
+        out[0] += p0
         return out
+
+    @cached_property
+    def _segments(self) -> tuple[tuple[float, float, np.ndarray, np.ndarray], ...]:
+        """(t0, duration, p0, p1 - p0) of each move."""
+        return tuple((mv.t0, mv.t1 - mv.t0, mv.p0, mv.p1 - mv.p0) for mv in self.moves)
 
 
 def path_through(start: np.ndarray, moves: list[tuple[float, float, np.ndarray]]) -> SmoothPath:

@@ -5,8 +5,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from amcore.model import create_data, decoupled_terms, generalized_gravity
-from amcore.so3 import hat
+from amcore.model import AmState, create_data, decoupled_terms, generalized_gravity
+from amcore.so3 import exp_so3, hat
 
 from .conftest import flow, states
 
@@ -127,3 +127,32 @@ def test_transformed_dynamics_reproduce_forward_dynamics(model, data):
         assert np.abs(F_xi[0:3] - R_WE @ F_e[0:3]).max() < TOL  # F_rc = R_e f_e
         lhs = tm.Lambda_xi @ xidot + tm.Gamma_xi @ tm.xi + zeta
         assert np.abs(lhs - (u + F_xi)).max() < 1e-8
+
+
+def test_blockwise_terms_equal_their_generic_forms(model, data):
+    """Lambda_xi^-1 (assembled from its blocks), T^-1 (closed form) and the products Tdot V,
+    Gamma_xi xi agree with generic inverses and full matrix products."""
+    for st in states(model, count=24, seed=9):
+        tm = decoupled_terms(model, data, st, full=True)
+        Li = tm.T @ np.linalg.solve(tm.M, tm.T.T)
+        assert np.abs(tm.Lambda_xi_inv - Li).max() < TOL * np.abs(Li).max()
+        assert np.abs(tm.Lambda_xi_inv - np.linalg.inv(tm.Lambda_xi)).max() < TOL * np.abs(Li).max()
+        T_inv = np.linalg.inv(tm.T)
+        assert np.abs(tm.T_inv - T_inv).max() < TOL * np.abs(T_inv).max()
+        assert np.abs(tm.Tdot @ tm.V - tm.Tdot_V).max() < TOL * (1 + np.abs(tm.Tdot_V).max())
+        G = T_inv.T @ (tm.C - tm.M @ T_inv @ tm.Tdot) @ T_inv
+        assert np.abs(G @ tm.xi - tm.Gamma_xi_xi).max() < TOL * (1 + np.abs(tm.Gamma_xi_xi).max())
+        Lxi = T_inv.T @ tm.M @ T_inv
+        assert np.abs(tm.Lambda_xi - Lxi).max() < TOL * np.abs(Lxi).max()
+
+
+def test_pin_q_quaternion_is_pinocchios(model):
+    """AmState.pin_q builds the quaternion as pinocchio (Eigen) does, to the last bit or one ulp."""
+    rng = np.random.default_rng(4)
+    for k, st in enumerate(states(model, count=200, seed=4)):
+        R = st.R_WB if k % 2 else st.R_WB @ exp_so3(np.array([np.pi, 0, 0]) + 1e-3 * rng.normal(size=3))
+        quat = pin.Quaternion(R)
+        quat.normalize()
+        q_pin = AmState(st.p_WB, R, st.v_B, st.w_B, st.q, st.qdot).pin_q()
+        assert np.abs(q_pin[3:7] - quat.coeffs()).max() <= 4.5e-16
+        assert np.array_equal(q_pin[0:3], st.p_WB) and np.array_equal(q_pin[7:], st.q)

@@ -75,3 +75,23 @@ def test_task_frame_turns_with_heading(model, mission):
     f2 = TaskFrame(Rz @ mission.frame.R_WT, Rz @ mission.frame.p_WT)
     _, tk2 = _tk(model, st2, f2, ("x", "z", "pitch"))
     assert np.abs(tk.y - tk2.y).max() < 1e-12
+
+
+def test_model_pass_fills_the_kinematics_task_terms_reads(model, mission):
+    """decoupled_terms leaves in `data` the frame placements, Jacobians and their time
+    variation that pinocchio's dedicated passes compute (it relies on computeCoriolisMatrix)."""
+    import pinocchio as pin
+
+    pm, fid = model.pin_model, model.ee_frame_id
+    for st in states(model, count=6, seed=3):
+        d = create_data(model)
+        decoupled_terms(model, d, st)
+        ref = create_data(model)
+        pin.computeJointJacobiansTimeVariation(pm, ref, st.pin_q(), st.pin_v())
+        pin.updateFramePlacements(pm, ref)
+        for f in (fid, model.ft_frame_id):
+            assert np.abs(d.oMf[f].homogeneous - ref.oMf[f].homogeneous).max() < 1e-14
+            for rf in (pin.LOCAL, pin.WORLD, pin.LOCAL_WORLD_ALIGNED):
+                assert np.abs(pin.getFrameJacobian(pm, d, f, rf) - pin.getFrameJacobian(pm, ref, f, rf)).max() < 1e-14
+                assert np.abs(pin.getFrameJacobianTimeVariation(pm, d, f, rf)
+                              - pin.getFrameJacobianTimeVariation(pm, ref, f, rf)).max() < 1e-14
