@@ -156,3 +156,42 @@ def test_companion_with_the_wrong_signing_key_is_not_served(tmp_path):
             if p.poll() is None:
                 p.kill()
         sim.kill()
+
+
+def test_killing_the_logger_mid_run_costs_the_run_nothing_and_the_log_is_salvaged(tmp_path):
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        endpoint = f"tcp/127.0.0.1:{s.getsockname()[1]}"
+    mcap = tmp_path / "run.mcap"
+    rec = subprocess.Popen([script("ground-station"), "record", "--out", str(mcap), "--zenoh-listen", endpoint],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    tele = ["--zenoh-connect", endpoint]
+    sim = Sim("two_am_comp.toml", tmp_path, "--duration", "4", *tele)
+    c4, c5 = companion(4, sim.bind, "two_am_comp.toml", *tele), companion(5, sim.bind, "two_am_comp.toml", *tele)
+    try:
+        t_kill = None
+        for line in sim.proc.stdout:  # progress lines: simulation time
+            ev = json.loads(line)
+            if ev.get("event") == "progress" and ev["t"] >= 2.0:
+                rec.kill()
+                t_kill = ev["t"]
+                break
+        assert t_kill is not None
+        code, err = sim.wait(timeout_s=240)
+        assert code == 0, err  # the run went on without its logger
+        for c in (c4, c5):
+            c.communicate(timeout=30)
+            assert c.returncode == 0
+        r = subprocess.run([script("ground-station"), "review", str(mcap), "--json"], capture_output=True, text=True,
+                           timeout=120)
+        assert r.returncode == 0, r.stderr
+        rv = json.loads(r.stdout)
+        assert rv["log"]["salvaged"] is True
+        assert rv["log"]["sim_time_s"][1] >= t_kill - 1.5  # lost at most about the last flush period
+    finally:
+        for p in (c4, c5, rec):
+            if p.poll() is None:
+                p.kill()
+        sim.kill()
