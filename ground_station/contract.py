@@ -134,6 +134,9 @@ class KeyStats:
                     reordered=self.reordered, restarts=self.restarts)
 
 
+MAX_SIM_TIME_S = 1e7  # a payload claiming a later simulation time (or NaN) is malformed
+
+
 def _ns(t: float) -> int:
     return max(0, round(t * 1e9))
 
@@ -231,7 +234,7 @@ class Translator:
             try:
                 parsed = json.loads(data)
                 head = float(parsed["t"]), int(parsed["seq"])
-            except (ValueError, KeyError, TypeError) as exc:
+            except (ValueError, KeyError, TypeError, OverflowError) as exc:
                 if m is None:
                     self.unknown += 1
                     return [Out(f"/unknown/{key}", None, _ns(self.latest_t), bytes(data))]
@@ -239,6 +242,10 @@ class Translator:
                 self.last_error = f"{key}: payload without t/seq ({exc}): {bytes(data[:80])!r}"
                 return []
         t, seq = head
+        if not (0.0 <= t <= MAX_SIM_TIME_S and 0 <= seq < 2**63):  # NaN fails too
+            self.malformed += 1
+            self.last_error = f"{key}: implausible t = {t!r} or seq = {seq!r}"
+            return []
         self.stats.setdefault(key, KeyStats()).see(seq)
         if t > self.latest_t:
             self.latest_t = t
@@ -301,7 +308,7 @@ class Translator:
                 return [Out(SIM_EVENT_TOPIC, _RAW_SCHEMA[ch], ns, raw), Out(EVENTS_TOPIC, "foxglove.Log", ns, msg)]
             return [Out(am_event_topic(sysid), _RAW_SCHEMA[ch], ns, raw),
                     Out(am_log_topic(sysid), "foxglove.Log", ns, msg)]
-        except (ValueError, KeyError, TypeError, IndexError) as exc:
+        except (ValueError, KeyError, TypeError, IndexError, OverflowError, AttributeError) as exc:
             self.malformed += 1
             self.last_error = f"{key}: {type(exc).__name__}: {exc}"
             return []

@@ -125,7 +125,13 @@ class Recorder:
         pop, translate, write = self._inbox.popleft, self.translator.translate, self.writer.write
         while self._inbox and (max_items is None or n < max_items):
             key, data = pop()
-            for out in translate(key, data):
+            try:
+                outs = translate(key, data)
+            except Exception as exc:  # a payload the contract did not foresee: count it, never stop recording
+                self.translator.malformed += 1
+                self.translator.last_error = f"{key}: {type(exc).__name__}: {exc}"
+                outs = ()
+            for out in outs:
                 write(out)
             n += 1
         self._received += n

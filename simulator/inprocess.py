@@ -2,8 +2,9 @@
 failsafe, outcome) and the same `companion.pilot.Pilot` per AM, called in one loop.
 
 For experiments that need many runs (link-impairment sweeps, parameter studies) and for
-checking that the multi-process SITL adds nothing but transport: with an ideal link both
-produce the same `state_digest`.
+checking that the multi-process SITL adds nothing but transport: frames are rounded as the
+wire rounds them (ODOMETRY carries the base state as float32, time in microseconds;
+everything else is float64), so with an ideal link both produce the same `state_digest`.
 
     python -m simulator.inprocess configs/scenarios/two_am_comp.toml [--duration S]
 """
@@ -15,10 +16,21 @@ import sys
 import time
 from collections.abc import Callable
 
+import numpy as np
+
 from amcore.config import ConfigError, ScenarioSpec, load_scenario
+from amlink.types import SensorFrame
 from companion.pilot import Pilot
 
 from .core import SitlCore
+
+
+def as_on_the_wire(f: SensorFrame) -> SensorFrame:
+    """The frame a companion decodes: base state through float32 (MAVLink ODOMETRY)."""
+    f32 = lambda a: np.asarray(a, dtype=np.float32).astype(np.float64)  # noqa: E731
+    return SensorFrame(step=f.step, time_s=round(f.time_s * 1e6) / 1e6, p_WB=f32(f.p_WB),
+                       quat_WB_wxyz=f32(f.quat_WB_wxyz), v_B=f32(f.v_B), w_B=f32(f.w_B), q=f.q, qdot=f.qdot,
+                       wrench_E=f.wrench_E, flags=f.flags)
 
 
 def run(spec: ScenarioSpec, duration_s: float | None = None,
@@ -33,7 +45,7 @@ def run(spec: ScenarioSpec, duration_s: float | None = None,
         for k in range(n):
             frames = core.frames(k)
             gone = lost(core.time_s)
-            setpoints = {s: pilots[s].step(f)[0] for s, f in frames.items() if s not in gone}
+            setpoints = {s: pilots[s].step(as_on_the_wire(f))[0] for s, f in frames.items() if s not in gone}
             core.actuate(k, setpoints, gone)
             core.step()
         result = core.finish()

@@ -1,0 +1,70 @@
+"""The recorder's listening socket under junk: raw bytes on its TCP port and malformed
+payloads on every kind of key. It survives, counts what it cannot use, keeps every valid
+sample, and still stops on the run's end and leaves a readable log."""
+from __future__ import annotations
+
+import json
+import math
+import random
+import socket
+
+import zenoh
+
+from ground_station.mcap_io import read_log
+from telemetry import schema
+from telemetry.session import ZenohOptions, build_config
+
+from ..telemetry.zenoh_testing import free_endpoint
+from .proc import RecorderProcess
+
+
+def _junk(rng: random.Random) -> bytes:
+    kind = rng.randrange(7)
+    if kind == 0:
+        return rng.randbytes(rng.randrange(0, 2000))
+    if kind == 1:
+        return b"{not json"
+    if kind == 2:
+        return json.dumps({"t": "soon", "seq": -1}).encode()
+    if kind == 3:
+        return b'{"t": NaN, "seq": 1, "r_c": [Infinity, 1, 2]}'
+    if kind == 4:
+        return json.dumps({"t": 1e308, "seq": 2**70, "sysid": "x" * 100000}).encode()
+    if kind == 5:
+        return json.dumps([1, 2, 3]).encode()
+    return json.dumps({"t": rng.random(), "seq": rng.randrange(5), "phase": None}).encode()
+
+
+def test_recorder_survives_junk_and_keeps_the_valid_samples(tmp_path):
+    endpoint = free_endpoint()
+    host, port = endpoint.split("/")[1].rsplit(":", 1)
+    rng = random.Random(7)
+    keys = schema.Keys()
+    with RecorderProcess(tmp_path / "fuzz.mcap", endpoint) as rec:
+        for _ in range(50):  # raw junk on the zenoh port: not even a zenoh session
+            with socket.create_connection((host, int(port)), timeout=2) as s:
+                try:
+                    s.sendall(rng.randbytes(rng.randrange(1, 4096)))
+                except OSError:
+                    pass  # the recorder may drop the connection: that is fine
+        session = zenoh.open(build_config(ZenohOptions(role="publisher", connect=(endpoint,))))
+        try:
+            targets = [keys.controller(4), keys.object, keys.sim_event, keys.contact(4), keys.am_truth(4),
+                       f"{keys.prefix}/am/notanumber/controller", f"{keys.prefix}/whatever/else"]
+            for i in range(3000):
+                session.put(rng.choice(targets), _junk(rng))
+            for i in range(200):  # and genuine samples in between
+                ev = schema.phase_event(i * 0.01, "approach", "simulator") | {"seq": i}
+                session.put(keys.sim_event, schema.encode(ev)[0])
+            session.put(keys.sim_event, schema.encode(schema.run_end_event(2.0, "completed") | {"seq": 200})[0])
+        finally:
+            session.close()
+        code, out = rec.wait(timeout_s=60)
+    assert code == 0, rec.stderr_lines
+    summary = json.loads(out)
+    assert summary["malformed"] + summary["unknown"] > 1000, summary
+    log = read_log(tmp_path / "fuzz.mcap")
+    assert not log.truncated
+    events = [m for _, m in log.decoded("/sim/event")]
+    assert len([e for e in events if e.get("kind") == "phase"]) == 200
+    assert all(math.isfinite(e["t"]) for e in events)
