@@ -181,6 +181,8 @@ class AmSpec:
     sysid: int
     azimuth_deg: float  # direction from the object centre to the AM, about world z
     signing_key_hex: str = ""  # 64 hex digits; empty: see LinkSpec
+    # this AM's link impairment: [link] with this [[am]]'s `link = {loss = ..., ...}` on top
+    link: LinkSpec | None = None
 
 
 @dataclass(frozen=True)
@@ -382,7 +384,25 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
     am_tables = data.get("am", [])
     if not isinstance(am_tables, list) or not am_tables:
         raise ConfigError(f"{where}: needs at least one [[am]] entry")
-    ams = tuple(AmSpec(**_build(AmSpec, t, f"{where}: [[am]] #{i + 1}")) for i, t in enumerate(am_tables))
+    link_table = data.get("link", {})
+    if not isinstance(link_table, dict):
+        raise ConfigError(f"{where}: [link] must be a table")
+    link = _link_spec(link_table, f"{where}: [link]")
+    ams = []
+    for i, t in enumerate(am_tables):
+        w = f"{where}: [[am]] #{i + 1}"
+        if not isinstance(t, dict):
+            raise ConfigError(f"{w}: expected a table")
+        am_link = None
+        if "link" in t:
+            own = t["link"]
+            allowed = {"loss", "delay_s", "jitter_s", "reorder", "duplicate"}
+            if not isinstance(own, dict) or set(own) - allowed:
+                raise ConfigError(f"{w}.link: expected a table of {', '.join(sorted(allowed))}")
+            am_link = _link_spec({**link_table, **own}, f"{w}.link")
+        plain = {k: v for k, v in t.items() if k != "link"}
+        ams.append(AmSpec(**_build(AmSpec, plain, w, skip=("link",)), link=am_link))
+    ams = tuple(ams)
     seen = set()
     for i, a in enumerate(ams):
         if not 1 < a.sysid < 256:
@@ -393,13 +413,6 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
     for i, a in enumerate(ams):
         if a.signing_key_hex and not _is_key_hex(a.signing_key_hex):
             raise ConfigError(f"{where}: [[am]] #{i + 1}.signing_key_hex: need 64 hex digits (32 bytes)")
-    link = LinkSpec(**_build(LinkSpec, data.get("link", {}), f"{where}: [link]"))
-    for key in ("loss", "reorder", "duplicate"):
-        if not 0.0 <= getattr(link, key) <= 1.0:
-            raise ConfigError(f"{where}: [link].{key}: must be a probability in [0, 1], got {getattr(link, key)!r}")
-    for key in ("delay_s", "jitter_s"):
-        if getattr(link, key) < 0.0:
-            raise ConfigError(f"{where}: [link].{key}: must be >= 0, got {getattr(link, key)!r}")
     key_path = link.key_path(path)
     if key_path is not None and not key_path.is_file():
         raise ConfigError(f"{where}: [link].key_file: file not found: {key_path}")
@@ -407,6 +420,17 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
     _positive(f"{where}: [scenario].rate_hz", spec.rate_hz)
     _positive(f"{where}: [scenario].duration_s", spec.duration_s)
     return spec
+
+
+def _link_spec(table: dict, where: str) -> LinkSpec:
+    link = LinkSpec(**_build(LinkSpec, table, where))
+    for key in ("loss", "reorder", "duplicate"):
+        if not 0.0 <= getattr(link, key) <= 1.0:
+            raise ConfigError(f"{where}.{key}: must be a probability in [0, 1], got {getattr(link, key)!r}")
+    for key in ("delay_s", "jitter_s"):
+        if getattr(link, key) < 0.0:
+            raise ConfigError(f"{where}.{key}: must be >= 0, got {getattr(link, key)!r}")
+    return link
 
 
 def scenario_id(spec: ScenarioSpec) -> int:

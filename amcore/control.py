@@ -153,6 +153,7 @@ class Diagnostics:
     tau: np.ndarray
     Lambda_y: np.ndarray
     Lambda_y_dot: np.ndarray | None = None
+    wrench_W_filtered: np.ndarray | None = None  # filtered [f; m] of F_e in W axes, moment about {e} [N, N m]
 
 
 @dataclass
@@ -302,6 +303,7 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
         r_c=tm.r_c, r_c_d=ref.r_c, r_c_err=e, rdot_c=xi[0:3].copy(), e_R=vecs[1], e_w=vecs[2], R_WB=R,
         R_d=vecs[6:9], w_bd=vecs[3], wdot_bd=vecs[4], Omega_d=vecs[5], f_d=vecs[0], y=tk.y,
         y_d=ref.y, y_err=y_err, ydot=ydot, F_y=F_y, F_rc=F_W.copy(), wrench_E_filtered=wrench_E_f,
+        wrench_W_filtered=filt.x.copy(),
         sigma_min_J3=sigma_min, damping=damping, com_err_saturated=com_sat,
         y_err_saturated=any(map(float.__ne__, y_err_s, y_err_l)),  # the clip changed something
         u=u, tau=tau, Lambda_y=Lambda_y,

@@ -12,6 +12,7 @@ simulator main and the in-process runner (`simulator.inprocess`) both drive it:
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 from collections.abc import Callable, Collection, Mapping
 
@@ -41,8 +42,8 @@ class SitlCore:
         ms = spec.mission
         self.outcome = RunOutcome(self.sysids, (ms.grasp_end_s + ms.lift_move_s + 1.0, ms.hover_end_s),
                                   slip_from_s=ms.grasp_end_s)
-        impairment = LinkImpairment.for_scenario(spec)
-        self.fc_links = {s: ImpairedLink(impairment, stream=s) for s in self.sysids}
+        self.fc_links = {am.sysid: ImpairedLink(LinkImpairment.for_scenario(
+            dataclasses.replace(spec, link=am.link or spec.link)), stream=am.sysid) for am in spec.ams}
         self.failsafes: dict[int, Failsafe] = {}
         self.events: list[dict] = []
         self.digest = hashlib.sha256()

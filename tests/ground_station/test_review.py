@@ -60,7 +60,8 @@ def synthetic_samples(with_run_start=True):
             diag = NS(r_c=np.zeros(3), r_c_d=np.zeros(3), r_c_err=com_err(s, t), e_R=np.array([0.0, 0.1 * t, 0.0]),
                       e_w=np.zeros(3), R_WB=np.eye(3), R_d=np.eye(3), y=np.zeros(3), y_d=np.zeros(3),
                       y_err=np.array([0.001 * t, -0.002 * t, 0.0]), F_y=np.zeros(3), F_rc=np.zeros(3),
-                      wrench_E_filtered=np.array([-normal(t), 0.0, 0.0, 0.0, 0.0, 0.0]), sigma_min_J3=0.55,
+                      wrench_E_filtered=np.array([-normal(t), 0.0, 0.0, 0.0, 0.0, 0.0]),
+                      wrench_W_filtered=np.array([normal(t), 0.0, 0.0, 0.0, 0.0, 0.0]), sigma_min_J3=0.55,
                       damping=0.0, com_err_saturated=False, y_err_saturated=False)
             cmd = NS(thrust_n=17.0, tau_B_nm=np.zeros(3), tau_q_nm=np.zeros(3))
             out.append((KEYS.controller(s), schema.controller_sample(t, PHASE_OF(t), diag, cmd, sysid=s)))
