@@ -2,9 +2,11 @@
 
 What an autopilot does on offboard loss (PX4: hold, then land), for an aerial manipulator:
 - HOLD for `hold_s`: keep the base where it was when the companion was lost (position PD
-  on the base, level attitude at the last heading) and every arm joint at its angle then,
-  both with gravity compensation from the AM's own model (pinocchio's g(q)). A pad still
-  squeezing an object keeps squeezing: the arm holds its pose.
+  on the base, level attitude at the last heading, gravity compensation from the AM's own
+  model, pinocchio's g(q)), and make the arm compliant: gravity compensation and joint
+  damping, no stiffness. An AM that was squeezing an object with others thus lets go
+  instead of pushing or dragging it, and the remaining AMs' impedance takes over its
+  share (holding the arm's pose instead made one lost AM of ten pull the ring apart).
 - LAND: the same, with the position target descending at `descent_mps`; once the base has
   not come down for `touchdown_s` although the target is `touchdown_gap_m` below it (the
   ground, or whatever it stands on, holds it up), motors off (thrust 0) and joints limp.
@@ -24,12 +26,11 @@ from amcore.so3 import Rz, vee
 
 @dataclass(frozen=True)
 class FailsafeGains:
-    k_p: float = 4.0  # position stiffness per kg [N/m/kg]
-    k_d: float = 3.0  # velocity damping per kg [N s/m/kg]
+    k_p: float = 16.0  # position stiffness per kg [N/m/kg]
+    k_d: float = 6.4  # velocity damping per kg [N s/m/kg]
     k_R: float = 6.0  # attitude stiffness [N m/rad]
     k_w: float = 0.6  # attitude damping [N m s/rad]
-    k_q: tuple[float, ...] = (20.0, 10.0, 4.0)  # joint stiffness [N m/rad]
-    d_q: tuple[float, ...] = (1.0, 0.4, 0.1)  # joint damping [N m s/rad]
+    d_q: tuple[float, ...] = (1.0, 0.4, 0.1)  # joint damping [N m s/rad]; no stiffness: compliant arm
     hold_s: float = 5.0
     descent_mps: float = 0.3
     touchdown_gap_m: float = 0.15
@@ -49,7 +50,7 @@ class Failsafe:
 
     def __init__(self, model: AmModel, x0: AmState, t0_s: float, gains: FailsafeGains = FailsafeGains()) -> None:
         n = model.n
-        if len(gains.k_q) != n or len(gains.d_q) != n:
+        if len(gains.d_q) != n:
             raise ValueError(f"failsafe joint gains need {n} entries")
         self.model, self.g = model, gains
         self.data = model.pin_model.createData()
@@ -57,7 +58,6 @@ class Failsafe:
         self.p_hold = np.array(x0.p_WB, dtype=float)
         b1 = x0.R_WB[:, 0]
         self.R_hold = Rz(float(np.arctan2(b1[1], b1[0])))
-        self.q_hold = np.array(x0.q, dtype=float)
         self.mode = "hold"
         self._z_low, self._t_low = np.inf, t0_s  # lowest base height in LAND and when it was reached
 
@@ -86,5 +86,5 @@ class Failsafe:
         R_d = np.column_stack([np.cross(b2, b3), b2, b3])
         e_R = 0.5 * vee(R_d.T @ R - R.T @ R_d)
         tau_B = grav[3:6] - g.k_R * e_R - g.k_w * x.w_B
-        tau_q = grav[6:] - np.asarray(g.k_q) * (x.q - self.q_hold) - np.asarray(g.d_q) * x.qdot
+        tau_q = grav[6:] - np.asarray(g.d_q) * x.qdot
         return FailsafeCommand(self.mode, thrust, tau_B, tau_q)

