@@ -1,8 +1,12 @@
-"""Benchmark: encode + decode of one SensorFrame batch and one TorqueSetpoint batch.
+"""Benchmark: encode + decode of the lockstep batches, pymavlink path vs fast path, in one run.
 
-Run ``python -m amlink.bench_codec``; prints median microseconds per operation.
-Not a test: timings depend on the machine.  The loop budget is 1 ms per step per
-vehicle (1 kHz), shared with physics and control.
+Run ``python -m amlink.bench_codec``; prints median microseconds per operation
+for the old path (:mod:`amlink.codec`: pymavlink message objects, ``Encoder.pack``
+/ ``Decoder.feed``) next to the new one (:mod:`amlink.fastcodec`:
+``Encoder.pack_payloads`` / ``Decoder.feed_records``) and their ratio.  The two
+are timed in alternating rounds so machine load hits both alike.  Not a test:
+timings depend on the machine.  The loop budget is 1 ms per step per vehicle
+(1 kHz), shared with physics and control.
 """
 
 from __future__ import annotations
@@ -13,8 +17,12 @@ import time
 
 import numpy as np
 
-from amlink import codec
+from amlink import codec, fastcodec
+from amlink.signing import now_timestamp
 from amlink.types import AttitudeTarget, SensorFrame, TorqueSetpoint
+
+KEY = bytes(range(32))
+ROUNDS = 10  # old and new alternate this many times per row
 
 
 def _example(rng: np.random.Generator, n: int = 3) -> tuple[SensorFrame, TorqueSetpoint, AttitudeTarget]:
@@ -29,93 +37,112 @@ def _example(rng: np.random.Generator, n: int = 3) -> tuple[SensorFrame, TorqueS
     return frame, sp, att
 
 
-def _median_us(fn, repeats: int) -> float:
-    samples = []
-    for _ in range(repeats):
-        t0 = time.perf_counter_ns()
-        fn()
-        samples.append(time.perf_counter_ns() - t0)
-    return statistics.median(samples) / 1e3
+def _old_decode(dec: codec.Decoder, asm, datagrams):
+    def run():
+        out = None
+        for m in dec.feed(next(datagrams)):
+            out = asm.push(m) or out
+        assert out is not None
+        return out
+
+    return run
+
+
+def _new_decode(dec: codec.Decoder, asm, datagrams):
+    def run():
+        out = None
+        for mid, _sysid, _compid, body in dec.feed_records(next(datagrams)):
+            out = asm.push(mid, body) or out
+        assert out is not None
+        return out
+
+    return run
+
+
+def _forever(data: bytes):
+    while True:
+        yield data
+
+
+class _Batch:
+    """One kind of batch: how each path encodes it, and decoders for its datagrams."""
+
+    def __init__(self, messages, payloads, sysid: int, compid: int, assemblers, signed: bool, count: int):
+        key = KEY if signed else None
+        self.enc_old = codec.Encoder(sysid, compid, signing_key=key, link_id=2)
+        self.enc_new = codec.Encoder(sysid, compid, signing_key=key, link_id=2)
+        self.encode_old = lambda: self.enc_old.pack(messages())
+        self.encode_new = lambda: self.enc_new.pack_payloads(payloads())
+        if signed:  # same signing clock on both, so that the bytes can be compared
+            ahead = now_timestamp() + 10**7  # 100 s ahead: pack() keeps it
+            self.enc_old.mavlink.signing.timestamp = self.enc_new.mavlink.signing.timestamp = ahead
+        assert self.encode_old() == self.encode_new(), "fast path is not bit-identical"
+        keys = {sysid: KEY} if signed else None
+        # signed: every datagram once (a repeat is a replay); each decoder reads the list once
+        data = [self.encode_new() for _ in range(count)] if signed else None
+        self.size = len(self.encode_new())
+        old_asm, new_asm = assemblers
+        self.decode_old = _old_decode(codec.Decoder(keys), old_asm,
+                                      iter(data) if signed else _forever(self.encode_old()))  # fmt: skip
+        self.decode_new = _new_decode(codec.Decoder(keys, readers=fastcodec.READERS), new_asm,
+                                      iter(data) if signed else _forever(self.encode_new()))  # fmt: skip
+
+
+def _time_pair(old, new, repeats: int) -> tuple[float, float]:
+    """Median [us] of ``old()`` and ``new()``, timed in alternating rounds after a warm-up."""
+    per_round = max(1, repeats // ROUNDS)
+    samples: tuple[list[int], list[int]] = ([], [])
+    for fn in (old, new):
+        for _ in range(min(200, per_round)):
+            fn()
+    for _ in range(ROUNDS):
+        for fn, out in ((old, samples[0]), (new, samples[1])):
+            for _ in range(per_round):
+                t0 = time.perf_counter_ns()
+                fn()
+                out.append(time.perf_counter_ns() - t0)
+    return statistics.median(samples[0]) / 1e3, statistics.median(samples[1]) / 1e3
 
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--repeats", type=int, default=5000)
+    ap.add_argument("--repeats", type=int, default=5000, help="timed calls per path and row")
     args = ap.parse_args(argv)
     frame, sp, att = _example(np.random.default_rng(0))
-    sim_enc, comp_enc = codec.Encoder(1, 1), codec.Encoder(2, 191)
-    comp_dec, sim_dec = codec.Decoder(), codec.Decoder()
-    frames_asm, sp_asm = codec.SensorFrameAssembler(), codec.SetpointAssembler()
+    count = args.repeats + 2 * 200  # enough distinct signed datagrams for warm-up and timing
 
-    def enc_frame():
-        return sim_enc.pack(codec.sensor_frame_messages(frame))
+    def sensor(signed):
+        old, new = lambda: codec.sensor_frame_messages(frame), lambda: fastcodec.sensor_frame_payloads(frame)
+        assemblers = (codec.SensorFrameAssembler(), fastcodec.SensorFrameAssembler())
+        return _Batch(old, new, 1, 1, assemblers, signed, count)
 
-    frame_bytes = enc_frame()
+    def setpoint(signed, attitude):
+        old, new = lambda: codec.setpoint_messages(sp, attitude), lambda: fastcodec.setpoint_payloads(sp, attitude)
+        assemblers = (codec.SetpointAssembler(), fastcodec.SetpointAssembler())
+        return _Batch(old, new, 2, 191, assemblers, signed, count)
 
-    def dec_frame():
-        out = None
-        for m in comp_dec.feed(frame_bytes):
-            out = frames_asm.push(m) or out
-        assert out is not None
-        return out
-
-    def enc_sp():
-        return comp_enc.pack(codec.setpoint_messages(sp))
-
-    def enc_sp_att():
-        return comp_enc.pack(codec.setpoint_messages(sp, att))
-
-    sp_bytes, sp_att_bytes = enc_sp(), enc_sp_att()
-
-    def dec(data):
-        def run():
-            out = None
-            for m in sim_dec.feed(data):
-                out = sp_asm.push(m) or out
-            assert out is not None
-            return out
-
-        return run
-
-    rows = [
-        (f"SensorFrame encode ({len(frame_bytes)} B datagram)", enc_frame),
-        ("SensorFrame decode", dec_frame),
-        (f"TorqueSetpoint encode ({len(sp_bytes)} B)", enc_sp),
-        ("TorqueSetpoint decode", dec(sp_bytes)),
-        (f"TorqueSetpoint+AttitudeTarget encode ({len(sp_att_bytes)} B)", enc_sp_att),
-        ("TorqueSetpoint+AttitudeTarget decode", dec(sp_att_bytes)),
+    batches = [
+        ("SensorFrame", sensor(False)),
+        ("SensorFrame, signed", sensor(True)),
+        ("TorqueSetpoint", setpoint(False, None)),
+        ("TorqueSetpoint, signed", setpoint(True, None)),
+        ("TorqueSetpoint+AttitudeTarget", setpoint(False, att)),
+        ("TorqueSetpoint+AttitudeTarget, signed", setpoint(True, att)),
     ]
-    key = bytes(range(32))
-    signed_enc = codec.Encoder(2, 191, signing_key=key, link_id=2)
-    signed_dec = codec.Decoder({2: key})
-
-    def enc_sp_signed():
-        return signed_enc.pack(codec.setpoint_messages(sp))
-
-    n_signed = args.repeats + 200
-    signed_bytes = iter([enc_sp_signed() for _ in range(n_signed)])  # distinct: a repeat is a replay
-
-    def dec_sp_signed():
-        out = None
-        for m in signed_dec.feed(next(signed_bytes)):
-            out = sp_asm.push(m) or out
-        assert out is not None
-        return out
-
-    rows += [
-        (f"TorqueSetpoint encode, signed ({len(enc_sp_signed())} B)", enc_sp_signed),
-        ("TorqueSetpoint decode, signed (verify + replay check)", dec_sp_signed),
-    ]
+    print(f"{'median us per batch (one datagram)':52s} {'old':>8s} {'new':>8s} {'speedup':>8s}")
     results = {}
-    for name, fn in rows:
-        for _ in range(200):  # warm-up
-            fn()
-        results[name] = _median_us(fn, args.repeats)
-        print(f"{name:55s} median {results[name]:8.1f} us")
-    signed_cost = results[rows[-2][0]] + results[rows[-1][0]] - results[rows[2][0]] - results[rows[3][0]]
-    print(f"{'signing cost per setpoint packet (enc+dec, signed - unsigned)':55s} median {signed_cost:8.1f} us")
-    total = sum(results[n] for n, _ in rows[:4])
-    print(f"{'round trip (frame enc+dec + setpoint enc+dec)':55s} median {total:8.1f} us (sum of medians)")
+    for name, b in batches:
+        for what, old, new in (("encode", b.encode_old, b.encode_new), ("decode", b.decode_old, b.decode_new)):
+            label = f"{name} {what}" + (f" ({b.size} B)" if what == "encode" else "")
+            t_old, t_new = _time_pair(old, new, args.repeats)
+            results[(name, what)] = (t_old, t_new)
+            print(f"{label:52s} {t_old:8.1f} {t_new:8.1f} {t_old / t_new:7.1f}x")
+    for title, suffix in (("per step and vehicle, unsigned", ""), ("per step and vehicle, signed", ", signed")):
+        keys = [(f"SensorFrame{suffix}", w) for w in ("encode", "decode")]
+        keys += [(f"TorqueSetpoint+AttitudeTarget{suffix}", w) for w in ("encode", "decode")]
+        t_old = sum(results[k][0] for k in keys)
+        t_new = sum(results[k][1] for k in keys)
+        print(f"{title + ' (sum of the 4 medians)':52s} {t_old:8.1f} {t_new:8.1f} {t_old / t_new:7.1f}x")
 
 
 if __name__ == "__main__":

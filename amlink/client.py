@@ -6,7 +6,7 @@ import socket
 import time
 from collections import deque
 
-from amlink import codec
+from amlink import codec, fastcodec
 from amlink.codec import mav
 from amlink.errors import CommandRejectedError, SimulatorTimeoutError, SimulatorUnreachableError
 from amlink.limits import DEFAULT_SENSOR_LIMITS, SensorLimits
@@ -80,14 +80,14 @@ class CompanionClient:
         self._sim_rx_addr: tuple[str, int] | None = None  # signing off: the only source we read
         self._encoder = codec.Encoder(sysid, compid, signing_key=signing_key, link_id=sysid)
         keys = None if signing_key is None else {SIM_SYSID: signing_key}
-        self._decoder = codec.Decoder(keys, accept=_ACCEPT, counters=self.stats)
-        self._frames = codec.SensorFrameAssembler()
+        self._decoder = codec.Decoder(keys, accept=_ACCEPT, counters=self.stats, readers=fastcodec.READERS)
+        self._frames = fastcodec.SensorFrameAssembler()
         self._inbox: deque[SensorFrame | codec.Shutdown] = deque()
         self._acks: deque = deque(maxlen=_MAX_ACKS)
         self._shutdown = False  # recv_frame has returned None
         self._shutdown_seen = False  # a SHUTDOWN arrived; the rest of the traffic is ignored
         self._newest_step = -1  # newest step queued or handed out
-        self._answer: tuple[int, list] | None = None  # (step, messages) of the last setpoint sent
+        self._answer: tuple[int, tuple] | None = None  # (step, (msgid, payload)s) of the last setpoint sent
         self._last_time_s = 0.0
 
     @property
@@ -187,9 +187,9 @@ class CompanionClient:
     def send_setpoint(self, setpoint: TorqueSetpoint, attitude: AttitudeTarget | None = None) -> None:
         """Send the answer to step ``setpoint.step`` (one datagram); kept for re-sending."""
         time_boot_ms = round(self._last_time_s * 1e3)
-        msgs = codec.setpoint_messages(setpoint, attitude, time_boot_ms, SIM_SYSID, SIM_COMPID)
-        self._send(msgs)
-        self._answer = (setpoint.step, msgs)
+        payloads = fastcodec.setpoint_payloads(setpoint, attitude, time_boot_ms, SIM_SYSID, SIM_COMPID)
+        self._send_payloads(payloads)
+        self._answer = (setpoint.step, payloads)
 
     def close(self) -> None:
         if self._udp is not None:
@@ -209,7 +209,12 @@ class CompanionClient:
         return self._udp
 
     def _send(self, msgs) -> None:
+        """Send pymavlink messages (handshake, commands) as one datagram."""
         self._require_connected().send(self._sim_addr, self._encoder.pack(msgs))
+
+    def _send_payloads(self, payloads) -> None:
+        """Send a batch of :mod:`amlink.fastcodec` payloads as one datagram."""
+        self._require_connected().send(self._sim_addr, self._encoder.pack_payloads(payloads))
 
     def _pump(self, timeout_s: float) -> None:
         resend = False
@@ -218,39 +223,43 @@ class CompanionClient:
                 self.stats.wrong_address += 1
                 continue
             self._frames.reset()  # a sensor batch is one datagram
-            for msg in self._decoder.feed(data):
-                resend |= self._on_message(msg, addr)
+            for record in self._decoder.feed_records(data):
+                resend |= self._on_message(record, addr)
         if resend and self._answer is not None:
-            self._send(self._answer[1])  # re-encoded: a new sequence number and signing timestamp
+            self._send_payloads(self._answer[1])  # re-framed: a new sequence number and signing timestamp
             self.stats.retransmits += 1
 
-    def _on_message(self, msg, addr) -> bool:
-        """Handle one message; True if it asks for the last answer again."""
-        if msg.get_srcSystem() != SIM_SYSID:
+    def _on_message(self, record, addr) -> bool:
+        """Handle one decoder record; True if it asks for the last answer again.
+
+        ``body`` is a :data:`amlink.fastcodec.READERS` tuple for the sensor batch
+        ids, a pymavlink message for the rest.
+        """
+        mid, sysid, _compid, body = record
+        if sysid != SIM_SYSID:
             self.stats.unknown_sysid += 1
             return False
         if self._shutdown_seen:
             self.stats.ignored += 1
             return False
-        mid = msg.get_msgId()  # not msg.id: STATUSTEXT has a field named "id"
         if mid == _SCENARIO:
             if self.scenario is None:
                 try:
-                    self.scenario = codec.scenario_from_message(msg)
+                    self.scenario = codec.scenario_from_message(body)
                 except ValueError as exc:  # NonFiniteValueError, bad name, rate <= 0
                     self._reject(exc)
                     return False
                 self._sim_rx_addr = addr
         elif mid == _ACK:
-            self._acks.append(msg)
+            self._acks.append(body)
         elif mid == _STATUSTEXT:
-            self.status_texts.append((msg.severity, msg.text))
-        elif mid == _SIM_STEP and self.scenario is not None and msg.scenario_id != self.scenario.scenario_id:
-            self.stats.rejected_frames += 1
+            self.status_texts.append((body.severity, body.text))
+        elif mid == _SIM_STEP and self.scenario is not None and body[2] != self.scenario.scenario_id:
+            self.stats.rejected_frames += 1  # body[2]: AM_SIM_STEP.scenario_id
             self._frames.reset()
         else:
             try:
-                item = self._frames.push(msg)
+                item = self._frames.push(mid, body)
             except ValueError as exc:  # CodecError: non-finite, mismatched or incomplete batch
                 self._reject(exc)
                 return False

@@ -21,6 +21,11 @@ is ENU <- FLU, so the codec converts at this edge (a fixed quaternion map).
 
 Floats: ODOMETRY and SET_ATTITUDE_TARGET force float32; amstack messages carry
 float64.  Decoding rejects non-finite values with :class:`NonFiniteValueError`.
+
+This module works with pymavlink message objects and is the reference
+implementation.  The lockstep itself (:mod:`amlink.server`, :mod:`amlink.client`)
+uses :mod:`amlink.fastcodec`, which writes the same bytes and reads them into the
+same values with the same errors without those objects; tests hold the two equal.
 """
 
 from __future__ import annotations

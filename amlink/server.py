@@ -7,7 +7,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
-from amlink import codec
+from amlink import codec, fastcodec
 from amlink.codec import mav
 from amlink.errors import PeerMissingError, PeerTimeoutError
 from amlink.limits import DEFAULT_SETPOINT_LIMITS, SetpointLimits
@@ -44,7 +44,7 @@ class _Peer:
     last_heard: float = float("-inf")  # time.monotonic() of its last admitted packet
     last_step: int = -1
     last_time_s: float = 0.0
-    batch: list | None = None  # messages of the sensor batch awaiting an answer (re-sent)
+    batch: tuple | None = None  # (msgid, payload)s of the sensor batch awaiting an answer (re-framed on re-send)
 
 
 class SimServer:
@@ -121,7 +121,7 @@ class SimServer:
         self._peers = {
             s: _Peer(s, codec.Encoder(SIM_SYSID, SIM_COMPID, signing_key=keys.get(s), link_id=s)) for s in self.sysids
         }
-        self._decoder = codec.Decoder(self._keys, accept=_ACCEPT, counters=self.stats)
+        self._decoder = codec.Decoder(self._keys, accept=_ACCEPT, counters=self.stats, readers=fastcodec.READERS)
         return self.address
 
     @property
@@ -233,12 +233,12 @@ class SimServer:
                 raise ValueError(f"sysid {sysid} is not one of {self.sysids}")
             if peer.addr is None and not partial:
                 raise PeerMissingError([sysid], 0.0, "HEARTBEAT (call wait_for_peers first)")
-            peer.batch = codec.sensor_frame_messages(frame, self.scenario.scenario_id)
+            peer.batch = fastcodec.sensor_frame_payloads(frame, self.scenario.scenario_id)
             expected[sysid] = frame.step
         for sysid, frame in frames.items():
             peer = self._peers[sysid]
             if peer.addr is not None:
-                udp.send(peer.addr, peer.encoder.pack(peer.batch))
+                udp.send(peer.addr, peer.encoder.pack_payloads(peer.batch))
             peer.last_step, peer.last_time_s = frame.step, frame.time_s
         results: dict[int, TorqueSetpoint] = {}
         start = time.monotonic()
@@ -263,7 +263,7 @@ class SimServer:
                 for s in awaited.difference(results):
                     peer = self._peers[s]
                     if peer.addr is not None:
-                        udp.send(peer.addr, peer.encoder.pack(peer.batch))
+                        udp.send(peer.addr, peer.encoder.pack_payloads(peer.batch))
                         self.stats.retransmits += 1
                 interval = min(2 * interval, _MAX_BACKOFF * self.retry_s)
                 next_retry = now + interval
@@ -295,23 +295,23 @@ class SimServer:
     def _handle(self, data: bytes, addr: tuple[str, int]) -> list[tuple[int, TorqueSetpoint, AttitudeTarget | None]]:
         """Decode one datagram; answer control messages; return its valid setpoints."""
         out = []
-        attitude: dict[int, object] = {}  # SET_ATTITUDE_TARGET pairs with the setpoint of its datagram
-        for msg in self._decoder.feed(data):
-            peer = self._peers.get(msg.get_srcSystem())
+        attitude: dict[int, tuple] = {}  # SET_ATTITUDE_TARGET pairs with the setpoint of its datagram
+        # bodies: fastcodec.READERS tuples for the lockstep ids, pymavlink messages for the rest
+        for mid, sysid, _compid, body in self._decoder.feed_records(data):
+            peer = self._peers.get(sysid)
             if peer is None:
                 self.stats.unknown_sysid += 1
                 continue
-            mid = msg.get_msgId()  # not msg.id: STATUSTEXT has a field named "id"
             if not self._admit(peer, addr, mid):
                 continue
             if mid == _HEARTBEAT:
                 self._udp.send(addr, peer.encoder.pack([codec.scenario_message(self.scenario)]))
             elif mid == _COMMAND_LONG:
-                self._on_command(peer, msg)
+                self._on_command(peer, body)
             elif mid == _ATTITUDE:
-                attitude[peer.sysid] = msg
+                attitude[peer.sysid] = body
             elif mid == _SETPOINT:
-                got = self._setpoint(peer, msg, attitude.pop(peer.sysid, None))
+                got = self._setpoint(peer, body, attitude.pop(peer.sysid, None))
                 if got is not None:
                     peer.lost = False  # it is alive
                     out.append((peer.sysid, *got))
@@ -339,10 +339,10 @@ class SimServer:
         peer.addr = addr
         return True
 
-    def _setpoint(self, peer: _Peer, msg, att_msg):
+    def _setpoint(self, peer: _Peer, fields: tuple, att_fields: tuple | None):
         try:
-            sp = codec.setpoint_from_message(msg)
-            att = codec.attitude_from_message(att_msg, sp.step) if att_msg is not None else None
+            sp = fastcodec.setpoint_from_fields(fields)
+            att = fastcodec.attitude_from_fields(att_fields, sp.step) if att_fields is not None else None
             reason = self.limits.violation(sp)
         except codec.NonFiniteValueError as exc:
             self.stats.nonfinite_values += 1

@@ -10,7 +10,9 @@ Quaternions are scalar-first ``(w, x, y, z)``; ``quat_WB_wxyz`` rotates vectors
 expressed in B into W (``v_W = R(quat_WB) v_B``).
 
 All arrays are stored as read-only ``float64`` copies, so instances are truly
-immutable and can be shared between threads.  Note that the wire carries the base
+immutable and can be shared between threads.  (Decoders build instances with
+:func:`sensor_frame_from_wire` and friends: one read-only array per instance,
+the fields read-only views of it -- the same values, cheaper at 1 kHz.)  Note that the wire carries the base
 state (``p_WB``, ``quat_WB_wxyz``, ``v_B``, ``w_B``) as float32 because the
 standard ODOMETRY message does; the controller therefore sees float32-rounded
 base state.  Joint state, wrench and all setpoints travel as float64, exactly.
@@ -178,6 +180,52 @@ class AttitudeTarget:
         s(self, "quat_wxyz", _vec("quat_wxyz", self.quat_wxyz, 4))
         s(self, "rates_rad_s", _vec("rates_rad_s", self.rates_rad_s, 3))
         s(self, "thrust_normalized", float(self.thrust_normalized))
+
+
+# -- decoders' constructors ----------------------------------------------------
+# A decoder has values straight off the wire whose ranges the wire format already
+# bounds (uint64 step, uint8 flags, n <= MAX_JOINTS checked by the decoder).  These
+# build the same immutable instances as the validating constructors, several times
+# faster: one read-only float64 array, each field a read-only view of it.
+
+
+def _frozen_f64(values) -> np.ndarray:
+    arr = np.array(values, dtype=np.float64)
+    arr.setflags(write=False)
+    return arr
+
+
+def _assemble(cls, **fields):
+    obj = object.__new__(cls)
+    obj.__dict__.update(fields)  # what a frozen dataclass's __init__ ends with, minus the checks
+    return obj
+
+
+def sensor_frame_from_wire(step: int, time_s: float, values, n: int, flags: int) -> SensorFrame:
+    """SensorFrame of wire values: ``values`` = p_WB, quat_WB_wxyz, v_B, w_B, q[:n], qdot[:n], wrench_E.
+
+    For decoders: the caller guarantees 0 <= step < 2**64, 0 <= n <= MAX_JOINTS,
+    0 <= flags < 256 and ``len(values) == 19 + 2 n``.
+    """
+    a = _frozen_f64(values)
+    j = 13 + n
+    return _assemble(SensorFrame, step=step, time_s=float(time_s), p_WB=a[0:3], quat_WB_wxyz=a[3:7],
+                     v_B=a[7:10], w_B=a[10:13], q=a[13:j], qdot=a[j : j + n], wrench_E=a[j + n : j + n + 6],
+                     flags=_STEP_FLAGS[flags])  # fmt: skip
+
+
+def torque_setpoint_from_wire(step: int, thrust_n: float, values, n: int, flags: int) -> TorqueSetpoint:
+    """TorqueSetpoint of wire values: ``values`` = tau_B_nm (3), tau_q_nm[:n] (bounds as above)."""
+    a = _frozen_f64(values)
+    return _assemble(TorqueSetpoint, step=step, thrust_n=float(thrust_n), tau_B_nm=a[0:3], tau_q_nm=a[3 : 3 + n],
+                     flags=_SETPOINT_FLAGS[flags])  # fmt: skip
+
+
+def attitude_target_from_wire(step: int, values) -> AttitudeTarget:
+    """AttitudeTarget of wire values: ``values`` = quat_wxyz (4), rates_rad_s (3), thrust_normalized."""
+    a = _frozen_f64(values[:7])
+    return _assemble(AttitudeTarget, step=step, quat_wxyz=a[0:4], rates_rad_s=a[4:7],
+                     thrust_normalized=float(values[7]))  # fmt: skip
 
 
 @dataclass(frozen=True)

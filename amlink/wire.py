@@ -5,11 +5,22 @@ them), so :class:`Decoder` frames strictly: the datagram must start with a frame
 and each frame must end where the next begins.  Cheap checks run first so junk
 costs a few microseconds: magic byte, incompatibility flags, length, known
 message id, CRC (with CRC_EXTRA), then -- signing on -- signed at all, a key for
-the claimed sysid; only then pymavlink's ``decode`` (signature, unpacking).
+the claimed sysid, fresh, signature; only then the payload is unpacked.
+
+Two ways out of the same checks.  :meth:`Decoder.feed` returns pymavlink
+message objects (``MAVLink.decode``), for tools, tests and rare messages.
+:meth:`Decoder.feed_records` returns ``(msgid, sysid, compid, body)`` records
+whose ``body``, for the ids it was given *readers* for (the lockstep batches,
+:mod:`amlink.fastcodec`), is a plain tuple unpacked by a precompiled
+``struct.Struct`` -- no message object on the 1 kHz path -- and a pymavlink
+message otherwise.  Likewise :meth:`Encoder.pack` frames pymavlink messages and
+:meth:`Encoder.pack_payloads` frames ready payloads, bit for bit as pymavlink
+would (MAVLink 2 trailing-zero truncation, CRC_EXTRA, signing), sharing the
+sequence number and signing timestamp of the same link.
 
 Signing uses pymavlink's ``MAVLink.signing`` state (``secret_key``, ``link_id``,
-``timestamp``, ``sign_outgoing``, ``stream_timestamps``) and pymavlink signs
-outgoing frames, with one correction on the receive side:
+``timestamp``, ``sign_outgoing``, ``stream_timestamps``); outgoing frames are
+signed as pymavlink's ``sign_packet`` does, with one correction on the receive side:
 :meth:`Decoder._authentic` replaces ``MAVLink.check_signature`` and records a
 stream's timestamp only AFTER the signature verified.  pymavlink 2.4.x records
 it first, so one forged packet carrying a far-future timestamp and a wrong
@@ -22,7 +33,7 @@ from __future__ import annotations
 import hashlib
 import hmac
 import struct
-from collections.abc import Mapping
+from collections.abc import Callable, Iterable, Mapping
 
 from amlink import dialect
 from amlink.signing import NEW_STREAM_WINDOW, check_key, now_timestamp
@@ -36,7 +47,13 @@ SIGNATURE_LEN = 13  # link id (1), timestamp (6), signature (6)
 IFLAG_SIGNED = 0x01
 _MIN_FRAME = HEADER_LEN + CRC_LEN
 _CRC_EXTRA = {mid: bytes((cls.crc_extra,)) for mid, cls in mav.mavlink_map.items()}
-_mcrf4xx = dialect.mcrf4xx
+# fastcrc's CRC-16/MCRF4XX when installed (a dependency), else dialect.mcrf4xx
+_mcrf4xx = mav.mcrf4xx or dialect.mcrf4xx
+_HEADER = struct.Struct("<BBBBBBBHB")  # magic, len, incompat, compat, seq, sysid, compid, msgid (24 bit)
+_SIGN_PREFIX = struct.Struct("<BQ")  # link id, timestamp: the first 7 bytes are the signature block's
+
+Reader = Callable[[bytes, int, int], tuple]
+"""``read(datagram, payload_start, payload_len) -> tuple`` (see :class:`amlink.layout.Reader`)."""
 
 
 class CodecError(ValueError):
@@ -112,6 +129,38 @@ class Encoder:
         sink.parts.clear()
         return data
 
+    def pack_payloads(self, payloads: Iterable[tuple[int, bytes]]) -> bytes:
+        """Frame ``(msgid, payload)`` pairs into one datagram, exactly as :meth:`pack` frames messages.
+
+        ``payload`` is the full packed payload of ``msgid`` (trailing zeros are
+        dropped here, keeping at least one byte, as MAVLink 2 and pymavlink do).
+        Shares the sequence number and signing state with :meth:`pack`.
+        """
+        m = self.mavlink
+        s = m.signing
+        signed = s.sign_outgoing
+        if signed:
+            s.timestamp = max(s.timestamp, now_timestamp())
+            key, link_id = s.secret_key, s.link_id
+        iflags = IFLAG_SIGNED if signed else 0
+        seq, sysid, compid = m.seq, m.srcSystem, m.srcComponent
+        frames = []
+        for msgid, payload in payloads:
+            body = payload.rstrip(b"\x00") or payload[:1]
+            frame = _HEADER.pack(MAGIC_V2, len(body), iflags, 0, seq, sysid, compid, msgid & 0xFFFF, msgid >> 16) + body
+            frame += _mcrf4xx(frame[1:] + _CRC_EXTRA[msgid]).to_bytes(2, "little")
+            if signed:
+                frame += _SIGN_PREFIX.pack(link_id, s.timestamp)[:7]
+                frame += hashlib.sha256(key + frame).digest()[:6]
+                s.timestamp += 1
+            frames.append(frame)
+            seq = (seq + 1) % 256
+        data = b"".join(frames)
+        m.seq = seq
+        m.total_packets_sent += len(frames)
+        m.total_bytes_sent += len(data)
+        return data
+
 
 class Decoder:
     """Parses datagrams into messages; corrupt, unauthenticated and replayed frames are counted.
@@ -128,12 +177,16 @@ class Decoder:
             ``unknown_sysid``, ``unsigned``, ``bad_signature``, ``replayed``,
             ``ignored``) are incremented, e.g. a :class:`amlink.udp.LinkStats`;
             default: this decoder's own attributes.
+        readers: ``msgid -> read(datagram, payload_start, payload_len) -> tuple``
+            used by :meth:`feed_records` (e.g. :data:`amlink.fastcodec.READERS`).
     """
 
     bad_frames = unknown_sysid = unsigned = bad_signature = replayed = ignored = 0
 
-    def __init__(self, keys: Mapping[int, bytes] | None = None, *, accept=None, counters=None) -> None:
+    def __init__(self, keys: Mapping[int, bytes] | None = None, *, accept=None, counters=None,
+                 readers: Mapping[int, Reader] | None = None) -> None:  # fmt: skip
         self._c = self if counters is None else counters
+        self._readers = dict(readers or {})
         self._keys = None if keys is None else {int(s): check_key(k) for s, k in keys.items()}
         self._accept = None if accept is None else frozenset(accept)
         self._plain = mav.MAVLink(None)
@@ -145,6 +198,17 @@ class Decoder:
 
     def feed(self, datagram: bytes) -> list:
         """All valid (and, signing on, authentic and fresh) messages in ``datagram``, in order."""
+        return self._feed(datagram, None)
+
+    def feed_records(self, datagram: bytes) -> list[tuple[int, int, int, object]]:
+        """As :meth:`feed`, as ``(msgid, sysid, compid, body)``; see the module docstring.
+
+        Same checks and counters as :meth:`feed`; ``body`` is the reader's tuple
+        for ids with a reader, else the pymavlink message.
+        """
+        return self._feed(datagram, self._readers)
+
+    def _feed(self, datagram: bytes, readers: dict[int, Reader] | None) -> list:
         c, keys, accept = self._c, self._keys, self._accept
         out = []
         n, i = len(datagram), 0
@@ -183,12 +247,18 @@ class Decoder:
                     continue
                 if not self._authentic(parser, datagram, start, end):
                     continue
+            if readers is not None:
+                read = readers.get(msgid)
+                if read is not None:  # cannot fail: framing and CRC are checked, short payloads padded
+                    body = read(datagram, start + HEADER_LEN, plen)
+                    out.append((msgid, datagram[start + 5], datagram[start + 6], body))
+                    continue
             try:
                 msg = parser.decode(bytearray(datagram[start:end]))
             except Exception:  # MAVError, or anything odd in pymavlink's unpacking
                 c.bad_frames += 1
                 continue
-            out.append(msg)
+            out.append(msg if readers is None else (msgid, datagram[start + 5], datagram[start + 6], msg))
         return out
 
     def _parser(self, sysid: int):

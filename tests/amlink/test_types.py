@@ -14,6 +14,9 @@ from amlink.types import (
     SetpointFlag,
     StepFlag,
     TorqueSetpoint,
+    attitude_target_from_wire,
+    sensor_frame_from_wire,
+    torque_setpoint_from_wire,
 )
 
 
@@ -75,3 +78,25 @@ def test_scenario_info_rejects_what_the_wire_cannot_carry(kw):
     args.update(kw)
     with pytest.raises(ValueError):
         ScenarioInfo(**args)
+
+
+def _same(a, b):
+    assert type(a) is type(b) and vars(a).keys() == vars(b).keys()
+    for name, x in vars(a).items():
+        y = getattr(b, name)
+        if isinstance(x, np.ndarray):
+            assert x.dtype == y.dtype == np.float64 and x.shape == y.shape and x.tobytes() == y.tobytes()
+            assert not x.flags.writeable and not y.flags.writeable
+        else:
+            assert (x, type(x)) == (y, type(y))
+
+
+@pytest.mark.parametrize("n", [0, 1, 3, 8])
+def test_wire_constructors_build_what_the_validating_constructors_build(n):
+    rng = np.random.default_rng(n)
+    v = rng.normal(size=19 + 2 * n).tolist()
+    j = 13 + n
+    _same(sensor_frame_from_wire(2**64 - 1, 1.5, v, n, 3),
+          SensorFrame(2**64 - 1, 1.5, v[0:3], v[3:7], v[7:10], v[10:13], v[13:j], v[j : j + n], v[j + n :], 3))
+    _same(torque_setpoint_from_wire(7, 2.5, v[: 3 + n], n, 2), TorqueSetpoint(7, 2.5, v[:3], v[3 : 3 + n], 2))
+    _same(attitude_target_from_wire(7, v[:8]), AttitudeTarget(7, v[:4], v[4:7], v[7]))

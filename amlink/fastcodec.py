@@ -1,0 +1,268 @@
+"""Fast path of the codec: lockstep batches <-> MAVLink 2 payloads with precompiled structs.
+
+The same batches, bytes and rejections as :mod:`amlink.codec`, without pymavlink
+message objects: encoding packs each payload with a ``struct.Struct`` derived
+from the generated dialect (:mod:`amlink.layout`) and frames it with
+:meth:`amlink.wire.Encoder.pack_payloads`; decoding takes the records of
+:meth:`amlink.wire.Decoder.feed_records` (built with :data:`READERS`) and
+assembles value types from plain tuples.  :mod:`amlink.codec` stays the
+reference: tests check that both produce identical bytes, values and errors
+(``tests/amlink/test_fastcodec.py``), and pymavlink reads what this writes.
+
+Usage::
+
+    enc = wire.Encoder(1, 1, signing_key=key, link_id=2)
+    data = enc.pack_payloads(fastcodec.sensor_frame_payloads(frame, scenario_id))
+    dec = wire.Decoder(keys, readers=fastcodec.READERS)
+    asm = fastcodec.SensorFrameAssembler()
+    for msgid, sysid, compid, body in dec.feed_records(data):
+        item = asm.push(msgid, body)        # SensorFrame | codec.Shutdown | None
+
+Errors are those of :mod:`amlink.codec` (``EncodeError``, ``NonFiniteValueError``,
+``BatchMismatchError``, ``FrameConventionError``, ``CodecError``) with the same
+messages.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+
+from amlink.codec import (
+    ODOM_CHILD_FRAME_ID,
+    ODOM_FRAME_ID,
+    BatchMismatchError,
+    CodecError,
+    EncodeError,
+    FrameConventionError,
+    NonFiniteValueError,
+    Shutdown,
+    _usec,
+    all_finite,
+    enu_flu_to_ned_frd,
+    mav,
+    ned_frd_to_enu_flu,
+)
+from amlink.layout import MessageLayout
+from amlink.types import (
+    MAX_JOINTS,
+    AttitudeTarget,
+    SensorFrame,
+    StepFlag,
+    TorqueSetpoint,
+    attitude_target_from_wire,
+    sensor_frame_from_wire,
+    torque_setpoint_from_wire,
+)
+
+ODOMETRY = MessageLayout.of(mav.MAVLink_odometry_message)
+JOINT_STATE = MessageLayout.of(mav.MAVLink_am_joint_state_message)
+WRENCH = MessageLayout.of(mav.MAVLink_am_wrench_message)
+SIM_STEP = MessageLayout.of(mav.MAVLink_am_sim_step_message)
+TORQUE_SETPOINT = MessageLayout.of(mav.MAVLink_am_torque_setpoint_message)
+ATTITUDE_TARGET = MessageLayout.of(mav.MAVLink_set_attitude_target_message)
+_ODOMETRY_ID, _JOINT_STATE_ID, _WRENCH_ID = ODOMETRY.msgid, JOINT_STATE.msgid, WRENCH.msgid
+_SIM_STEP_ID, _TORQUE_SETPOINT_ID, _ATTITUDE_TARGET_ID = SIM_STEP.msgid, TORQUE_SETPOINT.msgid, ATTITUDE_TARGET.msgid
+
+_BASE = ("x", "y", "z", "q", "vx", "vy", "vz", "rollspeed", "pitchspeed", "yawspeed")  # 13 floats
+_UNKNOWN_COV = [float("nan")] + [0.0] * 20  # as codec: NaN first element = unknown
+
+# -- packers: the fields we set, in wire order; the rest fixed ------------------------
+_pack_odometry = ODOMETRY.packer(
+    "time_usec", *_BASE, pose_covariance=_UNKNOWN_COV, velocity_covariance=_UNKNOWN_COV,
+    frame_id=ODOM_FRAME_ID, child_frame_id=ODOM_CHILD_FRAME_ID, reset_counter=0,
+    estimator_type=mav.MAV_ESTIMATOR_TYPE_NAIVE, quality=100,
+).pack  # fmt: skip
+_pack_joints = JOINT_STATE.packer("step", "position_rad", "velocity_rad_s", "n_joints").pack
+_pack_wrench = WRENCH.packer("step", "force_n", "torque_nm").pack
+_pack_step = SIM_STEP.packer("step", "time_usec", "scenario_id", "flags").pack
+_pack_setpoint = TORQUE_SETPOINT.packer("step", "thrust_n", "body_torque_nm", "joint_torque_nm", "n_joints",
+                                        "flags").pack  # fmt: skip
+_pack_attitude = ATTITUDE_TARGET.packer("time_boot_ms", "q", "body_roll_rate", "body_pitch_rate", "body_yaw_rate",
+                                        "thrust", "target_system", "target_component", type_mask=0).pack  # fmt: skip
+
+# -- readers: the fields we use, in wire order; values flattened -----------------------
+READERS = {
+    ODOMETRY.msgid: ODOMETRY.reader("time_usec", *_BASE, "frame_id", "child_frame_id").read,
+    JOINT_STATE.msgid: JOINT_STATE.reader("step", "position_rad", "velocity_rad_s", "n_joints").read,
+    WRENCH.msgid: WRENCH.reader("step", "force_n", "torque_nm").read,
+    SIM_STEP.msgid: SIM_STEP.reader("step", "time_usec", "scenario_id", "flags").read,
+    TORQUE_SETPOINT.msgid: TORQUE_SETPOINT.reader(
+        "step", "thrust_n", "body_torque_nm", "joint_torque_nm", "n_joints", "flags"
+    ).read,
+    ATTITUDE_TARGET.msgid: ATTITUDE_TARGET.reader(
+        "q", "body_roll_rate", "body_pitch_rate", "body_yaw_rate", "thrust"
+    ).read,
+}
+"""``msgid -> read`` for :class:`amlink.wire.Decoder`; body tuples as documented on each assembler."""
+
+_ZEROS = (0.0,) * MAX_JOINTS
+_SHUTDOWN = int(StepFlag.SHUTDOWN)
+
+
+# -- encoders ---------------------------------------------------------------------------
+
+
+def sensor_frame_payloads(frame: SensorFrame, scenario_id: int = 0) -> tuple[tuple[int, bytes], ...]:
+    """``(msgid, payload)`` of a sensor batch (as :func:`amlink.codec.sensor_frame_messages`)."""
+    t_us = _usec(frame.time_s)
+    p, qt = frame.p_WB.tolist(), frame.quat_WB_wxyz.tolist()
+    v, w = frame.v_B.tolist(), frame.w_B.tolist()
+    q, qdot, wr = frame.q.tolist(), frame.qdot.tolist(), frame.wrench_E.tolist()
+    if not all_finite(p + qt + v + w + q + qdot + wr):
+        raise EncodeError(f"non-finite value in SensorFrame step {frame.step}")
+    n, step = len(q), frame.step
+    pad = _ZEROS[n:]
+    name = "ODOMETRY"  # the messages that can fail to pack (float32 range, uint32 scenario id)
+    try:
+        odom = _pack_odometry(t_us, *p, *qt, *v, *w)
+        name = "AM_SIM_STEP"
+        sim_step = _pack_step(step, t_us, scenario_id, int(frame.flags))
+    except (struct.error, OverflowError) as exc:  # worded as amlink.wire.Encoder.pack does
+        raise EncodeError(f"cannot pack {name}: {exc}") from exc
+    return (
+        (_ODOMETRY_ID, odom),
+        (_JOINT_STATE_ID, _pack_joints(step, *q, *pad, *qdot, *pad, n)),
+        (_WRENCH_ID, _pack_wrench(step, *wr)),
+        (_SIM_STEP_ID, sim_step),
+    )
+
+
+def setpoint_payloads(
+    sp: TorqueSetpoint, attitude: AttitudeTarget | None = None, time_boot_ms: int = 0,
+    target_system: int = 1, target_component: int = 1,
+) -> tuple[tuple[int, bytes], ...]:  # fmt: skip
+    """``(msgid, payload)`` of a setpoint batch (as :func:`amlink.codec.setpoint_messages`)."""
+    tau_B, tau_q = sp.tau_B_nm.tolist(), sp.tau_q_nm.tolist()
+    if not all_finite([sp.thrust_n, *tau_B, *tau_q]):
+        raise EncodeError(f"non-finite value in TorqueSetpoint step {sp.step}")
+    n = len(tau_q)
+    setpoint = (_TORQUE_SETPOINT_ID, _pack_setpoint(sp.step, sp.thrust_n, *tau_B, *tau_q, *_ZEROS[n:], n,
+                                                      int(sp.flags)))  # fmt: skip
+    if attitude is None:
+        return (setpoint,)
+    quat, r = attitude.quat_wxyz.tolist(), attitude.rates_rad_s.tolist()
+    if not all_finite([*quat, *r, attitude.thrust_normalized]):
+        raise EncodeError(f"non-finite value in AttitudeTarget step {attitude.step}")
+    # FLU -> FRD body rates: (p, q, r) -> (p, -q, -r)
+    try:
+        att = _pack_attitude(time_boot_ms & 0xFFFFFFFF, *enu_flu_to_ned_frd(quat), r[0], -r[1], -r[2],
+                             attitude.thrust_normalized, target_system, target_component)  # fmt: skip
+    except (struct.error, OverflowError) as exc:
+        raise EncodeError(f"cannot pack SET_ATTITUDE_TARGET: {exc}") from exc
+    return (_ATTITUDE_TARGET_ID, att), setpoint
+
+
+# -- decoders (bodies are READERS tuples) --------------------------------------------------
+
+
+def sensor_frame_from_fields(odom: tuple, joints: tuple, wrench: tuple, step_fields: tuple) -> SensorFrame:
+    """As :func:`amlink.codec.sensor_frame_from_messages`, from reader tuples.
+
+    ``odom`` = (time_usec, x, y, z, q[4], vx, vy, vz, rollspeed, pitchspeed, yawspeed,
+    frame_id, child_frame_id); ``joints`` = (step, position[8], velocity[8], n_joints);
+    ``wrench`` = (step, force[3], torque[3]); ``step_fields`` = (step, time_usec, scenario_id, flags).
+    """
+    step, time_usec, _, flags = step_fields
+    if joints[0] != step or wrench[0] != step:
+        raise BatchMismatchError(
+            f"batch steps disagree: AM_SIM_STEP {step}, AM_JOINT_STATE {joints[0]}, AM_WRENCH {wrench[0]}"
+        )
+    if odom[0] != time_usec:
+        raise BatchMismatchError(f"step {step}: ODOMETRY time_usec {odom[0]} != AM_SIM_STEP time_usec {time_usec}")
+    frame_id, child_frame_id = odom[14], odom[15]
+    if frame_id != ODOM_FRAME_ID or child_frame_id != ODOM_CHILD_FRAME_ID:
+        raise FrameConventionError(
+            f"ODOMETRY frames ({frame_id}, {child_frame_id}) != (LOCAL_ENU, BODY_FLU)"
+            f" = ({ODOM_FRAME_ID}, {ODOM_CHILD_FRAME_ID})"
+        )
+    n = joints[17]
+    if n > MAX_JOINTS:
+        raise CodecError(f"AM_JOINT_STATE.n_joints={n} > {MAX_JOINTS}")
+    base = odom[1:14]
+    if not all_finite(base):
+        raise NonFiniteValueError("ODOMETRY", "pose/twist")
+    q, qdot = joints[1 : 1 + n], joints[9 : 9 + n]
+    if not all_finite(q):
+        raise NonFiniteValueError("AM_JOINT_STATE", "position_rad")
+    if not all_finite(qdot):
+        raise NonFiniteValueError("AM_JOINT_STATE", "velocity_rad_s")
+    wr = wrench[1:7]
+    if not all_finite(wr):
+        raise NonFiniteValueError("AM_WRENCH", "force_n/torque_nm")
+    return sensor_frame_from_wire(step, time_usec / 1e6, base + q + qdot + wr, n, flags)
+
+
+def setpoint_from_fields(fields: tuple) -> TorqueSetpoint:
+    """As :func:`amlink.codec.setpoint_from_message`; ``fields`` = (step, thrust, tau_B[3], tau_q[8], n, flags)."""
+    n = fields[13]
+    if n > MAX_JOINTS:
+        raise CodecError(f"AM_TORQUE_SETPOINT.n_joints={n} > {MAX_JOINTS}")
+    thrust = fields[1]
+    if not math.isfinite(thrust):
+        raise NonFiniteValueError("AM_TORQUE_SETPOINT", "thrust_n")
+    if not all_finite(fields[2:5]):
+        raise NonFiniteValueError("AM_TORQUE_SETPOINT", "body_torque_nm")
+    if not all_finite(fields[5 : 5 + n]):
+        raise NonFiniteValueError("AM_TORQUE_SETPOINT", "joint_torque_nm")
+    return torque_setpoint_from_wire(fields[0], thrust, fields[2 : 5 + n], n, fields[14])
+
+
+def attitude_from_fields(fields: tuple, step: int) -> AttitudeTarget:
+    """As :func:`amlink.codec.attitude_from_message`; ``fields`` = (q[4], roll, pitch, yaw rates, thrust), NED/FRD."""
+    if not all_finite(fields):
+        raise NonFiniteValueError("SET_ATTITUDE_TARGET", "q/rates/thrust")
+    # FRD -> FLU rates; the quaternion map is an involution
+    return attitude_target_from_wire(step, (*ned_frd_to_enu_flu(fields[0:4]), fields[4], -fields[5], -fields[6],
+                                            fields[7]))  # fmt: skip
+
+
+class SensorFrameAssembler:
+    """As :class:`amlink.codec.SensorFrameAssembler`, fed ``(msgid, body)`` of reader records."""
+
+    def __init__(self) -> None:
+        self._odom = self._joints = self._wrench = None
+
+    def reset(self) -> None:
+        """Forget parts received so far (a new datagram starts a new batch)."""
+        self._odom = self._joints = self._wrench = None
+
+    def push(self, msgid: int, body) -> SensorFrame | Shutdown | None:
+        if msgid == _ODOMETRY_ID:
+            self._odom = body
+        elif msgid == _JOINT_STATE_ID:
+            self._joints = body
+        elif msgid == _WRENCH_ID:
+            self._wrench = body
+        elif msgid == _SIM_STEP_ID:
+            odom, joints, wrench = self._odom, self._joints, self._wrench
+            self._odom = self._joints = self._wrench = None
+            step, time_usec, _, flags = body
+            if flags & _SHUTDOWN:
+                return Shutdown(step, time_usec / 1e6, StepFlag(flags))
+            if odom is None or joints is None or wrench is None:
+                missing = [n for n, m in (("ODOMETRY", odom), ("AM_JOINT_STATE", joints), ("AM_WRENCH", wrench))
+                           if m is None]  # fmt: skip
+                raise BatchMismatchError(f"step {step}: batch incomplete, missing {', '.join(missing)}")
+            return sensor_frame_from_fields(odom, joints, wrench, body)
+        return None
+
+
+class SetpointAssembler:
+    """As :class:`amlink.codec.SetpointAssembler`, fed ``(msgid, body)`` of reader records."""
+
+    def __init__(self) -> None:
+        self._attitude = None
+
+    def reset(self) -> None:
+        self._attitude = None
+
+    def push(self, msgid: int, body) -> tuple[TorqueSetpoint, AttitudeTarget | None] | None:
+        if msgid == _ATTITUDE_TARGET_ID:
+            self._attitude = body
+        elif msgid == _TORQUE_SETPOINT_ID:
+            att, self._attitude = self._attitude, None
+            sp = setpoint_from_fields(body)
+            return sp, (attitude_from_fields(att, sp.step) if att is not None else None)
+        return None
+
