@@ -19,7 +19,9 @@ def vee(S: np.ndarray) -> np.ndarray:
 
 def quat_wxyz_to_R(qwxyz: np.ndarray) -> np.ndarray:
     """Rotation matrix of a unit quaternion given as (w, x, y, z); normalises first."""
-    w, x, y, z = np.asarray(qwxyz, dtype=float) / np.linalg.norm(qwxyz)
+    w, x, y, z = (float(v) for v in qwxyz)
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w / n, x / n, y / n, z / n
     return np.array(
         [
             [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
@@ -55,22 +57,9 @@ def quat_xyzw_of_R(R: np.ndarray) -> list[float]:
 
 
 def R_to_quat_wxyz(R: np.ndarray) -> np.ndarray:
-    """Unit quaternion (w, x, y, z) with w >= 0 of a rotation matrix (Shepperd's method)."""
-    tr = R[0, 0] + R[1, 1] + R[2, 2]
-    if tr > 0.0:
-        s = 2.0 * np.sqrt(tr + 1.0)
-        q = np.array([0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s])
-    else:
-        i = int(np.argmax(np.diag(R)))
-        j, k = (i + 1) % 3, (i + 2) % 3
-        s = 2.0 * np.sqrt(1.0 + R[i, i] - R[j, j] - R[k, k])
-        q = np.empty(4)
-        q[0] = (R[k, j] - R[j, k]) / s
-        q[1 + i] = 0.25 * s
-        q[1 + j] = (R[j, i] + R[i, j]) / s
-        q[1 + k] = (R[k, i] + R[i, k]) / s
-    q /= np.linalg.norm(q)
-    return q if q[0] >= 0.0 else -q
+    """Unit quaternion (w, x, y, z) with w >= 0 of a rotation matrix (Shepperd's method, on floats)."""
+    x, y, z, w = quat_xyzw_of_R(R)
+    return np.array([w, x, y, z]) if w >= 0.0 else np.array([-w, -x, -y, -z])
 
 
 def Rz(psi: float) -> np.ndarray:

@@ -6,6 +6,8 @@ and in the hover window the mean of the filtered end-effector force in W [N].
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from amcore.control import Diagnostics
@@ -23,10 +25,16 @@ class PhaseStats:
         if self.t_first is None:
             self.t_first = t
         self.t_last = t
-        for k, v in values.items():
-            a = np.abs(np.asarray(v, dtype=float))
-            self.final[k] = np.asarray(v, dtype=float)
-            self.max[k] = a if k not in self.max else np.maximum(self.max[k], a)
+        mx = self.max
+        for k, v in values.items():  # plain floats and lists: this runs every control step
+            if isinstance(v, float):
+                self.final[k] = v
+                mx[k] = max(mx.get(k, 0.0), abs(v))
+            else:
+                v = v.tolist() if isinstance(v, np.ndarray) else list(v)
+                self.final[k] = v
+                old = mx.get(k)
+                mx[k] = [abs(a) for a in v] if old is None else [max(o, abs(a)) for o, a in zip(old, v)]
 
     def to_dict(self) -> dict:
         def j(x):
@@ -50,8 +58,8 @@ class Outcome:
 
     def add(self, t: float, phase: str, d: Diagnostics) -> None:
         self.steps += 1
-        values = {"r_c_err": float(np.linalg.norm(d.r_c_err)), "e_R": float(np.linalg.norm(d.e_R)),
-                  "y_err": d.y_err, "r_c_err_vec": d.r_c_err, "sigma_min_J3": d.sigma_min_J3}
+        values = {"r_c_err": math.hypot(*d.r_c_err.tolist()), "e_R": math.hypot(*d.e_R.tolist()),
+                  "y_err": d.y_err, "r_c_err_vec": d.r_c_err, "sigma_min_J3": float(d.sigma_min_J3)}
         self.phases[phase].add(t, values)
         if self.hover_window[0] <= t <= self.hover_window[1]:
             self._force_sum += d.F_rc

@@ -24,8 +24,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--lose-at", type=float, default=14.0)
     ap.add_argument("--sysid", type=int, default=2)
+    ap.add_argument("--scenario", default=str(ROOT / "configs" / "scenarios" / "ten_am.toml"))
     a = ap.parse_args()
-    spec = load_scenario(ROOT / "configs" / "scenarios" / "ten_am.toml")
+    spec = load_scenario(a.scenario)
     o = run(spec, lost=lambda t: {a.sysid} if t >= a.lose_at else set())
     obj = o["object"]
     print(f"companion of sysid {a.sysid} silent from t = {a.lose_at} s; events: {o['events']}")
