@@ -56,17 +56,36 @@ def test_companion_of_another_scenario_is_told_so(tmp_path):
         sim.kill()
 
 
-def test_bad_config_exits_2_naming_file_and_key(tmp_path):
+@pytest.mark.parametrize("old,new,file,key", [
+    ("mass_kg = 1.0", 'mass_kg = "heavy"', "bad.toml", "[object].mass_kg"),
+    ("sysid = 5", "sysid = 4", "bad.toml", "duplicate sysid 4"),
+    ("azimuth_deg = 0.0", "azimuth_deg = 0.0\nspeed = 3", "bad.toml", "unknown key 'speed'"),
+    ("[object]", "[link]\nloss = 2.0\n[object]", "bad.toml", "[link].loss"),
+    ("VEHICLE", "urdf", "am3dof.toml", "urdf: file not found"),
+    ("VEHICLE", "gains", "am3dof.toml", "[gains].k_R: must be > 0"),
+])
+def test_bad_config_exits_2_naming_file_and_key_and_starts_nothing(tmp_path, old, new, file, key):
+    vehicle = SCENARIOS.parent / "vehicles" / "am3dof.toml"
+    if old == "VEHICLE":  # a broken vehicle file next to the scenario
+        vtext = vehicle.read_text().replace('urdf = "am3dof.urdf"', f'urdf = "{vehicle.parent / "am3dof.urdf"}"')
+        vtext = vtext.replace(f'urdf = "{vehicle.parent / "am3dof.urdf"}"', 'urdf = "missing.urdf"') if new == "urdf" \
+            else vtext.replace("k_R = 30.0", "k_R = -1.0")
+        vehicle = tmp_path / "am3dof.toml"
+        vehicle.write_text(vtext)
+        text = (SCENARIOS / "two_am_comp.toml").read_text()
+    else:
+        assert old in (SCENARIOS / "two_am_comp.toml").read_text()
+        text = (SCENARIOS / "two_am_comp.toml").read_text().replace(old, new, 1)
     bad = tmp_path / "bad.toml"
-    text = (SCENARIOS / "two_am_comp.toml").read_text().replace("mass_kg = 1.0", "mass_kg = \"heavy\"")
-    bad.write_text(text.replace('vehicle = "../vehicles/am3dof.toml"',
-                                f'vehicle = "{SCENARIOS.parent / "vehicles" / "am3dof.toml"}"'))
-    for cmd in ([script("simulator"), "--config", str(bad)],
+    bad.write_text(text.replace('vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{vehicle}"'))
+    for cmd in ([script("simulator"), "--config", str(bad), "--bind", "udp:127.0.0.1:0", "--run-dir", str(tmp_path / "s")],
                 [script("companion"), "--sysid", "4", "--config", str(bad)],
                 [script("am-run"), str(bad), "--run-dir", str(tmp_path / "r")]):
         p = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
         assert p.returncode == 2, (cmd, p.stderr)
-        assert "bad.toml" in p.stderr and "[object].mass_kg" in p.stderr
+        assert file in p.stderr and key in p.stderr, p.stderr
+        assert p.stderr.count("error:") == 1  # one clear message
+    assert not (tmp_path / "s").exists() and not (tmp_path / "r" / "simulator.log").exists()  # nothing started
     p = subprocess.run([script("companion"), "--sysid", "9"], capture_output=True, text=True, timeout=60)
     assert p.returncode == 2 and "sysid 9" in p.stderr
 
