@@ -339,7 +339,7 @@ class Translator:
         base = {"pose": fg.pose(tr["p_WB"], tr["q_WB"]), "size": fg.vec3([0.5, 0.5, 0.04]),
                 "bottom_scale": 1.0, "top_scale": 1.0, "color": fg.color(0.3, 0.3, 0.3, 0.6)}
         arm = {"type": 0, "pose": fg.pose([0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]), "thickness": 0.015,
-               "scale_invariant": False, "points": [fg.vec3(tr["p_WB"]), fg.vec3(tr["p_WE"])], "color": grey,
+               "scale_invariant": False, "points": [fg.vec3(p) for p in [tr["p_WB"], *tr.get("p_W_joints", ()), tr["p_WE"]]], "color": grey,
                "colors": [], "indices": []}
         pad = {"pose": fg.pose(tr["p_WE"], tr["q_WE"]), "size": fg.vec3([0.01, 0.06, 0.06]), "color": orange}
         label = {"pose": fg.pose([tr["p_WB"][0], tr["p_WB"][1], tr["p_WB"][2] + 0.15], [1.0, 0.0, 0.0, 0.0]),

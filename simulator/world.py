@@ -73,7 +73,8 @@ class PadContact:
 @dataclass(frozen=True)
 class AmTruth:
     """Ground truth of one AM: base pose (p_WB [m], R_WB), end-effector pose (p_WE, R_WE),
-    the pad-object contact, and the names of other bodies the pad or the base touch."""
+    the pad-object contact, the names of other bodies the pad or the base touch, and the
+    arm's joint origins."""
 
     p_WB: np.ndarray
     R_WB: np.ndarray
@@ -82,6 +83,7 @@ class AmTruth:
     pad_object_contact: PadContact
     pad_other_contacts: tuple[str, ...]
     base_contacts: tuple[str, ...]
+    p_W_joints: tuple[np.ndarray, ...] = ()  # arm joint origins, base to wrist [m] (to draw the arm)
 
 
 @dataclass(frozen=True)
@@ -289,6 +291,7 @@ class World:
         c = self._c()
         p, quat = pb.getBasePositionAndOrientation(am.body_id, physicsClientId=c)
         ee = pb.getLinkState(am.body_id, am.ee_link_id, computeForwardKinematics=1, physicsClientId=c)
+        joints = pb.getLinkStates(am.body_id, list(am.arm_joint_ids), computeForwardKinematics=1, physicsClientId=c)
         pad_points = pb.getContactPoints(bodyA=am.body_id, linkIndexA=am.pad_link_id, physicsClientId=c)
         base_points = pb.getContactPoints(bodyA=am.body_id, linkIndexA=-1, physicsClientId=c)
         on_object = pb.getContactPoints(bodyA=self._object_id, bodyB=am.body_id, linkIndexB=am.pad_link_id,
@@ -296,7 +299,8 @@ class World:
         return AmTruth(p_WB=np.array(p), R_WB=_R(quat), p_WE=np.array(ee[4]), R_WE=_R(ee[5]),
                        pad_object_contact=_sum_contact(on_object),
                        pad_other_contacts=self._names_of(pt[2] for pt in pad_points if pt[2] != self._object_id),
-                       base_contacts=self._names_of(pt[2] for pt in base_points))
+                       base_contacts=self._names_of(pt[2] for pt in base_points),
+                       p_W_joints=tuple(np.array(j[4]) for j in joints))
 
     def _names_of(self, body_ids) -> tuple[str, ...]:
         return tuple(sorted({self._names.get(b, f"body{b}") for b in body_ids}))

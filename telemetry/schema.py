@@ -181,7 +181,9 @@ AM_TRUTH_SCHEMA = _object("amstack.AmTruth", "Ground-truth base and end-effector
     "q_WB": _vec(4, "base attitude (w, x, y, z)"),
     "p_WE": _vec(3, "end-effector (pad face centre) position [m]"),
     "q_WE": _vec(4, "end-effector attitude (w, x, y, z); x = pad outward normal"),
-})
+    "p_W_joints": {"type": "array", "items": _vec(3, "joint origin [m]"),
+                   "description": "arm joint origins from the base to the wrist [m] (optional)"},
+}, optional=("p_W_joints",))
 
 CONTACT_SCHEMA = _object("amstack.PadContact", "Force the object applies on one AM's pad, ground truth", {
     "sysid": {"type": "integer"},
@@ -275,8 +277,12 @@ def controller_sample(t_s: float, phase: str, diag, cmd, seq: int = 0, sysid: in
 def am_truth_sample(t_s: float, sysid: int, am, seq: int = 0) -> dict:
     """Payload of <p>/sim/am/<sysid>/truth from a simulator AmTruth (duck-typed:
     p_WB, R_WB, p_WE, R_WE)."""
-    return {"t": float(t_s), "seq": int(seq), "sysid": int(sysid),
-            "p_WB": _l(am.p_WB), "q_WB": quat_wxyz(am.R_WB), "p_WE": _l(am.p_WE), "q_WE": quat_wxyz(am.R_WE)}
+    out = {"t": float(t_s), "seq": int(seq), "sysid": int(sysid),
+           "p_WB": _l(am.p_WB), "q_WB": quat_wxyz(am.R_WB), "p_WE": _l(am.p_WE), "q_WE": quat_wxyz(am.R_WE)}
+    joints = getattr(am, "p_W_joints", ())
+    if len(joints):
+        out["p_W_joints"] = [_l(p) for p in joints]
+    return out
 
 
 def contact_sample(t_s: float, sysid: int, am, seq: int = 0) -> dict:

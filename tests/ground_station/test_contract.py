@@ -72,6 +72,13 @@ def test_scene_rate_and_content(capture):
     assert abs(len(scenes) - (1 + int(span * 10.0))) <= 1
     ids = {e["id"] for e in scenes[-1][1]["entities"]}
     assert ids == {"object"} | {f"am{a.sysid}" for a in capture.spec.ams}
+    last_truth = capture.truths[-1]
+    for e in scenes[-1][1]["entities"]:
+        if e["id"].startswith("am"):  # the arm: base, every joint origin, the end-effector
+            am = last_truth.ams[int(e["id"][2:])]
+            pts = [[p["x"], p["y"], p["z"]] for p in e["lines"][0]["points"]]
+            assert len(pts) == 2 + len(am.p_W_joints) == 2 + capture.spec.vehicle.n_joints
+            np.testing.assert_allclose(pts[1:-1], np.array(am.p_W_joints), atol=0.05)  # drawn a little earlier
     _, none = _translate_all(capture.samples, scene_rate_hz=0.0)
     assert not any(o.topic == c.SCENE_TOPIC for o in none)
 
