@@ -175,20 +175,33 @@ def _readable(stream, deadline: float) -> bool:
 
 
 def _follow(sim: subprocess.Popen, procs: dict[str, subprocess.Popen], bar: _Bar) -> list[str]:
-    """Show progress until the simulator exits; stop early if any process fails."""
+    """Show progress until the simulator exits. A process that fails before the run starts
+    stops everything (the simulator would only wait for it); once the run is under way, a
+    companion that dies is reported and its vehicle flies on under the flight controller's
+    failsafe, as on a real vehicle, until the simulator ends the run; a dead logger never
+    stops a run."""
+    started, reported, failed = False, set(), []
     while True:
         if _readable(sim.stdout, time.monotonic() + 0.2):
             line = sim.stdout.readline()
             if not line:
                 sim.wait()
-                return []
+                return failed
             ev = json.loads(line)
             if ev.get("event") == "progress":
+                started = True
                 bar.show(ev["t"], ev["duration"], ev["rtf"])
         for name, p in procs.items():
             code = p.poll()
-            if code not in (None, 0) and p is not sim:
+            if code in (None, 0) or p is sim or name in reported:
+                continue
+            if not started and name != "recorder":
                 return [name]
+            reported.add(name)
+            failed.append(name)
+            what = "the run goes on without its log" if name == "recorder" else "its vehicle is in failsafe"
+            print(f"\nam-run: {name} exited with code {code}; {what} (see {name.replace(' ', '-')}.log)",
+                  file=sys.stderr)
 
 
 def _stop_all(procs: dict[str, subprocess.Popen], grace_s: float = 10.0) -> None:

@@ -214,3 +214,41 @@ def test_killing_the_logger_mid_run_costs_the_run_nothing_and_the_log_is_salvage
             if p.poll() is None:
                 p.kill()
         sim.kill()
+
+
+def test_am_run_keeps_flying_when_a_companion_dies_and_reports_it(tmp_path):
+    """am-run does not tear the run down when a companion dies mid-run: the simulator's
+    failsafe takes that vehicle, the run completes, and am-run names the dead process."""
+    import os
+    import threading
+
+    run_dir = tmp_path / "r"
+    p = subprocess.Popen([script("am-run"), str(SCENARIOS / "two_am_comp.toml"), "--run-dir", str(run_dir),
+                          "--duration", "4", "--no-telemetry"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True)
+
+    def kill_companion_5():
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            log = run_dir / "companion-5.log"
+            if log.is_file() and "armed" in log.read_text():
+                time.sleep(1.0)
+                out = subprocess.run(["pgrep", "-f", f"companion.*--sysid 5 .*{run_dir}"], capture_output=True,
+                                     text=True).stdout.split()
+                for pid in out:
+                    os.kill(int(pid), signal.SIGKILL)
+                return
+            time.sleep(0.1)
+
+    killer = threading.Thread(target=kill_companion_5)
+    killer.start()
+    try:
+        _, err = p.communicate(timeout=400)
+    finally:
+        killer.join()
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 1
+    assert "companion 5 exited" in err and "failsafe" in err
+    o = json.loads((run_dir / "outcome.json").read_text())
+    assert o["steps"] == 4000 and o["failsafe_at_end"] == [5]  # the run was not torn down
