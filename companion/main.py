@@ -74,7 +74,11 @@ def main(argv: list[str] | None = None) -> int:
 
     signal.signal(signal.SIGTERM, _on_signal)
     signal.signal(signal.SIGINT, _on_signal)
-    client = CompanionClient(a.sysid, a.sim, signing_key=None if keys is None else keys[a.sysid])
+    try:
+        client = CompanionClient(a.sysid, a.sim, signing_key=None if keys is None else keys[a.sysid])
+    except ValueError as exc:
+        print(f"{tag}: error: --sim: {exc}", file=sys.stderr)
+        return 2
     why = "simulator ended the run"
     tele.open()  # never blocks: publishes are queued, dropped and counted while nobody listens
     try:

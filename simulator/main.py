@@ -41,6 +41,10 @@ class _Stop(Exception):
     pass
 
 
+class _BindError(Exception):
+    pass
+
+
 def _on_signal(signum, _frame):
     raise _Stop(signal.Signals(signum).name)
 
@@ -126,8 +130,12 @@ def main(argv: list[str] | None = None) -> int:
     core = SitlCore(spec, log=log, on_truth=sim_tele.truth)
     v = spec.vehicle
     limits = SetpointLimits.for_vehicle(v.rotors.count * v.rotors.thrust_max_n, max(v.joint_torque_max_nm), v.n_joints)
-    server = SimServer(a.bind, sysids=sysids, scenario=info, timeout_s=a.step_timeout, signing_keys=keys,
-                       limits=limits)
+    try:
+        server = SimServer(a.bind, sysids=sysids, scenario=info, timeout_s=a.step_timeout, signing_keys=keys,
+                           limits=limits)
+    except ValueError as exc:
+        print(f"simulator: error: --bind: {exc}", file=sys.stderr)
+        return 2
     status, code, k = "run complete", 0, 0
     completed = False  # the run reached its end (a vehicle in failsafe makes the code 1, not the run an error)
     told = status  # what the companions hear (STATUSTEXT carries 50 bytes)
@@ -136,7 +144,10 @@ def main(argv: list[str] | None = None) -> int:
     tele.open()
     try:
         core.connect()
-        host, port = server.open()
+        try:
+            host, port = server.open()
+        except OSError as exc:
+            raise _BindError(f"cannot listen on {a.bind}: {exc}") from None
         progress.event(event="ready", bind=f"udp:{host}:{port}", scenario=spec.name, sysids=sysids)
         print(f"simulator: '{spec.name}' listening on udp:{host}:{port}, waiting for sysids {sysids}",
               file=sys.stderr, flush=True)
@@ -160,6 +171,9 @@ def main(argv: list[str] | None = None) -> int:
     except _Stop as stop:
         status, code = f"interrupted by {stop}", 130
         told = status
+    except _BindError as exc:
+        status, code, told = str(exc), 1, str(exc)
+        print(f"simulator: error: {exc}", file=sys.stderr)
     except LinkError as exc:
         status, code, told = f"link failure: {exc}", 1, str(exc)
         print(f"\nsimulator: error: {exc}", file=sys.stderr)

@@ -252,3 +252,20 @@ def test_am_run_keeps_flying_when_a_companion_dies_and_reports_it(tmp_path):
     assert "companion 5 exited" in err and "failsafe" in err
     o = json.loads((run_dir / "outcome.json").read_text())
     assert o["steps"] == 4000 and o["failsafe_at_end"] == [5]  # the run was not torn down
+
+
+def test_bad_endpoints_are_named_not_tracebacks(tmp_path):
+    import socket
+
+    for cmd in ([script("simulator"), "--bind", "tcp:127.0.0.1:x", "--run-dir", str(tmp_path / "a")],
+                [script("companion"), "--sysid", "4", "--sim", "127.0.0.1"]):
+        p = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+        assert p.returncode == 2, p.stderr
+        assert "Traceback" not in p.stderr and ("--bind" in p.stderr or "--sim" in p.stderr)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:  # the port is taken
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+        p = subprocess.run([script("simulator"), "--bind", f"udp:127.0.0.1:{port}", "--run-dir", str(tmp_path / "b")],
+                           capture_output=True, text=True, timeout=60)
+    assert p.returncode == 1 and "Traceback" not in p.stderr
+    assert f"cannot listen on udp:127.0.0.1:{port}" in p.stderr
