@@ -16,7 +16,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from telemetry.schema import PHASES
 
 from . import contract as c
 from .mcap_io import LogData

@@ -7,7 +7,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from amcore.control import ControllerMemory, ControllerParams, step
+from amcore.control import ControllerMemory, step
 from amcore.filters import FilterState
 from amcore.ideal import forward_dynamics, full_tau
 from amcore.model import AmState, create_data, decoupled_terms

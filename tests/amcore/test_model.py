@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
-import pytest
 
 from amcore.model import AmState, create_data, decoupled_terms, generalized_gravity
 from amcore.so3 import exp_so3, hat

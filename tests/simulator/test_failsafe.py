@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from amcore.mission import am_mission
 from amcore.so3 import exp_so3
 from simulator.failsafe import Failsafe, FailsafeGains
 from simulator.world import World
