@@ -160,11 +160,15 @@ class CompanionClient:
             self._pump(min(deadline, next_try) - now)
 
     def recv_frame(self, timeout_s: float = 1.0) -> SensorFrame | None:
-        """Next sensor frame, or None once the simulator announced shutdown.
+        """Newest sensor frame not yet returned, or None once the simulator announced shutdown.
 
-        Invalid batches (non-finite, implausible, wrong scenario) are dropped and
-        counted in :attr:`stats`, never returned.  Raises SimulatorTimeoutError
-        after ``timeout_s``.
+        In lockstep at most one frame is pending.  A backlog (the simulator ran on
+        while this companion did not answer, e.g. before it rejoined) is passed
+        over to its newest frame, counted in ``stats.skipped_frames``: answering
+        stale states one by one would only keep it behind.  Invalid batches
+        (non-finite, implausible, wrong scenario) are dropped and counted in
+        :attr:`stats`, never returned.  Raises SimulatorTimeoutError after
+        ``timeout_s``.
         """
         self._require_connected()
         deadline = time.monotonic() + timeout_s
@@ -175,6 +179,9 @@ class CompanionClient:
                 if isinstance(item, codec.Shutdown):
                     self._shutdown = True
                     break
+                while self._inbox and not isinstance(self._inbox[0], codec.Shutdown):
+                    item = self._inbox.popleft()
+                    self.stats.skipped_frames += 1
                 self._last_time_s = item.time_s
                 return item
             remaining = deadline - time.monotonic()

@@ -120,12 +120,17 @@ class ImpairedChannel(Generic[T]):
         self._rng = rng
         self._pending: dict[int, list[tuple[int, T]]] = {}  # arrival step -> [(sent step, item)]
         self._now = -1
+        self._ideal = impairment.is_ideal
 
     def send(self, step: int, item: T) -> None:
         """The setpoint ``item`` for step ``step`` leaves the companion at that step."""
         if step < self._now:
             raise ValueError(f"send at step {step} after deliver({self._now}): time goes forward")
         imp, st = self.impairment, self.stats
+        if self._ideal:  # arrives at once, no draws: the per-step path of an unimpaired link
+            st.sent += 1
+            self._pending.setdefault(step, []).append((step, item))
+            return
         u_loss, u_jitter, u_reorder, u_hold, u_dup = self._rng.random(5)
         st.sent += 1
         if u_loss < imp.loss:

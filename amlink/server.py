@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import socket
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 from amlink import codec, fastcodec
@@ -201,8 +201,13 @@ class SimServer:
 
     # -- lockstep ----------------------------------------------------------------
     def exchange(self, frames: dict[int, SensorFrame], timeout_s: float | None = None, *,
-                 partial: bool = False) -> dict[int, TorqueSetpoint]:  # fmt: skip
+                 partial: bool = False, while_waiting: Callable[[], None] | None = None,
+                 ) -> dict[int, TorqueSetpoint]:  # fmt: skip
         """Send each companion its frame, then wait for the setpoints of those steps.
+
+        ``while_waiting``, if given, is called once after the frames are out and
+        before the first answer is read: work that need not delay the companions
+        (the simulator's bookkeeping) runs while they compute.
 
         All batches go out before any answer is awaited, so the companions
         compute concurrently.  A batch still unanswered after ``retry_s`` is
@@ -240,6 +245,8 @@ class SimServer:
             if peer.addr is not None:
                 udp.send(peer.addr, peer.encoder.pack_payloads(peer.batch))
             peer.last_step, peer.last_time_s = frame.step, frame.time_s
+        if while_waiting is not None:
+            while_waiting()
         results: dict[int, TorqueSetpoint] = {}
         start = time.monotonic()
         deadline, interval = start + timeout, self.retry_s

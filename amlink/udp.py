@@ -72,6 +72,7 @@ class LinkStats:
     # loss recovery
     retransmits: int = 0  # server: batches re-sent; companion: cached setpoints re-sent
     duplicate_frames: int = 0  # companion: sensor frames for a step already seen
+    skipped_frames: int = 0  # companion: frames passed over for a newer one already queued (a backlog)
 
 
 Shim = Callable[[tuple[str, int], bytes], Iterable[tuple[tuple[str, int], bytes]]]

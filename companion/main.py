@@ -82,6 +82,9 @@ def main(argv: list[str] | None = None) -> int:
     why = "simulator ended the run"
     tele.open()  # never blocks: publishes are queued, dropped and counted while nobody listens
     try:
+        if not tele.await_recorder(tele.keys.controller(a.sysid), a.telemetry_wait):
+            print(f"{tag}: warning: telemetry: no subscriber (recorder) after {a.telemetry_wait:g} s; "
+                  f"publishing anyway", file=sys.stderr)
         info = client.connect(timeout_s=a.connect_timeout)
         if info.scenario_id != my_id or info.name != spec.name:
             same = " (same name, different content: the files differ between hosts or were edited)" \
@@ -97,8 +100,9 @@ def main(argv: list[str] | None = None) -> int:
             frame = client.recv_frame(timeout_s=a.frame_timeout)
             if frame is None:
                 break
-            sp, att, res = pilot.step(frame)
-            client.send_setpoint(sp, att)
+            sp, att, res = pilot.command(frame)
+            client.send_setpoint(sp, att)  # the simulator waits for this; bookkeeping comes after
+            pilot.record(frame.time_s, res)
             am_tele.step(frame.time_s, pilot.mission.phase(frame.time_s), res)
         wall = time.perf_counter() - t0
     except _Stop as stop:

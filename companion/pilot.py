@@ -3,7 +3,8 @@
 `Pilot(spec, sysid)` builds the AM's model, its own mission references from its [[am]]
 entry, and the paper's controller; `pilot.step(frame)` returns the torque setpoint and
 attitude target for that frame, and keeps the per-phase error summary
-(`companion.outcome`). The companion process wraps it in the MAVLink link; the
+(`companion.outcome`); `command` and `record` are its two halves, for a caller that sends
+the setpoint before the bookkeeping. The companion process wraps it in the MAVLink link; the
 in-process runner (`simulator.inprocess`) calls it directly.
 """
 from __future__ import annotations
@@ -37,18 +38,29 @@ class Pilot:
         self.steps = 0
 
     def step(self, frame: SensorFrame) -> tuple[TorqueSetpoint, AttitudeTarget, StepResult]:
+        """`command`, then `record`: the setpoint answering `frame`, its errors summarized."""
+        sp, att, res = self.command(frame)
+        self.record(frame.time_s, res)
+        return sp, att, res
+
+    def command(self, frame: SensorFrame) -> tuple[TorqueSetpoint, AttitudeTarget, StepResult]:
+        """The controller's answer to `frame`, and nothing else: in lockstep the simulator is
+        waiting for it, so the companion sends it before it does any bookkeeping (`record`)."""
         t = frame.time_s
         res = step(self.model, self.data, self.params, state_from_frame(frame), self.mission.reference(t),
                    frame.wrench_E, self.memory, t)
         self.memory = res.memory
         sp, att = setpoint_from_result(frame.step, res, self.thrust_max_n)
+        return sp, att, res
+
+    def record(self, t: float, res: StepResult) -> None:
+        """Adds the step answered at time t [s] to the per-phase error summary."""
         d = res.diagnostics
         self.outcome.add(t, self.mission.phase(t), d)
         while self._snaps and t >= self._snaps[0][1] - 0.5 * self.spec.dt_s:
             self.outcome.snapshot(self._snaps.pop(0)[0], t, d)
         self.last = (t, d)
         self.steps += 1
-        return sp, att, res
 
     def summary(self, error: str | None = None) -> dict:
         if self.last is not None and "end" not in self.outcome.at:

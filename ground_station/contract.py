@@ -95,8 +95,9 @@ class Out:
 
 @dataclass
 class KeyStats:
-    """Sequence accounting of one key. missing: seq numbers skipped (lost in the publisher's
-    queue, in zenoh or in the recorder's inbox); reordered: seq not above the last one;
+    """Sequence accounting of one key. missing: seq numbers skipped, the head (seq numbers
+    before the first one received) included (lost in the publisher's queue, in zenoh or in
+    the recorder's inbox, or published before the recorder listened); reordered: seq not above the last one;
     restarts: seq fell back to 0 (the publisher restarted)."""
 
     received: int = 0
@@ -116,7 +117,10 @@ class KeyStats:
     def see(self, seq: int) -> None:
         self.received += 1
         if self.first_seq < 0:
+            # seq numbers start at 0: those before the first arrival never reached the log
+            # (lost in zenoh, or published before this recorder listened)
             self.first_seq = self.last_seq = seq
+            self.missing += seq
             return
         if seq == self.last_seq + 1:
             self.last_seq = seq

@@ -21,6 +21,7 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from telemetry.schema import samples_of
 from telemetry.session import ZenohOptions, build_config
 
 from .contract import Translator
@@ -123,18 +124,21 @@ class Recorder:
     def _drain(self, max_items: int | None = None) -> int:
         n = 0
         pop, translate, write = self._inbox.popleft, self.translator.translate, self.writer.write
+        samples = 0
         while self._inbox and (max_items is None or n < max_items):
-            key, data = pop()
-            try:
-                outs = translate(key, data)
-            except Exception as exc:  # a payload the contract did not foresee: count it, never stop recording
-                self.translator.malformed += 1
-                self.translator.last_error = f"{key}: {type(exc).__name__}: {exc}"
-                outs = ()
-            for out in outs:
-                write(out)
+            key, message = pop()
             n += 1
-        self._received += n
+            for data in samples_of(message):  # one or more samples, one JSON text per line
+                samples += 1
+                try:
+                    outs = translate(key, data)
+                except Exception as exc:  # a payload the contract did not foresee: count it, never stop recording
+                    self.translator.malformed += 1
+                    self.translator.last_error = f"{key}: {type(exc).__name__}: {exc}"
+                    outs = ()
+                for out in outs:
+                    write(out)
+        self._received += samples
         if not self._run_start_written and self.translator.run_start is not None:
             self.writer.add_metadata("run_start", {"json": json.dumps(self.translator.run_start)})
             self._run_start_written = True

@@ -6,6 +6,7 @@ flight controller sees it, `amlink.impair`, and the failsafe after companion los
 simulator main and the in-process runner (`simulator.inprocess`) both drive it:
 
     frames = core.frames(k)                  # sensor frames of step k, one per AM
+    <send them>; core.observe()              # bookkeeping while the companions compute
     setpoints = <the companions answer>      # dict sysid -> TorqueSetpoint (some may miss)
     core.actuate(k, setpoints, lost)         # flight controllers apply them (or failsafe)
     core.step()
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+from array import array
 from collections.abc import Callable, Collection, Mapping
 
 import numpy as np
@@ -21,9 +23,8 @@ import numpy as np
 from amcore.config import ScenarioSpec
 from amcore.mission import am_mission
 from amcore.model import build_model
-from amcore.so3 import R_to_quat_wxyz
 from amlink.impair import ImpairedLink, LinkImpairment
-from amlink.types import SensorFrame, TorqueSetpoint
+from amlink.types import SensorFrame, TorqueSetpoint, sensor_frame_from_wire
 
 from .failsafe import Failsafe
 from .outcome import RunOutcome
@@ -47,7 +48,7 @@ class SitlCore:
         self.failsafes: dict[int, Failsafe] = {}
         self.events: list[dict] = []
         self.digest = hashlib.sha256()
-        self._wrenches: dict[int, np.ndarray] = {}
+        self._unobserved: tuple | None = None  # (k, values, frames) of `frames` awaiting `observe`
 
     def connect(self) -> None:
         self.world.connect()
@@ -60,25 +61,38 @@ class SitlCore:
         return self.world.time_s
 
     def frames(self, k: int) -> dict[int, SensorFrame]:
-        """Step k's sensor frames (exact state, wrist F/T reading); samples ground truth."""
+        """Step k's sensor frames (exact state, wrist F/T reading). Their bookkeeping (the
+        digest, ground truth every TRUTH_EVERY steps) is left to `observe`, so that a caller
+        can send the frames first; `actuate` runs it if the caller did not."""
         w, t = self.world, self.world.time_s
         out = {}
+        n = self.model.n
+        values = {}
         for s in self.sysids:
-            st = w.state(s)
-            self._wrenches[s] = w.wrench_ee(s)
-            f = out[s] = SensorFrame(step=k, time_s=t, p_WB=st.p_WB, quat_WB_wxyz=R_to_quat_wxyz(st.R_WB), v_B=st.v_B,
-                                     w_B=st.w_B, q=st.q, qdot=st.qdot, wrench_E=self._wrenches[s])
-            self.digest.update(f.p_WB.tobytes() + f.quat_WB_wxyz.tobytes() + f.q.tobytes() + f.wrench_E.tobytes())
+            values[s] = w.sensor_values(s)
+            out[s] = sensor_frame_from_wire(k, t, values[s], n, 0)
+        self._unobserved = (k, values, out)
+        return out
+
+    def observe(self) -> None:
+        """Bookkeeping of the last `frames` call (once): every frame into the state digest, and
+        every TRUTH_EVERY steps a ground-truth sample for the outcome and `on_truth`."""
+        if self._unobserved is None:
+            return
+        k, values, frames = self._unobserved
+        self._unobserved = None
+        for s in self.sysids:
+            self.digest.update(array("d", values[s]).tobytes())
         if k % TRUTH_EVERY == 0:
-            gt = w.ground_truth()
-            self.outcome.add(gt, self._wrenches)
+            gt = self.world.ground_truth()
+            self.outcome.add(gt, {s: f.wrench_E for s, f in frames.items()})
             if self.on_truth is not None:
                 self.on_truth(gt)
-        return out
 
     def actuate(self, k: int, setpoints: Mapping[int, TorqueSetpoint], lost: Collection[int] = ()) -> None:
         """Each flight controller applies what reached it (zero-order hold), or its failsafe
         while its companion is lost; a companion that answers again takes over again."""
+        self.observe()
         w, t = self.world, self.world.time_s
         for s in self.sysids:
             if s in lost or (s in self.failsafes and s not in setpoints):
@@ -107,6 +121,7 @@ class SitlCore:
 
     def finish(self) -> dict:
         """Final ground-truth sample; the outcome as a dict."""
+        self.observe()
         w = self.world
         self.outcome.add(w.ground_truth(), {s: w.wrench_ee(s) for s in self.sysids})
         return {"state_digest": self.digest.hexdigest(), "events": self.events,

@@ -86,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
         if not a.no_telemetry:
             # the logger listens on a free loopback port; every publisher connects to it
             endpoint = f"tcp/127.0.0.1:{_free_tcp_port()}"
-            tele_args = ["--zenoh-connect", endpoint]
+            tele_args = ["--zenoh-connect", endpoint, "--telemetry-wait", "5"]  # the log starts with the run
             rlog = open(run_dir / "recorder.log", "w")
             logs.append(rlog)
             procs["recorder"] = subprocess.Popen(

@@ -153,11 +153,14 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr, flush=True)
         server.wait_for_peers(a.peer_timeout)
         server.wait_for_armed(a.peer_timeout)
+        if not tele.await_recorder(tele.keys.sim_event, a.telemetry_wait):
+            print(f"simulator: warning: telemetry: no subscriber (recorder) after {a.telemetry_wait:g} s; "
+                  f"publishing anyway", file=sys.stderr, flush=True)
         progress.t_wall0 = time.perf_counter()
         sim_tele.start(core.time_s)
         for k in range(n_steps):
             frames = core.frames(k)
-            setpoints = server.exchange(frames, partial=True)
+            setpoints = server.exchange(frames, partial=True, while_waiting=core.observe)
             core.actuate(k, setpoints, server.lost_peers)
             core.step()
             progress.update(core.time_s)

@@ -68,6 +68,7 @@ class QuadMixer:
     A_inv: np.ndarray = field(repr=False)
     p_B_rotors_m: np.ndarray = field(repr=False)  # (4, 3) rotor positions in B
     spin: np.ndarray = field(repr=False)  # (4,) sign of each rotor's drag torque about +z_B
+    A_inv_rows: tuple[tuple[float, ...], ...] = field(repr=False, default=())  # A_inv as floats (per-step path)
 
     @staticmethod
     def from_rotors(rotors: RotorParams) -> "QuadMixer":
@@ -82,7 +83,9 @@ class QuadMixer:
         p = rotors.arm_length_m * np.stack([np.cos(azimuth), np.sin(azimuth), np.zeros(4)], axis=1)
         spin = np.array([1.0, -1.0, 1.0, -1.0])
         A = np.stack([np.ones(4), p[:, 1], -p[:, 0], spin * rotors.yaw_moment_coeff_m])
-        return QuadMixer(rotors=rotors, A=A, A_inv=np.linalg.inv(A), p_B_rotors_m=p, spin=spin)
+        A_inv = np.linalg.inv(A)
+        return QuadMixer(rotors=rotors, A=A, A_inv=A_inv, p_B_rotors_m=p, spin=spin,
+                         A_inv_rows=tuple(map(tuple, A_inv.tolist())))
 
     # ------------------------------------------------------------------ allocation
     def rotor_thrusts(self, thrust_n: float, tau_B_nm) -> np.ndarray:
@@ -119,20 +122,22 @@ class QuadMixer:
         """
         tau = np.asarray(tau_B_nm, dtype=float).reshape(3)
         thrust_n = float(thrust_n)
-        if not (math.isfinite(thrust_n) and math.isfinite(tau[0] + tau[1] + tau[2])):
+        tx, ty, tz = tau.tolist()
+        if not (math.isfinite(thrust_n) and math.isfinite(tx + ty + tz)):
             raise ValueError(f"non-finite command: thrust_n = {thrust_n}, tau_B_nm = {tau}")
         r = self.rotors
         lo, hi = r.thrust_min_n - _FEASIBILITY_TOL_N, r.thrust_max_n + _FEASIBILITY_TOL_N
-        col = self.A_inv  # columns: effect of unit T, tau_x, tau_y, tau_z on rotor thrusts
         T = min(max(thrust_n, r.count * r.thrust_min_n), r.count * r.thrust_max_n)
+        if T == thrust_n:  # the common, feasible case on Python floats (it runs per AM per step)
+            f = [a0 * T + (a1 * tx + a2 * ty) + a3 * tz for a0, a1, a2, a3 in self.A_inv_rows]
+            if min(f) >= lo and max(f) <= hi:
+                f = [min(max(x, r.thrust_min_n), r.thrust_max_n) for x in f]
+                return MixResult(rotor_thrusts_n=np.array(f), applied_thrust_n=thrust_n, applied_tau_B_nm=tau.copy(),
+                                 saturated=False)
+        col = self.A_inv  # columns: effect of unit T, tau_x, tau_y, tau_z on rotor thrusts
         f_T = col[:, 0] * T
         f_rp = col[:, 1] * tau[0] + col[:, 2] * tau[1]
         f_yaw = col[:, 3] * tau[2]
-        f_exact = f_T + f_rp + f_yaw
-        if T == thrust_n and f_exact.min() >= lo and f_exact.max() <= hi:
-            f = np.minimum(np.maximum(f_exact, r.thrust_min_n), r.thrust_max_n)
-            return MixResult(rotor_thrusts_n=f, applied_thrust_n=thrust_n, applied_tau_B_nm=tau.copy(),
-                             saturated=False)
         # f_T is inside the limits because T was clamped; scale roll/pitch, then yaw.
         s_rp = self._max_scale(f_T, f_rp)
         f_base = f_T + s_rp * f_rp
@@ -150,10 +155,11 @@ def limit_joint_torques(tau_q_nm, tau_max_nm) -> JointTorqueResult:
     tau_max = np.asarray(tau_max_nm, dtype=float)
     if tau.shape != tau_max.shape:
         raise ValueError(f"got joint torques of shape {tau.shape} for {tau_max.shape[0]} joints")
-    if not np.isfinite(tau).all():
+    t, t_max = tau.tolist(), tau_max.tolist()  # Python floats: a few joints, per AM per step
+    if not math.isfinite(sum(t)):
         raise ValueError(f"non-finite joint torque command: {tau}")
-    applied = np.minimum(np.maximum(tau, -tau_max), tau_max)
-    return JointTorqueResult(applied_nm=applied, saturated=bool((applied != tau).any()))
+    applied = [min(max(x, -m), m) for x, m in zip(t, t_max)]
+    return JointTorqueResult(applied_nm=np.array(applied), saturated=applied != t)
 
 
 # ---------------------------------------------------------------------- derived limits

@@ -116,9 +116,16 @@ def _R(quat_xyzw) -> np.ndarray:
     return np.array(pb.getMatrixFromQuaternion(quat_xyzw)).reshape(3, 3)
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    # np.cross costs ~30x more for 3-vectors, and wrench_ee runs per AM per step
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+def _mv(R, v) -> tuple[float, float, float]:
+    """R v for R a row-major 9-sequence (PyBullet's getMatrixFromQuaternion) and a 3-sequence."""
+    return (R[0] * v[0] + R[1] * v[1] + R[2] * v[2], R[3] * v[0] + R[4] * v[1] + R[5] * v[2],
+            R[6] * v[0] + R[7] * v[1] + R[8] * v[2])
+
+
+def _mtv(R, v) -> tuple[float, float, float]:
+    """R^T v, as `_mv`."""
+    return (R[0] * v[0] + R[3] * v[1] + R[6] * v[2], R[1] * v[0] + R[4] * v[1] + R[7] * v[2],
+            R[2] * v[0] + R[5] * v[1] + R[8] * v[2])
 
 
 class World:
@@ -134,10 +141,14 @@ class World:
         self._tau_q_max = np.array(spec.vehicle.joint_torque_max_nm, dtype=float)
         self._client: int | None = None
         self._ams: dict[int, scene.AmBody] = {}
-        self._commands: dict[int, tuple[float, np.ndarray, np.ndarray]] = {}
+        self._commands: dict[int, tuple[float, list[float], list[float]]] = {}  # applied T, tau_B, tau_q
         self._names: dict[int, str] = {}
         self._object_id = -1
         self._step_index = 0
+        # per AM, for the per-step paths: link lists as PyBullet takes them, tool CoM weights
+        self._arm_ids: dict[int, list[int]] = {}
+        self._sensed_links: dict[int, list[int]] = {}
+        self._tool_weights: dict[int, tuple[float, ...]] = {}
 
     # ------------------------------------------------------------------ lifecycle
     def connect(self) -> None:
@@ -161,7 +172,10 @@ class World:
             scene.reset_am(c, am, self._initial[a.sysid])
             self._ams[a.sysid] = am
             self._names[am.body_id] = f"am{a.sysid}"
-            self._commands[a.sysid] = (0.0, np.zeros(3), np.zeros(n))
+            self._commands[a.sysid] = (0.0, [0.0] * 3, [0.0] * n)
+            self._arm_ids[a.sysid] = list(am.arm_joint_ids)
+            self._sensed_links[a.sysid] = [am.pad_link_id, am.ee_link_id, *am.tool_link_ids]
+            self._tool_weights[a.sysid] = tuple(m / am.tool_mass_kg for m in am.tool_link_masses_kg)
         self._step_index = 0
 
     def close(self) -> None:
@@ -221,7 +235,7 @@ class World:
         self._am(sysid)
         mix = self._mixer.mix(float(thrust_n), tau_B_nm)
         joints = limit_joint_torques(tau_q_nm, self._tau_q_max)
-        self._commands[sysid] = (mix.applied_thrust_n, mix.applied_tau_B_nm, joints.applied_nm)
+        self._commands[sysid] = (mix.applied_thrust_n, mix.applied_tau_B_nm.tolist(), joints.applied_nm.tolist())
         return ApplyReport(mix=mix, joints=joints)
 
     def step(self) -> None:
@@ -231,8 +245,8 @@ class World:
             thrust, tau_B, tau_q = self._commands[sysid]
             pb.applyExternalForce(am.body_id, -1, [0.0, 0.0, thrust], [0.0, 0.0, 0.0], pb.LINK_FRAME,
                                   physicsClientId=c)
-            pb.applyExternalTorque(am.body_id, -1, list(tau_B), pb.LINK_FRAME, physicsClientId=c)
-            pb.setJointMotorControlArray(am.body_id, list(am.arm_joint_ids), pb.TORQUE_CONTROL, forces=list(tau_q),
+            pb.applyExternalTorque(am.body_id, -1, tau_B, pb.LINK_FRAME, physicsClientId=c)
+            pb.setJointMotorControlArray(am.body_id, self._arm_ids[sysid], pb.TORQUE_CONTROL, forces=tau_q,
                                          physicsClientId=c)
         pb.stepSimulation(physicsClientId=c)
         self._step_index += 1
@@ -248,6 +262,22 @@ class World:
         return AmState(p_WB=np.array(p), R_WB=R, v_B=R.T @ np.array(v_W), w_B=R.T @ np.array(w_W),
                        q=np.array([j[0] for j in joints]), qdot=np.array([j[1] for j in joints]))
 
+    def sensor_values(self, sysid: int) -> list[float]:
+        """One sensor frame's values as Python floats: p_WB, quat_WB (w, x, y, z; w >= 0),
+        v_B, w_B, q, qdot, wrench_E (the order of `amlink.types.sensor_frame_from_wire`).
+
+        The same quantities as `state` and `wrench_ee` (tests/simulator check it); this is
+        the per-step path, where numpy's per-call cost on 3-vectors would dominate.
+        """
+        c, am = self._c(), self._am(sysid)
+        p, (x, y, z, w) = pb.getBasePositionAndOrientation(am.body_id, physicsClientId=c)
+        v_W, w_W = pb.getBaseVelocity(am.body_id, physicsClientId=c)
+        R = pb.getMatrixFromQuaternion((x, y, z, w))  # row-major 3x3 as a 9-tuple
+        joints = pb.getJointStates(am.body_id, self._arm_ids[sysid], physicsClientId=c)
+        quat = [w, x, y, z] if w >= 0.0 else [-w, -x, -y, -z]
+        return [*p, *quat, *_mtv(R, v_W), *_mtv(R, w_W), *[j[0] for j in joints], *[j[1] for j in joints],
+                *self._wrench_E(c, sysid, am)]
+
     def wrench_ee(self, sysid: int) -> np.ndarray:
         """(6,) [f_E [N]; m_E [N m]]: wrench the environment applies on the end-effector,
         expressed in E, moment about E's origin, as a wrist F/T sensor on ft_joint reports it.
@@ -259,22 +289,37 @@ class World:
         Before the first `step()` nothing has been measured and the result is zero.
         """
         c, am = self._c(), self._am(sysid)
+        return np.array(self._wrench_E(c, sysid, am))
+
+    def _wrench_E(self, c: int, sysid: int, am: scene.AmBody) -> list[float]:
+        """`wrench_ee` on Python floats. The sensor reports (f_s, m_s), the wrench the wrist
+        exerts on the pad, in the pad's inertial frame P, moment about the pad's CoM c_pad.
+        Pad and marker quasi-static: f_s + f_env + F_grav = 0, so f_env = -R_WP f_s - F_grav
+        with F_grav = (0, 0, -m_tool g) acting at the tool's CoM c_tool; about c_pad,
+        m_env = -R_WP m_s - (c_tool - c_pad) x F_grav; then moved to E and turned into E."""
         if self._step_index == 0:
-            return np.zeros(6)
-        reaction = np.array(pb.getJointState(am.body_id, am.ft_joint_id, physicsClientId=c)[2])
-        f_s, m_s = reaction[0:3], reaction[3:6]
-        links = pb.getLinkStates(am.body_id, [am.pad_link_id, am.ee_link_id, *am.tool_link_ids],
-                                 computeForwardKinematics=1, physicsClientId=c)
-        pad, ee, tool = links[0], links[1], links[2:]
-        R_WP, c_pad = _R(pad[1]), np.array(pad[0])  # pad's inertial frame: the sensor's frame
-        R_WE, p_WE = _R(ee[5]), np.array(ee[4])  # ee URDF link frame {E}
-        c_tool = sum(m * np.array(s[0]) for m, s in zip(am.tool_link_masses_kg, tool)) / am.tool_mass_kg
-        F_grav = np.array([0.0, 0.0, -am.tool_mass_kg * self.spec.vehicle.gravity_mps2])
-        # Pad (quasi-static): f_sensor + f_env + m g = m a  ->  f_env = -f_sensor - m g (+ m a).
-        f_env_W = -R_WP @ f_s - F_grav
-        m_env_cpad_W = -R_WP @ m_s - _cross(c_tool - c_pad, F_grav)
-        m_env_E_W = m_env_cpad_W + _cross(c_pad - p_WE, f_env_W)
-        return np.concatenate([R_WE.T @ f_env_W, R_WE.T @ m_env_E_W])
+            return [0.0] * 6
+        f_s = pb.getJointState(am.body_id, am.ft_joint_id, physicsClientId=c)[2]
+        links = pb.getLinkStates(am.body_id, self._sensed_links[sysid], computeForwardKinematics=1, physicsClientId=c)
+        pad, ee = links[0], links[1]
+        RP = pb.getMatrixFromQuaternion(pad[1])  # pad's inertial frame: the sensor's frame
+        RE = pb.getMatrixFromQuaternion(ee[5])  # ee URDF link frame {E}
+        cx, cy, cz = pad[0]
+        ex, ey, ez = ee[4]
+        tx = ty = tz = 0.0  # tool CoM: mass-weighted mean of the tool links' CoMs
+        for wgt, link in zip(self._tool_weights[sysid], links[2:]):
+            lx, ly, lz = link[0]
+            tx, ty, tz = tx + wgt * lx, ty + wgt * ly, tz + wgt * lz
+        mg = am.tool_mass_kg * self.spec.vehicle.gravity_mps2  # F_grav = (0, 0, -mg)
+        fx, fy, fz = _mv(RP, f_s[0:3])
+        f_env = (-fx, -fy, mg - fz)
+        mx, my, mz = _mv(RP, f_s[3:6])
+        # -(c_tool - c_pad) x (0, 0, -mg) = mg ((ty - cy), -(tx - cx), 0)
+        m_env = (-mx + mg * (ty - cy), -my - mg * (tx - cx), -mz)
+        rx, ry, rz = cx - ex, cy - ey, cz - ez  # + (c_pad - p_WE) x f_env
+        m_E = (m_env[0] + ry * f_env[2] - rz * f_env[1], m_env[1] + rz * f_env[0] - rx * f_env[2],
+               m_env[2] + rx * f_env[1] - ry * f_env[0])
+        return [*_mtv(RE, f_env), *_mtv(RE, m_E)]
 
     def ground_truth(self) -> GroundTruth:
         c = self._c()

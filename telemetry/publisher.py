@@ -8,8 +8,12 @@
 The caller only stamps the per-key `seq` and appends to a bounded deque (~1 us; no lock,
 no wake-up of another thread). A sender thread opens the zenoh session (retrying if it
 cannot, e.g. client mode with no router), wakes every poll_period_s, JSON-encodes what is
-queued and puts it. When the queue is full the sample is dropped and counted; its seq
-number is used up, so the recorder sees the gap too.
+queued and puts it: one message per run of consecutive samples of a key, carrying them as
+JSON texts separated by newlines (docs/telemetry.md; a subscriber splits on newlines). At 1 kHz
+per AM that is a handful of samples per message instead of a message per sample, whose
+cost in zenoh, in the subscriber's callback and in the recorder is per message. When the
+queue is full the sample is dropped and counted; its seq number is used up, so the
+recorder sees the gap too.
 
 The sender's zenoh puts use congestion control BLOCK by default: a slow recorder slows
 the sender (zenoh releases the GIL while it waits, so the caller is not held), the queue
@@ -72,8 +76,8 @@ class TelemetryPublisher:
     """One process's telemetry sender. See the module docstring."""
 
     def __init__(self, options: ZenohOptions | None = None, *, name: str | None = None, queue_size: int = 8192,
-                 congestion: str = "block", poll_period_s: float = 0.001, reopen_period_s: float = 1.0,
-                 stats_period_s: float = 1.0):
+                 congestion: str = "block", poll_period_s: float = 0.005, reopen_period_s: float = 1.0,
+                 stats_period_s: float = 1.0, max_batch: int = 256):
         """name: this process in <prefix>/telemetry/<name> ('am4', 'simulator'; default host-pid)."""
         if congestion not in ("block", "drop"):
             raise ValueError(f"congestion {congestion!r} must be 'block' or 'drop'")
@@ -88,6 +92,7 @@ class TelemetryPublisher:
         self._queue_size = queue_size
         self._congestion = congestion
         self._poll_s = poll_period_s
+        self._max_batch = max(1, max_batch)
         self._reopen_period_s = reopen_period_s
         self._q: collections.deque = collections.deque()
         self._seq: dict[str, int] = {}
@@ -102,7 +107,7 @@ class TelemetryPublisher:
         self._n = dict(published=0, sent=0, dropped_queue_full=0, dropped_no_session=0, dropped_at_close=0,
                        encode_errors=0, send_errors=0, nonfinite=0, session_open_failures=0)
         self._last_error = ""
-        self._in_flight = 0  # 1 while the sender holds a sample it took from the queue
+        self._in_flight = 0  # samples the sender took from the queue and has not yet counted
         self._abandoned = False
 
     # ------------------------------------------------------------------ lifecycle
@@ -176,6 +181,17 @@ class TelemetryPublisher:
         """Wait until the zenoh session is open (not the same as a subscriber listening)."""
         return self._connected.wait(timeout_s)
 
+    def await_recorder(self, key: str, timeout_s: float) -> bool:
+        """Before a run's first sample: wait (at most timeout_s) until a subscriber matches
+        `key`, as zenoh drops what is put before the route to a subscriber exists. True if one
+        matched; also True when there is nothing to wait for (telemetry off, no endpoint to
+        reach a recorder through, timeout_s <= 0)."""
+        o = self.options
+        if not self.enabled or timeout_s <= 0.0 or not (o.connect_endpoints or o.listen_endpoints
+                                                         or o.config_file is not None):
+            return True
+        return self.wait_for_subscriber(key, timeout_s)
+
     def wait_for_subscriber(self, key: str, timeout_s: float) -> bool:
         """Wait until some subscriber (e.g. the recorder) matches `key`: lets a simulator
         hold its first step until the recorder listens. False on timeout."""
@@ -224,30 +240,51 @@ class TelemetryPublisher:
         return True
 
     def _take(self):
+        """Up to max_batch queued (key, payload) pairs, oldest first; None if there are none."""
         with self._lock:
             if self._abandoned or not self._q:
                 return None
-            self._in_flight = 1
-            return self._q.popleft()
+            q = self._q
+            items = [q.popleft() for _ in range(min(len(q), self._max_batch))]
+            self._in_flight = len(items)
+            return items
 
-    def _send(self, key: str, payload: Mapping) -> None:
-        outcome = "sent"
-        try:
-            data, replaced = encode(payload)
-            if replaced:
-                self._count("nonfinite")
-            pub = self._publishers.get(key)
-            if pub is None:
-                pub = self._publishers[key] = self._session.declare_publisher(key, congestion_control=self._cc)
-            pub.put(data)
-        except (TypeError, ValueError) as exc:
-            outcome, self._last_error = "encode_errors", f"{key}: cannot encode payload: {exc}"
-        except Exception as exc:
-            outcome, self._last_error = "send_errors", f"{key}: put: {exc}"
+    def _send(self, items: list[tuple[str, Mapping]]) -> None:
+        """Encode each sample and put each run of consecutive samples of one key as one
+        message: their JSON texts joined by newlines (JSON text has no raw newline). The
+        order of publish() calls is kept across keys too (the recorder merges keys into
+        shared topics such as /tf). A companion's stream is one key: one put per wake-up
+        instead of one per sample, and zenoh's, the subscriber's and the recorder's cost is
+        per message."""
+        counts = dict.fromkeys(("sent", "encode_errors", "send_errors", "nonfinite"), 0)
+        runs: list[tuple[str, list[bytes]]] = []
+        for key, payload in items:
+            try:
+                data, replaced = encode(payload)
+            except (TypeError, ValueError) as exc:
+                counts["encode_errors"] += 1
+                self._last_error = f"{key}: cannot encode payload: {exc}"
+                continue
+            counts["nonfinite"] += replaced
+            if runs and runs[-1][0] == key:
+                runs[-1][1].append(data)
+            else:
+                runs.append((key, [data]))
+        for key, texts in runs:
+            try:
+                pub = self._publishers.get(key)
+                if pub is None:
+                    pub = self._publishers[key] = self._session.declare_publisher(key, congestion_control=self._cc)
+                pub.put(b"\n".join(texts))
+                counts["sent"] += len(texts)
+            except Exception as exc:
+                counts["send_errors"] += len(texts)
+                self._last_error = f"{key}: put: {exc}"
         with self._lock:
             self._in_flight = 0
-            if not self._abandoned:  # else close() counted it already
-                self._n[outcome] += 1
+            if not self._abandoned:  # else close() counted them already
+                for name, k in counts.items():
+                    self._n[name] += k
 
     def _send_stats(self, final: bool) -> None:
         with self._lock:
@@ -274,10 +311,10 @@ class TelemetryPublisher:
                     return
             next_stats = time.monotonic() + self._stats_period_s
             while True:
-                item = self._take()
-                while item is not None:
-                    self._send(*item)
-                    item = self._take()
+                items = self._take()
+                while items is not None:
+                    self._send(items)
+                    items = self._take()
                 if self._stopping.is_set() or self._abandoned:
                     if not self._abandoned:
                         self._send_stats(final=True)

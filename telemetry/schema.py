@@ -368,6 +368,11 @@ def publisher_stats_sample(t_s: float, name: str, final: bool, seq_issued: Mappi
 
 
 # ----------------------------------------------------------------------------- encoding
+def samples_of(message: bytes) -> list[bytes]:
+    """The samples of one zenoh message: its JSON texts, one per line (docs/telemetry.md)."""
+    return message.split(b"\n")
+
+
 def encode(payload: Mapping) -> tuple[bytes, bool]:
     """Compact JSON bytes of a payload, and whether non-finite numbers were replaced by
     null (strict JSON has no NaN; the recorder and Foxglove reject it)."""

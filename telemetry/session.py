@@ -140,6 +140,10 @@ def add_zenoh_arguments(parser: argparse.ArgumentParser, role: str = "publisher"
     g.add_argument("--telemetry-prefix", default=DEFAULT_PREFIX, help=f"key prefix (default: {DEFAULT_PREFIX})")
     if role == "publisher":
         g.add_argument("--no-telemetry", action="store_true", help="publish nothing")
+        g.add_argument("--telemetry-wait", type=float, default=0.0, metavar="S",
+                       help="at start, wait up to S seconds for a subscriber (the recorder) so that the log "
+                            "holds the first samples, then go on without (default 0: do not wait; am-run, "
+                            "which starts the recorder first, passes 5)")
 
 
 def _endpoints(values: list[str] | None) -> tuple[str, ...] | None:

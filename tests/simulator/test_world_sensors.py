@@ -5,7 +5,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from amcore.so3 import Rz
+from amcore.so3 import Rz, quat_wxyz_to_R
 from simulator.scene import table_geometry
 
 from .sim_testing import at_rest, facing_object, far_apart, hold_arm, hold_base, p_BE, push_link, push_object
@@ -158,3 +158,27 @@ def test_ten_am_ring_around_a_cylinder(spec, make_world):
         assert am.pad_object_contact.n_points == 0 and am.pad_other_contacts == () and am.base_contacts == ()
     assert gt.object.touching == ("table",)
     np.testing.assert_allclose(gt.object.p_WO, centre, atol=1e-3)
+
+
+def test_sensor_values_are_state_and_wrench_on_floats(squeezed):
+    """The per-step path (`sensor_values`, Python floats) reports what `state` and `wrench_ee`
+    (numpy) report, in the wire order of a sensor frame."""
+    w = squeezed
+    for s in w.sysids:
+        hold_base(w, s)
+        push_object(w, [0.3, -0.2, 2.0])
+    w.step()  # something is moving and pushing
+    for s in w.sysids:
+        st, wrench = w.state(s), w.wrench_ee(s)
+        v = np.array(w.sensor_values(s))
+        n = len(st.q)
+        assert v.shape == (19 + 2 * n,)
+        np.testing.assert_allclose(v[0:3], st.p_WB, rtol=0, atol=1e-15)
+        assert v[3] >= 0.0
+        np.testing.assert_allclose(quat_wxyz_to_R(v[3:7]), st.R_WB, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(v[7:10], st.v_B, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(v[10:13], st.w_B, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(v[13:13 + n], st.q, rtol=0, atol=0)
+        np.testing.assert_allclose(v[13 + n:13 + 2 * n], st.qdot, rtol=0, atol=0)
+        np.testing.assert_allclose(v[13 + 2 * n:], wrench, rtol=0, atol=0)
+        assert np.linalg.norm(wrench[:3]) > 1.0 and np.linalg.norm(st.v_B) + np.linalg.norm(st.w_B) > 0.0

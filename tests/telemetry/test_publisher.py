@@ -15,7 +15,7 @@ import pytest
 import zenoh
 
 from telemetry.publisher import TelemetryPublisher, TelemetryStateError
-from telemetry.schema import Keys
+from telemetry.schema import Keys, samples_of
 from telemetry.session import ZenohOptions, build_config
 
 from .zenoh_testing import free_endpoint, start_subscriber
@@ -68,12 +68,14 @@ def test_client_mode_without_router_opens_retries_and_drops_counted():
 def test_live_subscriber_receives_every_sample_in_order():
     ep = free_endpoint()
     got: list[bytes] = []
+    messages = [0]
     done = threading.Event()
     n = 3000
     with zenoh.open(build_config(ZenohOptions(role="recorder", listen=(ep,)))) as s:
         def on_sample(sample):
             if str(sample.key_expr) == KEYS.controller(4):
-                got.append(sample.payload.to_bytes())
+                messages[0] += 1
+                got.extend(samples_of(sample.payload.to_bytes()))
             if len(got) == n:
                 done.set()
 
@@ -87,6 +89,7 @@ def test_live_subscriber_receives_every_sample_in_order():
         sub.undeclare()
     assert st.sent == n and st.dropped == 0
     assert [json.loads(g)["seq"] for g in got] == list(range(n))
+    assert messages[0] < n  # a burst goes out batched, several samples per message
 
 
 @pytest.mark.skipif(not hasattr(signal, "SIGSTOP"), reason="needs SIGSTOP")
@@ -116,7 +119,9 @@ def test_stalled_subscriber_fills_the_bounded_queue_without_blocking_the_caller(
         assert later.sent == sent < st.published and later.queued == st.queued > 0
         assert pub.publish(KEYS.controller(4), {"t": 0.0, "seq": 0}) is False
         st = pub.close(timeout_s=1.0)  # the sender is stuck in a blocking put: close gives up, never hangs
-        assert st.sent == later.sent and st.dropped_at_close == later.queued + 1  # + the one in flight
+        in_flight = later.published - later.sent - later.queued  # the batch the stuck put holds
+        assert 1 <= in_flight <= 256
+        assert st.sent == later.sent and st.dropped_at_close == later.queued + in_flight
         assert st.published == st.sent + st.dropped_at_close and st.queued == 0
     finally:
         os.kill(sub.pid, signal.SIGCONT)
@@ -168,11 +173,12 @@ def test_final_stats_let_the_recorder_count_tail_drops_exactly():
     final = threading.Event()
     with zenoh.open(build_config(ZenohOptions(role="recorder", listen=(ep,)))) as s:
         def on_sample(sample):
-            key, data = str(sample.key_expr), sample.payload.to_bytes()
-            with lock:
-                tr.translate(key, data)
-            if key == KEYS.publisher("burst") and json.loads(data)["final"]:
-                final.set()
+            key = str(sample.key_expr)
+            for data in samples_of(sample.payload.to_bytes()):
+                with lock:
+                    tr.translate(key, data)
+                if key == KEYS.publisher("burst") and json.loads(data)["final"]:
+                    final.set()
 
         sub = s.declare_subscriber(KEYS.everything, on_sample)
         pub = TelemetryPublisher(ZenohOptions(connect=(ep,)), name="burst", queue_size=50, stats_period_s=0.05)
@@ -203,7 +209,7 @@ def test_publisher_started_before_the_recorder_reaches_it_once_it_listens():
         time.sleep(0.01)
     got: list[int] = []
     with zenoh.open(build_config(ZenohOptions(role="recorder", listen=(ep,)))) as s:
-        sub = s.declare_subscriber(KEYS.controller(4), lambda x: got.append(json.loads(x.payload.to_bytes())["seq"]))
+        sub = s.declare_subscriber(KEYS.controller(4), lambda x: got.extend(json.loads(d)["seq"] for d in samples_of(x.payload.to_bytes())))
         assert pub.wait_for_subscriber(KEYS.controller(4), 10.0)  # the background retry found the recorder
         for i in range(10, 20):
             pub.publish(KEYS.controller(4), {"t": i * 1e-3, "seq": 0})
@@ -213,3 +219,29 @@ def test_publisher_started_before_the_recorder_reaches_it_once_it_listens():
             time.sleep(0.02)
         sub.undeclare()
     assert got == list(range(10, 20)) and st.sent == 20 and st.dropped == 0
+
+
+def test_await_recorder_waits_for_a_subscriber_only_where_one_can_come():
+    key = KEYS.controller(4)
+    alone = TelemetryPublisher(ZenohOptions(connect=(), listen=()))
+    alone.open()
+    t0 = time.monotonic()
+    assert alone.await_recorder(key, 5.0) and time.monotonic() - t0 < 1.0  # no endpoint: nothing to wait for
+    alone.close()
+    ep = free_endpoint()
+    pub = TelemetryPublisher(ZenohOptions(connect=(ep,)))
+    pub.open()
+    t0 = time.monotonic()
+    assert not pub.await_recorder(key, 0.5) and time.monotonic() - t0 >= 0.5  # nobody listens
+    assert pub.await_recorder(key, 0.0)  # 0: do not wait
+    got: list[int] = []
+    with zenoh.open(build_config(ZenohOptions(role="recorder", listen=(ep,)))) as s:
+        sub = s.declare_subscriber(key, lambda x: got.extend(json.loads(d)["seq"] for d in samples_of(x.payload.to_bytes())))
+        assert pub.await_recorder(key, 10.0)
+        pub.publish(key, {"t": 0.0, "seq": 0})  # the first sample reaches the subscriber
+        pub.close(5.0)
+        deadline = time.monotonic() + 5.0
+        while not got and time.monotonic() < deadline:
+            time.sleep(0.02)
+        sub.undeclare()
+    assert got == [0]

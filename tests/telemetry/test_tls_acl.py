@@ -11,6 +11,7 @@ import pytest
 import zenoh
 
 from telemetry.publisher import TelemetryPublisher
+from telemetry.schema import samples_of
 from telemetry.session import ZenohOptions, build_config
 
 from .zenoh_testing import free_endpoint
@@ -65,7 +66,7 @@ def test_mtls_and_acl_admit_the_fleet_only(certs, tmp_path, acl):
     rec_cfg = _localized(ROOT / "configs/zenoh/recorder-tls.json5", tmp_path / "rec.json5", certs, "gs", acl=acl)
     got: list[bytes] = []
     with zenoh.open(build_config(ZenohOptions(role="recorder", config_file=rec_cfg, listen=(ep,)))) as s:
-        sub = s.declare_subscriber("amstack/**", lambda x: got.append(x.payload.to_bytes()))
+        sub = s.declare_subscriber("amstack/**", lambda x: got.extend(samples_of(x.payload.to_bytes())))
         sent = {}
         for who in ("companion", "intruder"):
             cfg = _localized(ROOT / "configs/zenoh/publisher-tls.json5", tmp_path / f"{who}.json5", certs, who)
