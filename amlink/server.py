@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import socket
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 from amlink import codec, fastcodec
@@ -200,14 +200,22 @@ class SimServer:
                     self.stats.stale_setpoints += 1  # nothing awaited yet
 
     # -- lockstep ----------------------------------------------------------------
-    def exchange(self, frames: dict[int, SensorFrame], timeout_s: float | None = None, *,
-                 partial: bool = False, while_waiting: Callable[[], None] | None = None,
+    def exchange(self, frames: Mapping[int, SensorFrame] | Iterable[tuple[int, SensorFrame]],
+                 timeout_s: float | None = None, *, partial: bool = False,
+                 while_waiting: Callable[[], None] | None = None,
+                 on_setpoint: Callable[[int, TorqueSetpoint], None] | None = None,
                  ) -> dict[int, TorqueSetpoint]:  # fmt: skip
         """Send each companion its frame, then wait for the setpoints of those steps.
 
-        ``while_waiting``, if given, is called once after the frames are out and
-        before the first answer is read: work that need not delay the companions
-        (the simulator's bookkeeping) runs while they compute.
+        ``frames``: sysid -> frame, or (sysid, frame) pairs produced lazily: with
+        ``partial=True`` each frame is sent as soon as it is produced, so that
+        companion computes while the next one is read (``partial=False`` checks
+        every peer first, so it takes them all before sending).  ``while_waiting``, if given, is called once after
+        the frames are out and before the first answer is read: work that need not
+        delay the companions (the simulator's bookkeeping) runs while they compute.
+        ``on_setpoint(sysid, setpoint)``, if given, is called for each accepted
+        setpoint as it arrives (the flight controller applies it while the others
+        are awaited); the returned dict holds them all the same.
 
         All batches go out before any answer is awaited, so the companions
         compute concurrently.  A batch still unanswered after ``retry_s`` is
@@ -232,16 +240,20 @@ class SimServer:
         udp = self._require_open()
         timeout = self.timeout_s if timeout_s is None else timeout_s
         expected: dict[int, int] = {}
-        for sysid, frame in frames.items():
+        if not partial:  # every peer must be known and have said hello before anything is sent
+            frames = list(frames.items() if isinstance(frames, Mapping) else frames)
+            for sysid, _ in frames:
+                peer = self._peers.get(sysid)
+                if peer is None:
+                    raise ValueError(f"sysid {sysid} is not one of {self.sysids}")
+                if peer.addr is None:
+                    raise PeerMissingError([sysid], 0.0, "HEARTBEAT (call wait_for_peers first)")
+        for sysid, frame in (frames.items() if isinstance(frames, Mapping) else frames):
             peer = self._peers.get(sysid)
             if peer is None:
                 raise ValueError(f"sysid {sysid} is not one of {self.sysids}")
-            if peer.addr is None and not partial:
-                raise PeerMissingError([sysid], 0.0, "HEARTBEAT (call wait_for_peers first)")
             peer.batch = fastcodec.sensor_frame_payloads(frame, self.scenario.scenario_id)
             expected[sysid] = frame.step
-        for sysid, frame in frames.items():
-            peer = self._peers[sysid]
             if peer.addr is not None:
                 udp.send(peer.addr, peer.encoder.pack_payloads(peer.batch))
             peer.last_step, peer.last_time_s = frame.step, frame.time_s
@@ -288,6 +300,8 @@ class SimServer:
                         results[sysid] = sp
                         if att is not None:
                             self.attitude_targets[sysid] = att
+                        if on_setpoint is not None:
+                            on_setpoint(sysid, sp)
         for peer in self._peers.values():
             peer.batch = None
         self.last_missing = tuple(sorted(set(expected).difference(results)))

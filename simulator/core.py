@@ -8,6 +8,7 @@ simulator main and the in-process runner (`simulator.inprocess`) both drive it:
     frames = core.frames(k)                  # sensor frames of step k, one per AM
     <send them>; core.observe()              # bookkeeping while the companions compute
     setpoints = <the companions answer>      # dict sysid -> TorqueSetpoint (some may miss)
+                                             # (core.on_setpoint(sysid, sp) as each arrives)
     core.actuate(k, setpoints, lost)         # flight controllers apply them (or failsafe)
     core.step()
 """
@@ -16,7 +17,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 from array import array
-from collections.abc import Callable, Collection, Mapping
+from collections.abc import Callable, Collection, Iterator, Mapping
 
 import numpy as np
 
@@ -49,6 +50,7 @@ class SitlCore:
         self.events: list[dict] = []
         self.digest = hashlib.sha256()
         self._unobserved: tuple | None = None  # (k, values, frames) of `frames` awaiting `observe`
+        self._k, self._actuated = -1, set()  # step of the last frames; AMs actuated on arrival
 
     def connect(self) -> None:
         self.world.connect()
@@ -64,15 +66,20 @@ class SitlCore:
         """Step k's sensor frames (exact state, wrist F/T reading). Their bookkeeping (the
         digest, ground truth every TRUTH_EVERY steps) is left to `observe`, so that a caller
         can send the frames first; `actuate` runs it if the caller did not."""
+        return dict(self.iter_frames(k))
+
+    def iter_frames(self, k: int) -> Iterator[tuple[int, SensorFrame]]:
+        """`frames` one AM at a time, so that a caller can send each frame as soon as it is
+        read (that companion computes while the next frame is read). Consume it whole."""
         w, t = self.world, self.world.time_s
-        out = {}
         n = self.model.n
-        values = {}
+        values, out = {}, {}
+        self._k, self._actuated = k, set()
         for s in self.sysids:
-            values[s] = w.sensor_values(s)
-            out[s] = sensor_frame_from_wire(k, t, values[s], n, 0)
+            values[s] = v = w.sensor_values(s)
+            out[s] = f = sensor_frame_from_wire(k, t, v, n, 0)
+            yield s, f
         self._unobserved = (k, values, out)
-        return out
 
     def observe(self) -> None:
         """Bookkeeping of the last `frames` call (once): every frame into the state digest, and
@@ -89,12 +96,24 @@ class SitlCore:
             if self.on_truth is not None:
                 self.on_truth(gt)
 
+    def on_setpoint(self, sysid: int, setpoint: TorqueSetpoint) -> None:
+        """A setpoint answering the last frames, as it arrives: its flight controller applies
+        it now, while the other companions still compute (`actuate` then skips this AM).
+        One of a vehicle in failsafe is left to `actuate`, which ends the failsafe."""
+        if sysid in self.failsafes or sysid in self._actuated:
+            return
+        self._actuated.add(sysid)
+        self._apply(self._k, sysid, setpoint)
+
     def actuate(self, k: int, setpoints: Mapping[int, TorqueSetpoint], lost: Collection[int] = ()) -> None:
         """Each flight controller applies what reached it (zero-order hold), or its failsafe
         while its companion is lost; a companion that answers again takes over again."""
         self.observe()
         w, t = self.world, self.world.time_s
+        done, self._actuated = (self._actuated if self._k == k else set()), set()
         for s in self.sysids:
+            if s in done:  # applied on arrival (on_setpoint)
+                continue
             if s in lost or (s in self.failsafes and s not in setpoints):
                 if s not in self.failsafes:
                     self.failsafes[s] = Failsafe(self.model, w.state(s), t)
@@ -107,11 +126,17 @@ class SitlCore:
                 del self.failsafes[s]
                 self.events.append({"t": t, "sysid": s, "event": "rejoined"})
                 self.log(f"t={t:.3f} s sysid {s}: companion back, failsafe ended")
-            sp = self.fc_links[s].step(k, setpoints.get(s))
-            if sp is None:  # nothing has reached this flight controller yet: keep the last command
-                continue
-            rep = w.apply(s, sp.thrust_n, sp.tau_B_nm, sp.tau_q_nm)
-            if rep.saturated and self.outcome.saturation(s, t):
+            self._apply(k, s, setpoints.get(s))
+
+    def _apply(self, k: int, s: int, setpoint: TorqueSetpoint | None) -> None:
+        """The flight controller of `s` at step k: what its link delivers (zero-order hold)."""
+        sp = self.fc_links[s].step(k, setpoint)
+        if sp is None:  # nothing has reached this flight controller yet: keep the last command
+            return
+        rep = self.world.apply(s, sp.thrust_n, sp.tau_B_nm, sp.tau_q_nm)
+        if rep.saturated:
+            t = self.world.time_s
+            if self.outcome.saturation(s, t):
                 self.log(f"t={t:.3f} s sysid {s}: command saturated (thrust {sp.thrust_n:.2f} N, tau_B "
                          f"{np.round(sp.tau_B_nm, 3)}, tau_q {np.round(sp.tau_q_nm, 3)}); counted in outcome.json, "
                          f"further ones not printed")

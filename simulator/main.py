@@ -159,8 +159,9 @@ def main(argv: list[str] | None = None) -> int:
         progress.t_wall0 = time.perf_counter()
         sim_tele.start(core.time_s)
         for k in range(n_steps):
-            frames = core.frames(k)
-            setpoints = server.exchange(frames, partial=True, while_waiting=core.observe)
+            # each frame leaves as soon as it is read; each setpoint is applied as it arrives
+            setpoints = server.exchange(core.iter_frames(k), partial=True, while_waiting=core.observe,
+                                        on_setpoint=core.on_setpoint)
             core.actuate(k, setpoints, server.lost_peers)
             core.step()
             progress.update(core.time_s)

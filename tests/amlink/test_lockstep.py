@@ -105,6 +105,47 @@ def test_two_companions_200_lockstep_steps_matched_by_sysid_and_step():
     assert server.stats.stale_setpoints == server.stats.unknown_sysid == server.stats.bad_frames == 0
 
 
+def test_lazy_frames_leave_one_by_one_and_each_setpoint_is_handed_on_as_it_arrives():
+    server = server_for([2, 3], timeout_s=2.0)
+    server.open()
+    errors: list[BaseException] = []
+
+    def companion(sysid: int) -> None:
+        try:
+            with CompanionClient(sysid, sim=url(server)) as c:
+                c.connect(5.0)
+                c.arm(2.0)
+                while (frame := c.recv_frame(5.0)) is not None:
+                    c.send_setpoint(answer(frame, sysid))
+        except BaseException as exc:
+            errors.append(exc)
+
+    threads = [threading.Thread(target=companion, args=(s,)) for s in (2, 3)]
+    for t in threads:
+        t.start()
+    try:
+        server.wait_for_peers(5.0)
+        server.wait_for_armed(5.0)
+        for k in range(50):
+            sent_before: list[int] = []
+
+            def lazily():
+                for s in (2, 3):
+                    sent_before.append(server.stats.datagrams_tx)
+                    yield s, make_frame(s, k)
+
+            arrived: list[tuple[int, TorqueSetpoint]] = []
+            sps = server.exchange(lazily(), partial=True, on_setpoint=lambda s, sp: arrived.append((s, sp)))
+            assert sent_before[1] == sent_before[0] + 1  # frame 2 was out before frame 3 was produced
+            assert sorted(s for s, _ in arrived) == [2, 3] and all(sps[s] is sp for s, sp in arrived)
+            assert all(sp.step == k for sp in sps.values())
+    finally:
+        server.close("done")
+        for t in threads:
+            t.join(5.0)
+    assert not errors, errors
+
+
 def test_missing_peer_raises_naming_it_within_timeout():
     server = server_for([2, 3, 4])
     server.open()
