@@ -76,7 +76,7 @@ class TelemetryPublisher:
     """One process's telemetry sender. See the module docstring."""
 
     def __init__(self, options: ZenohOptions | None = None, *, name: str | None = None, queue_size: int = 8192,
-                 congestion: str = "block", poll_period_s: float = 0.005, reopen_period_s: float = 1.0,
+                 congestion: str = "block", poll_period_s: float = 0.02, reopen_period_s: float = 1.0,
                  stats_period_s: float = 1.0, max_batch: int = 256):
         """name: this process in <prefix>/telemetry/<name> ('am4', 'simulator'; default host-pid)."""
         if congestion not in ("block", "drop"):
