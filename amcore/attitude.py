@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from .vec3 import Vec, dot, vee_RtX
+from .vec3 import Vec, vee_RtX
 
 
 def _unit_derivs(a: Vec, ad: Vec, add: Vec) -> tuple[Vec, Vec, Vec]:
@@ -52,16 +52,35 @@ def _cross_derivs(a: Vec, ad: Vec, add: Vec, b: Vec, bd: Vec, bdd: Vec) -> tuple
     return c, cd, cdd
 
 
+def _cross_derivs_const(a: Vec, ad: Vec, add: Vec, b: Vec) -> tuple[Vec, Vec, Vec]:
+    """_cross_derivs for a constant b (its derivative terms vanish)."""
+    a0, a1, a2 = a
+    d0, d1, d2 = ad
+    e0, e1, e2 = add
+    b0, b1, b2 = b
+    return ((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0),
+            (d1 * b2 - d2 * b1, d2 * b0 - d0 * b2, d0 * b1 - d1 * b0),
+            (e1 * b2 - e2 * b1, e2 * b0 - e0 * b2, e0 * b1 - e1 * b0))
+
+
+_ZERO = (0.0, 0.0, 0.0)
+
+
 def desired_attitude_cols(f, fd, fdd, b1, b1d, b1dd):
     """Columns (b_1, b_2, b_3) of R_d, Omega_d and Omegadot_d as 3-tuples (eq. Rd).
 
     Inputs are 3-sequences of floats. Raises if |f_d| or |b_3d x b_1d| vanishes.
     """
-    if dot(f, f) < 1e-12:
+    f0, f1, f2 = f
+    if f0 * f0 + f1 * f1 + f2 * f2 < 1e-12:
         raise FloatingPointError("eq. Rd needs |f_d| > 0")
     b3, b3d, b3dd = _unit_derivs(f, fd, fdd)
-    c, cd, cdd = _cross_derivs(b3, b3d, b3dd, b1, b1d, b1dd)
-    if dot(c, c) < 1e-12:
+    if b1d == _ZERO and b1dd == _ZERO:  # a constant heading (the grasp mission's)
+        c, cd, cdd = _cross_derivs_const(b3, b3d, b3dd, b1)
+    else:
+        c, cd, cdd = _cross_derivs(b3, b3d, b3dd, b1, b1d, b1dd)
+    c0, c1, c2 = c
+    if c0 * c0 + c1 * c1 + c2 * c2 < 1e-12:
         raise FloatingPointError("eq. Rd: heading b_1d is parallel to b_3d")
     b2, b2d, b2dd = _unit_derivs(c, cd, cdd)
     b1c, b1cd, b1cdd = _cross_derivs(b2, b2d, b2dd, b3, b3d, b3dd)

@@ -19,16 +19,14 @@ def vee(S: np.ndarray) -> np.ndarray:
 
 def quat_wxyz_to_R(qwxyz: np.ndarray) -> np.ndarray:
     """Rotation matrix of a unit quaternion given as (w, x, y, z); normalises first."""
-    w, x, y, z = (float(v) for v in qwxyz)
+    w, x, y, z = qwxyz.tolist() if isinstance(qwxyz, np.ndarray) else map(float, qwxyz)  # Python floats
     n = math.sqrt(w * w + x * x + y * y + z * z)
     w, x, y, z = w / n, x / n, y / n, z / n
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    return np.array((
+        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+    )).reshape(3, 3)  # a flat tuple: a third cheaper than nested lists
 
 
 def quat_xyzw_of_R(R: np.ndarray) -> list[float]:
