@@ -203,11 +203,15 @@ def _saturation(e, limit: float) -> tuple[float, list | None]:
 def _feedforward_pd(m: float, a, K, x, D, xd, f) -> v3.Vec:
     """m a - K x - D xd - f on 3-vectors (K, D nested lists): the pattern of eq. Com_controller
     and of its time derivatives."""
-    k0, k1, k2 = v3.mv(K, x)
-    d0, d1, d2 = v3.mv(D, xd)
+    (k00, k01, k02), (k10, k11, k12), (k20, k21, k22) = K
+    (d00, d01, d02), (d10, d11, d12), (d20, d21, d22) = D
+    x0, x1, x2 = x
+    y0, y1, y2 = xd
     a0, a1, a2 = a
     f0, f1, f2 = f
-    return (m * a0 - k0 - d0 - f0, m * a1 - k1 - d1 - f1, m * a2 - k2 - d2 - f2)
+    return (m * a0 - (k00 * x0 + k01 * x1 + k02 * x2) - (d00 * y0 + d01 * y1 + d02 * y2) - f0,
+            m * a1 - (k10 * x0 + k11 * x1 + k12 * x2) - (d10 * y0 + d11 * y1 + d12 * y2) - f1,
+            m * a2 - (k20 * x0 + k21 * x1 + k22 * x2) - (d20 * y0 + d21 * y1 + d22 * y2) - f2)
 
 
 def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmState,
@@ -222,7 +226,7 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     """
     p = params
     fg = p.float_gains
-    m, g = model.mass_kg, model.gravity_mps2
+    m, g, n = model.mass_kg, model.gravity_mps2, model.n
     need_full = p.compensate_Lambda_y_dot
     tm = decoupled_terms(model, data, state, full=need_full)
     tk = task_terms(model, data, tm, p.task_frame, p.components, full=need_full)
@@ -242,7 +246,7 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     wrench_E_f = [e00 * f0 + e10 * f1 + e20 * f2, e01 * f0 + e11 * f1 + e21 * f2, e02 * f0 + e12 * f1 + e22 * f2,
                   e00 * t0 + e10 * t1 + e20 * t2, e01 * t0 + e11 * t1 + e21 * t2, e02 * t0 + e12 * t1 + e22 * t2]  # [R_e^T f; R_e^T tau]
     F_xi = np.array(wrench_E_f).dot(tk.J_e).dot(tm.T_inv)  # T^-T J_e^T F
-    sF_W = v3.scale(s, x_W[0:3])
+    sF_W = (s * f0, s * f1, s * f2)  # the filtered force, if compensated
     if p.force_rate_feedforward:
         sF_W_d = v3.scale(s, xd_W[0:3])
         wf, zeta = p.wrench_filter.omega, p.wrench_filter.zeta
@@ -253,7 +257,7 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     # --- CoM law, eq. Com_controller, and its first two time derivatives
     Rl = R.tolist()
     (R00, R01, R02), (R10, R11, R12), (R20, R21, R22) = Rl
-    w = w0, w1, w2 = state.w_B.tolist()
+    w0, w1, w2 = state.w_B.tolist()
     b3 = (R02, R12, R22)
     b3_d = (R00 * w1 - R01 * w0, R10 * w1 - R11 * w0, R20 * w1 - R21 * w0)  # R (w x e3)
     xi_l = xi.tolist()
@@ -288,18 +292,29 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     b1_dd = (pd2 * -sn - pd1**2 * c, pd2 * c - pd1**2 * sn, 0.0)
     (d1, d2, d3), Om_d, Omd_d = desired_attitude_cols(f_d, f_d_d, f_d_dd, b1, b1_d, b1_dd)
 
-    # --- orientation law, eq. ori_controller: e_R = vee(R_d^T R_b - R_b^T R_d) / 2
-    e_R = v3.vee_RtX((d1, d2, d3), ((R00, R10, R20), (R01, R11, R21), b3))
-    w_bd = v3.mtv(Rl, v3.cols_mv(d1, d2, d3, Om_d))  # R_b^T R_d Omega_d
-    e_w = v3.sub(w, w_bd)
-    wdot_bd = v3.sub(v3.mtv(Rl, v3.cols_mv(d1, d2, d3, Omd_d)), v3.cross(w, w_bd))
+    # --- orientation law, eq. ori_controller, through Q = R_b^T R_d (Q_ij = b_i . d_j):
+    # e_R = vee(R_d^T R_b - R_b^T R_d) / 2 = vee(Q^T - Q) / 2, w_bd = Q Omega_d and
+    # d/dt w_bd = Q Omegadot_d - w x w_bd
+    (x0, x1, x2), (y0, y1, y2), (z0, z1, z2) = d1, d2, d3
+    Q00, Q01, Q02 = R00 * x0 + R10 * x1 + R20 * x2, R00 * y0 + R10 * y1 + R20 * y2, R00 * z0 + R10 * z1 + R20 * z2
+    Q10, Q11, Q12 = R01 * x0 + R11 * x1 + R21 * x2, R01 * y0 + R11 * y1 + R21 * y2, R01 * z0 + R11 * z1 + R21 * z2
+    Q20, Q21, Q22 = R02 * x0 + R12 * x1 + R22 * x2, R02 * y0 + R12 * y1 + R22 * y2, R02 * z0 + R12 * z1 + R22 * z2
+    e_R = (0.5 * (Q12 - Q21), 0.5 * (Q20 - Q02), 0.5 * (Q01 - Q10))
+    o0, o1, o2 = Om_d
+    w_bd = wb0, wb1, wb2 = (Q00 * o0 + Q01 * o1 + Q02 * o2, Q10 * o0 + Q11 * o1 + Q12 * o2,
+                            Q20 * o0 + Q21 * o1 + Q22 * o2)
+    e_w = (w0 - wb0, w1 - wb1, w2 - wb2)
+    o0, o1, o2 = Omd_d
+    wdot_bd = (Q00 * o0 + Q01 * o1 + Q02 * o2 - (w1 * wb2 - w2 * wb1),
+               Q10 * o0 + Q11 * o1 + Q12 * o2 - (w2 * wb0 - w0 * wb2),
+               Q20 * o0 + Q21 * o1 + Q22 * o2 - (w0 * wb1 - w1 * wb0))
     Gxi = tm.Gamma_xi_xi.tolist()
     G_w = Gxi[3:6]
     k_R, k_w = p.k_R, p.k_w
     k_e = v3.mv(fg.Lambda_wb_d_inv, (k_R * e_R[0] + k_w * e_w[0], k_R * e_R[1] + k_w * e_w[1],
                                      k_R * e_R[2] + k_w * e_w[2]))
     L_w = v3.mv(tm.Lambda_xi[3:6, 3:6].tolist(), v3.sub(wdot_bd, k_e))
-    F_w = F_xi[3:6].tolist()
+    F_w = F_xi.tolist()[3:6]
     u2 = (L_w[0] + G_w[0] - s * F_w[0], L_w[1] + G_w[1] - s * F_w[1], L_w[2] + G_w[2] - s * F_w[2])
 
     # --- end-effector impedance law, eq. u3
@@ -316,9 +331,9 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     # Jbar_3 (u_3 - G_3) = -r, r = [Lambda_y, Jbar, D_y, K_y] [Jdot xi - y_d''; z; y~d; sat(y~)]
     # (one product: numpy's cost is per call).
     u1_b3 = (u1 * R02, u1 * R12, u1 * R22)
-    z = [u1_b3[0], u1_b3[1], u1_b3[2] - mg, u2[0] - G_w[0], u2[1] - G_w[1], u2[2] - G_w[2], *(0.0,) * model.n]
+    z = [u1_b3[0], u1_b3[1], u1_b3[2] - mg, u2[0] - G_w[0], u2[1] - G_w[1], u2[2] - G_w[2], *(0.0,) * n]
     a = list(map(float.__sub__, tk.Jdot_xi.tolist(), ref.y_d2.tolist()))
-    r = np.concatenate((Lambda_y, Jbar, p.DK_y), axis=1).dot(np.array(a + z + yd_err + y_err_s))
+    r = np.concatenate((Lambda_y, Jbar, p.DK_y), axis=1).dot(np.fromiter(a + z + yd_err + y_err_s, float, 6 + 4 * n))
     Lambda_y_dot = None
     if p.compensate_Lambda_y_dot:
         Lxi_dot = tm.Gamma_xi + tm.Gamma_xi.T
@@ -327,31 +342,31 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
         Lambda_y_dot = -Lambda_y @ inner @ Lambda_y
         r = r + 0.5 * Lambda_y_dot @ np.array(yd_err)
     J3 = Jbar[:, 6:]
-    sigma_min, J3_inv_r = linalg3.sigma_min_and_solve(J3, r)
+    sigma_min, J3_inv_r = linalg3.sigma_min_and_solve(J3, r, as_list=True)
     damping = 0.0
     if sigma_min >= p.sigma_damping:
         if J3_inv_r is None:
             raise np.linalg.LinAlgError("eq. u3: Jbar_3 is singular")
-        u3_G3 = J3_inv_r.tolist()  # -(u_3 - G_3)
+        u3_G3 = J3_inv_r  # -(u_3 - G_3)
     else:
         damping = p.damping_max**2 * (1.0 - (sigma_min / p.sigma_damping) ** 2)
-        n = J3.shape[0]
         u3_G3 = (J3.T @ np.linalg.solve(J3 @ J3.T + damping * np.eye(n), r)).tolist()
 
-    u = np.array([*u1_b3, *u2, *map(float.__sub__, Gxi[6:], u3_G3)])
+    # u and the diagnostics' vectors (and R_d's rows) as views of one array: numpy's cost is per
+    # call (the memory's filter state too: its own, non-overlapping slices)
+    v = np.fromiter([*f_d, *e_R, *e_w, *w_bd, *wdot_bd, *Om_d, d1[0], d2[0], d3[0], d1[1], d2[1], d3[1],
+                     d1[2], d2[2], d3[2], *e, *xi_l[0:3], *x_W, *wrench_E_f, *x_W, *xd_W, *y_err_l,
+                     *u1_b3, *u2, *map(float.__sub__, Gxi[6:], u3_G3)], float, 63 + 2 * n)
+    u = v[57 + n:]
     tau = u.dot(tm.T)  # T^T u
     F_y = Jbar.dot(F_xi)
     tau_cmd = tau.copy()  # the command does not share memory with the diagnostics
     cmd = Command(tau.item(2), tau_cmd[3:6], tau_cmd[6:])  # (thrust_n, tau_B_nm, tau_q_nm); positional: half the cost
-    # the diagnostics' vectors (and R_d's rows) as views of one array: numpy's cost is per call
-    # (the memory's filter state too: its own, non-overlapping slices)
-    v = np.array([*f_d, *e_R, *e_w, *w_bd, *wdot_bd, *Om_d, d1[0], d2[0], d3[0], d1[1], d2[1], d3[1],
-                  d1[2], d2[2], d3[2], *e, *xi_l[0:3], *x_W, *wrench_E_f, *x_W, *xd_W, *y_err_l])
-    diag = Diagnostics(  # positional, in field order: matching 28 keywords would cost ~1.5 us
+    diag = Diagnostics(  # positional, in field order: matching 28 keywords would cost ~1.4 us more
         tm.r_c, ref.r_c, v[27:30], v[30:33],  # r_c, r_c_d, r_c_err, rdot_c
         v[3:6], v[6:9], R, v[18:27].reshape(3, 3),  # e_R, e_w, R_WB, R_d
         v[9:12], v[12:15], v[15:18], v[0:3],  # w_bd, wdot_bd, Omega_d, f_d
-        tk.y, ref.y, v[57:], ydot, F_y,  # y, y_d, y_err, ydot, F_y
+        tk.y, ref.y, v[57:57 + n], ydot, F_y,  # y, y_d, y_err, ydot, F_y
         v[33:36], v[39:45],  # F_rc, wrench_E_filtered
         sigma_min, damping, P is not None,  # sigma_min_J3, damping, com_err_saturated
         any(map(float.__ne__, y_err_s, y_err_l)),  # y_err_saturated: the clip changed something

@@ -52,7 +52,7 @@ def inv(A: np.ndarray) -> np.ndarray:
     if det == 0.0:
         raise np.linalg.LinAlgError("Singular matrix")
     s = 1.0 / det
-    # a flat tuple and reshape: a third cheaper than numpy parsing nested lists
+    # a flat tuple and reshape: cheaper than numpy parsing nested lists
     return np.array((a * s, b * s, c * s, d * s, e * s, f * s, g * s, h * s, i * s)).reshape(3, 3)
 
 
@@ -96,19 +96,21 @@ def _adj_solve(adj, det: float, b) -> tuple[float, float, float]:
     return ((a * b0 + bb * b1 + c * b2) / det, (d * b0 + e * b1 + f * b2) / det, (g * b0 + h * b1 + i * b2) / det)
 
 
-def sigma_min_and_solve(A: np.ndarray, b: np.ndarray) -> tuple[float, np.ndarray | None]:
-    """(sigma_min(A), A^-1 b) sharing one adjugate; A^-1 b is None if A is singular."""
+def sigma_min_and_solve(A: np.ndarray, b: np.ndarray, as_list: bool = False) -> tuple[float, np.ndarray | None]:
+    """(sigma_min(A), A^-1 b) sharing one adjugate; A^-1 b is None if A is singular, a list of
+    Python floats with as_list=True."""
     cf = _closed_form(A)
     if cf is None:
         try:
             x = np.linalg.solve(A, b)
         except np.linalg.LinAlgError:
             x = None
-        return float(np.linalg.svd(A, compute_uv=False)[-1]), x
+        return float(np.linalg.svd(A, compute_uv=False)[-1]), (x.tolist() if as_list and x is not None else x)
     _, adj, _, det = cf
     if det == 0.0:
         return 0.0, None
-    return _sigma_min(A, cf), np.array(_adj_solve(adj, det, b.tolist()))
+    x = _adj_solve(adj, det, b.tolist())
+    return _sigma_min(A, cf), (list(x) if as_list else np.array(x))
 
 
 def sigma_min(A: np.ndarray) -> float:

@@ -79,7 +79,7 @@ class AmMission:
         n = (len(v) - 15) // 3
         y = 15 + n
         return Reference(v[0:3], v[3:6], v[6:9], v[9:12], v[12:15], self.psi, 0.0, 0.0, v[15:y], v[y:y + n],
-                         v[y + n:])  # positional (r_c..r_c_d4, psi..psi_d2, y..y_d2): half the cost
+                         v[y + n:])  # positional (r_c..r_c_d4, psi..psi_d2, y..y_d2): keywords cost more
 
     @cached_property
     def _com_path_w(self) -> SmoothPath:

@@ -25,7 +25,7 @@ import pinocchio as pin
 
 from . import linalg3
 from .config import VehicleParams
-from .so3 import hat, quat_wxyz_to_R, quat_xyzw_of_R
+from .so3 import hat, quat_wxyz_to_R, quat_xyzw_of_R, quat_xyzw_of_rows
 
 
 @dataclass(frozen=True)
@@ -168,18 +168,19 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     pm = model.pin_model
     n, m = model.n, model.mass_kg
     nv = n + 6
-    q_pin, V = _pin_qv(state)
+    R = state.R_WB
+    Rl = R.tolist()
+    q_pin, V = _pin_qv(state, Rl)
     M = pin.crba(pm, data, q_pin)
     if not _crba_returns_symmetric():
         M = np.triu(M) + np.triu(M, 1).T
     C = pin.computeCoriolisMatrix(pm, data, q_pin, V)
     pin.updateFramePlacements(pm, data)
-    Mdot = C.T.copy()  # Mdot = C + C^T; `C + C.T` (mixed memory layouts) costs ~3 us more in the step
+    Mdot = C.T.copy()  # Mdot = C + C^T; `C + C.T` (mixed memory layouts) measured ~2 us slower in the step
     Mdot += C
 
-    R = state.R_WB
     w = state.w_B
-    Mv_m = M[0:3] / m  # [I, -hat(r_b), J_b]; M's first block row is m times this
+    Mv_m = M[0:3] / _mass_rows(nv, m)  # [I, -hat(r_b), J_b]; M's first block row is m times this
     (_, z, _), (_, _, x), (y, _, _) = Mv_m[:, 3:6].tolist()  # -hat(r_b)
     rb = (x, y, z)
     J_b = Mv_m[:, 6:]
@@ -189,14 +190,16 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     A_inv = linalg3.inv_sym(ZM[:, 6:])
     N1 = A_inv.dot(ZM[:, 3:6])
 
-    T, T_inv = _two_identities(nv)
+    T = _eye(nv)
     R.dot(Mv_m, out=T[0:3])  # R [I, -hat(r_b), J_b]
     T[0:3, 0:3] = R
     T[6:, 3:6] = N1
 
+    # (negating contiguous results, then assigning: ufuncs writing into strided blocks cost more)
+    T_inv = _eye(nv)
     T_inv[0:3, 0:3] = R.T
-    np.negative(N1, out=T_inv[6:, 3:6])
-    np.negative(Mv_m[:, 3:].dot(T_inv[3:, 3:]), out=T_inv[0:3, 3:])  # [hat(r_b) + J_b N_1, -J_b]
+    T_inv[6:, 3:6] = -N1
+    T_inv[0:3, 3:] = -Mv_m[:, 3:].dot(T_inv[3:, 3:])  # [hat(r_b) + J_b N_1, -J_b]
     xi = T.dot(V)
 
     # Tdot V. First block row R [I, -hat(r_b), J_b]: its rate applied to V is, with
@@ -206,7 +209,7 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     # c = T^-1 [0; w; 0] = [(hat(r_b) + J_b N_1) w; w; -N_1 w]. d/dt(Z M) = Zdot M + Z Mdot
     # and M c has a zero first block row (M T^-1's (0, w) block, eq. new_dynamics), which is
     # all Zdot = [-Jdot_b^T, 0, 0] sees; so N1dot w = A^-1 Z Mdot c, with Z = (T^-1[:, 6:])^T.
-    (R00, R01, R02), (R10, R11, R12), (R20, R21, R22) = R.tolist()
+    (R00, R01, R02), (R10, R11, R12), (R20, R21, R22) = Rl
     c0, c1, c2 = xi.tolist()[0:3]  # rdot_c
     s0, s1, s2 = R00 * c0 + R10 * c1 + R20 * c2, R01 * c0 + R11 * c1 + R21 * c2, R02 * c0 + R12 * c1 + R22 * c2
     d0, d1, d2 = Mdot.dot(V).tolist()[0:3]
@@ -227,7 +230,7 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     Lambda_xi_inv[6:, 6:] = A_inv
     Gamma_xi_xi = C.dot(V).dot(T_inv) - Lambda_xi.dot(Tdot_V)  # T^-T (C V - M T^-1 Tdot V)
 
-    terms = DecoupledTerms(  # positional, in field order (matching keywords costs ~1 us)
+    terms = DecoupledTerms(  # positional, in field order (matching 16 keywords costs more)
         M, C, V, R, Tv_r[nv + 3:], Tv_r[nv:nv + 3], J_b, N1,  # M, C, V, R_WB, r_c, r_b, J_b, N1
         T, T_inv, Tdot_V, xi, Lambda_xi,  # T, T_inv, Tdot_V, xi, Lambda_xi
         Lambda_xi_inv, Gamma_xi_xi, Mdot,  # Lambda_xi_inv, Gamma_xi_xi, Mdot
@@ -259,27 +262,38 @@ def _crba_returns_symmetric() -> bool:
     return bool(np.array_equal(M, M.T))
 
 
-def _pin_qv(state: AmState) -> tuple[np.ndarray, np.ndarray]:
-    """(state.pin_q(), state.pin_v()) as two views of one new array (one numpy call, not three)."""
+def _pin_qv(state: AmState, R_rows: list) -> tuple[np.ndarray, np.ndarray]:
+    """(state.pin_q(), state.pin_v()) as two views of one new array (one numpy call, not three);
+    R_rows = state.R_WB.tolist()."""
     quat = state.quat_xyzw
     if quat is None:
-        quat = quat_xyzw_of_R(state.R_WB)
+        quat = quat_xyzw_of_rows(R_rows)
     q = state.q.tolist()
-    qv = np.array(state.p_WB.tolist() + list(quat) + q + state.v_B.tolist() + state.w_B.tolist() + state.qdot.tolist())
-    return qv[0:7 + len(q)], qv[7 + len(q):]
+    nq = 7 + len(q)
+    qv = np.fromiter([*state.p_WB.tolist(), *quat, *q, *state.v_B.tolist(), *state.w_B.tolist(), *state.qdot.tolist()],
+                     float, nq + 6 + len(q))  # fromiter with a count: cheaper than np.array for long lists
+    return qv[0:nq], qv[nq:]
 
 
 @lru_cache(maxsize=None)
-def _identity_pair(nv: int) -> np.ndarray:
-    out = np.array((np.eye(nv), np.eye(nv)))
+def _identity(nv: int) -> np.ndarray:
+    out = np.eye(nv)
     out.flags.writeable = False
     return out
 
 
-def _two_identities(nv: int) -> tuple[np.ndarray, np.ndarray]:
-    """Two fresh identities, views of one new array (one copy instead of two)."""
-    pair = _identity_pair(nv).copy()
-    return pair[0], pair[1]
+def _eye(nv: int) -> np.ndarray:
+    """A fresh identity (copying a cached one costs a sixth of np.eye)."""
+    return _identity(nv).copy()
+
+
+@lru_cache(maxsize=None)
+def _mass_rows(nv: int, m: float) -> np.ndarray:
+    """A (3, nv) array of m: dividing by it gives M[0:3] / m exactly, without numpy's per-call
+    conversion of a Python scalar."""
+    out = np.full((3, nv), m)
+    out.flags.writeable = False
+    return out
 
 
 @lru_cache(maxsize=None)

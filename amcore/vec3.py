@@ -4,8 +4,8 @@ At this size numpy's cost is its per-call overhead (0.5-1.5 us per operation), s
 times the arithmetic itself; the control laws' chains of 3-vector operations (eqs.
 Com_controller, Rd, ori_controller) therefore run on plain floats. Vectors are 3-tuples
 (any 3-sequence is accepted), matrices nested lists as returned by ndarray.tolist().
-Each function unpacks its arguments into locals first: a third cheaper than indexing
-them term by term.
+Each function unpacks its arguments into locals first (mv: a third cheaper than indexing
+them term by term).
 """
 from __future__ import annotations
 

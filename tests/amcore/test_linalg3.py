@@ -100,3 +100,13 @@ def test_symmetric_inverse_matches_numpy():
     A = rng.normal(size=(4, 4))
     A = A + A.T + 8 * np.eye(4)
     assert np.array_equal(linalg3.inv_sym(A), np.linalg.inv(A))
+
+
+def test_sigma_min_and_solve_as_list():
+    rng = np.random.default_rng(7)
+    for n in (3, 2):
+        A = rng.normal(size=(n, n)) + 3 * np.eye(n)
+        b = rng.normal(size=n)
+        s, x = linalg3.sigma_min_and_solve(A, b)
+        s2, x2 = linalg3.sigma_min_and_solve(A, b, as_list=True)
+        assert s == s2 and isinstance(x2, list) and x2 == x.tolist()
