@@ -170,7 +170,8 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     nv = n + 6
     R = state.R_WB
     Rl = R.tolist()
-    q_pin, V = _pin_qv(state, Rl)
+    p_l, w_l = state.p_WB.tolist(), state.w_B.tolist()
+    q_pin, V = _pin_qv(state, Rl, p_l, w_l)
     M = pin.crba(pm, data, q_pin)
     if not _crba_returns_symmetric():
         M = np.triu(M) + np.triu(M, 1).T
@@ -213,11 +214,11 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     c0, c1, c2 = xi.tolist()[0:3]  # rdot_c
     s0, s1, s2 = R00 * c0 + R10 * c1 + R20 * c2, R01 * c0 + R11 * c1 + R21 * c2, R02 * c0 + R12 * c1 + R22 * c2
     d0, d1, d2 = Mdot.dot(V).tolist()[0:3]
-    w0, w1, w2 = w.tolist()
+    w0, w1, w2 = w_l
     a0, a1, a2 = w1 * s2 - w2 * s1 + d0 / m, w2 * s0 - w0 * s2 + d1 / m, w0 * s1 - w1 * s0 + d2 / m
     N1dot_w = A_inv.dot(Mdot.dot(T_inv[:, 3:6].dot(w)).dot(T_inv[:, 6:])).tolist()
     # r_c = p_WB + R r_b; Tdot V, r_b and r_c as views of one array (numpy's cost is per call)
-    p0, p1, p2 = state.p_WB.tolist()
+    p0, p1, p2 = p_l
     rb0, rb1, rb2 = rb
     Tv_r = np.array([R00 * a0 + R01 * a1 + R02 * a2, R10 * a0 + R11 * a1 + R12 * a2, R20 * a0 + R21 * a1 + R22 * a2,
                      0.0, 0.0, 0.0, *N1dot_w, rb0, rb1, rb2, p0 + (R00 * rb0 + R01 * rb1 + R02 * rb2),
@@ -262,15 +263,15 @@ def _crba_returns_symmetric() -> bool:
     return bool(np.array_equal(M, M.T))
 
 
-def _pin_qv(state: AmState, R_rows: list) -> tuple[np.ndarray, np.ndarray]:
+def _pin_qv(state: AmState, R_rows: list, p: list, w: list) -> tuple[np.ndarray, np.ndarray]:
     """(state.pin_q(), state.pin_v()) as two views of one new array (one numpy call, not three);
-    R_rows = state.R_WB.tolist()."""
+    R_rows, p, w: state.R_WB, p_WB, w_B as lists."""
     quat = state.quat_xyzw
     if quat is None:
         quat = quat_xyzw_of_rows(R_rows)
     q = state.q.tolist()
     nq = 7 + len(q)
-    qv = np.fromiter([*state.p_WB.tolist(), *quat, *q, *state.v_B.tolist(), *state.w_B.tolist(), *state.qdot.tolist()],
+    qv = np.fromiter([*p, *quat, *q, *state.v_B.tolist(), *w, *state.qdot.tolist()],
                      float, nq + 6 + len(q))  # fromiter with a count: cheaper than np.array for long lists
     return qv[0:nq], qv[nq:]
 
