@@ -15,6 +15,7 @@ pose (paper Sec. IV, "CoM trajectory"), computed from the URDF, not entered.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import pinocchio as pin
@@ -72,13 +73,18 @@ class AmMission:
     phase_ends_s: tuple[float, float, float]
 
     def reference(self, t: float) -> Reference:
-        R = self.frame.R_WT
-        c = self.com_path_t.eval_array(t, 4).dot(R.T)  # rows R c^(k)
-        y = self.y_path.eval_array(t, 2)
-        return Reference(
-            r_c=self.frame.p_WT + c[0], r_c_d1=c[1], r_c_d2=c[2], r_c_d3=c[3], r_c_d4=c[4],
-            psi=self.psi, psi_d1=0.0, psi_d2=0.0, y=y[0], y_d1=y[1], y_d2=y[2],
-        )
+        # the CoM path taken to {w} once (_com_path_w), both paths on floats, and one array
+        # whose slices are the Reference's vectors: numpy's cost is per call
+        v = np.array(self._com_path_w.eval_flat(t, 4) + self.y_path.eval_flat(t, 2))
+        n = (len(v) - 15) // 3
+        y = 15 + n
+        return Reference(v[0:3], v[3:6], v[6:9], v[9:12], v[12:15], self.psi, 0.0, 0.0, v[15:y], v[y:y + n],
+                         v[y + n:])  # positional (r_c..r_c_d4, psi..psi_d2, y..y_d2): keywords cost more
+
+    @cached_property
+    def _com_path_w(self) -> SmoothPath:
+        """The CoM path in {w}: p_WT + R_WT c(t)."""
+        return self.com_path_t.transformed(self.frame.R_WT, self.frame.p_WT)
 
     def phase(self, t: float) -> str:
         a, g, _ = self.phase_ends_s

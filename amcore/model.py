@@ -24,9 +24,8 @@ import numpy as np
 import pinocchio as pin
 
 from . import linalg3
-from . import vec3 as v3
 from .config import VehicleParams
-from .so3 import hat, quat_wxyz_to_R, quat_xyzw_of_R
+from .so3 import hat, quat_wxyz_to_R, quat_xyzw_of_R, quat_xyzw_of_rows
 
 
 @dataclass(frozen=True)
@@ -80,6 +79,8 @@ class AmState:
 
     p_WB: base position in {w} [m]; R_WB: base orientation ({w} <- {b});
     v_B, w_B: body-frame linear [m/s] and angular [rad/s] velocity; q [rad], qdot [rad/s].
+    quat_xyzw: optionally, the unit quaternion (x, y, z, w) that R_WB was built from (a
+    sensor frame carries one); pin_q() then uses it instead of recovering it from R_WB.
     """
 
     p_WB: np.ndarray
@@ -88,6 +89,7 @@ class AmState:
     w_B: np.ndarray
     q: np.ndarray
     qdot: np.ndarray
+    quat_xyzw: tuple[float, float, float, float] | None = None
 
     @staticmethod
     def from_pin(q_pin: np.ndarray, v_pin: np.ndarray) -> "AmState":
@@ -103,7 +105,10 @@ class AmState:
 
     def pin_q(self) -> np.ndarray:
         """[p_WB, quaternion (x, y, z, w) of R_WB, q]: pinocchio's free-flyer configuration."""
-        return np.array(self.p_WB.tolist() + quat_xyzw_of_R(self.R_WB) + self.q.tolist())
+        quat = self.quat_xyzw
+        if quat is None:
+            quat = quat_xyzw_of_R(self.R_WB)
+        return np.array(self.p_WB.tolist() + list(quat) + self.q.tolist())
 
     def pin_v(self) -> np.ndarray:
         """V = [v_b, w_b, qdot] of eq. dynamics."""
@@ -157,68 +162,87 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     Lambda_xi = T^-T M T^-1 is block diagonal (eq. new_dynamics) with blocks m I, Lambda_w
     and Lambda_rho = (N M^-1 N^T)^-1 = Z M Z^T = A, so its inverse is formed blockwise.
     At these sizes numpy's cost is per call, not per flop, so the code below keeps the
-    number of calls low: whole block rows at once, ndarray.dot (half the cost of `@`).
+    number of calls low: whole block rows at once, ndarray.dot (half the cost of `@`), and
+    3-vectors on Python floats.
     """
     pm = model.pin_model
     n, m = model.n, model.mass_kg
     nv = n + 6
-    q_pin, V = state.pin_q(), state.pin_v()
+    R = state.R_WB
+    Rl = R.tolist()
+    p_l, w_l = state.p_WB.tolist(), state.w_B.tolist()
+    q_pin, V = _pin_qv(state, Rl, p_l, w_l)
     M = pin.crba(pm, data, q_pin)
-    np.copyto(M, M.T, where=_strictly_lower(nv))  # crba may fill only the upper triangle
+    if not _crba_returns_symmetric():
+        M = np.triu(M) + np.triu(M, 1).T
     C = pin.computeCoriolisMatrix(pm, data, q_pin, V)
     pin.updateFramePlacements(pm, data)
-    Mdot = C + C.T
+    Mdot = C.T.copy()  # Mdot = C + C^T; `C + C.T` (mixed memory layouts) measured ~2 us slower in the step
+    Mdot += C
 
-    R = state.R_WB
     w = state.w_B
-    Mv_m = M[0:3] / m  # [I, -hat(r_b), J_b]; M's first block row is m times this
-    r_b = np.array([Mv_m.item(1, 5), Mv_m.item(2, 3), Mv_m.item(0, 4)])
+    Mv_m = M[0:3] / _mass_rows(nv, m)  # [I, -hat(r_b), J_b]; M's first block row is m times this
+    (_, z, _), (_, _, x), (y, _, _) = Mv_m[:, 3:6].tolist()  # -hat(r_b)
+    rb = (x, y, z)
     J_b = Mv_m[:, 6:]
 
     # Z M with Z = [-J_b^T, 0, I] (eq. new_coord, in {b}) is [0, B, A]: A = Z M Z^T, N_1 = A^-1 B.
-    # Its rate Z Mdot + Zdot M gives [., Bdot, Adot] (m Jdot_b = Mdot[0:3, 6:]).
     ZM = M[6:] - J_b.T.dot(M[0:3])
-    ZMdot = Mdot[6:] - Mdot[0:3, 6:].T.dot(Mv_m) - J_b.T.dot(Mdot[0:3])
-    A = ZM[:, 6:]
-    A_inv = linalg3.inv(A)
+    A_inv = linalg3.inv_sym(ZM[:, 6:])
     N1 = A_inv.dot(ZM[:, 3:6])
 
     T = _eye(nv)
-    T[0:3] = R.dot(Mv_m)  # R [I, -hat(r_b), J_b]
+    R.dot(Mv_m, out=T[0:3])  # R [I, -hat(r_b), J_b]
     T[0:3, 0:3] = R
     T[6:, 3:6] = N1
 
+    # (negating contiguous results, then assigning: ufuncs writing into strided blocks cost more)
     T_inv = _eye(nv)
     T_inv[0:3, 0:3] = R.T
     T_inv[6:, 3:6] = -N1
     T_inv[0:3, 3:] = -Mv_m[:, 3:].dot(T_inv[3:, 3:])  # [hat(r_b) + J_b N_1, -J_b]
-
-    # d/dt of the first block row R [I, -hat(r_b), J_b], applied to V: with s = R^T rdot_c,
-    # R (hat(w) s + [0, -hat(rdot_b), Jdot_b] V) (3-vectors: Python floats, amcore.vec3).
-    # N1dot w = A^-1 (Bdot w - Adot N_1 w) = A^-1 [Bdot, Adot] [w; -N_1 w], and
-    # [w; -N_1 w] = [I; -N_1] w is a block column of T^-1.
-    a = v3.add(v3.cross(w.tolist(), Mv_m.dot(V).tolist()), v3.div(Mdot[0:3, 3:].dot(V[3:]).tolist(), m))
-    Tdot_V = np.zeros(nv)
-    Tdot_V[0:3] = v3.mv(R.tolist(), a)
-    Tdot_V[6:] = A_inv.dot(ZMdot[:, 3:].dot(T_inv[3:, 3:6].dot(w)))
-
     xi = T.dot(V)
+
+    # Tdot V. First block row R [I, -hat(r_b), J_b]: its rate applied to V is, with
+    # s = R^T rdot_c, R (hat(w) s + [0, -hat(rdot_b), Jdot_b] V), and m [0, -hat(rdot_b), Jdot_b]
+    # is Mdot's first block row (its first block, d(m I)/dt, is zero).
+    # Last block row: N1dot w = A^-1 (Bdot w - Adot N_1 w) = A^-1 d/dt(Z M) c with
+    # c = T^-1 [0; w; 0] = [(hat(r_b) + J_b N_1) w; w; -N_1 w]. d/dt(Z M) = Zdot M + Z Mdot
+    # and M c has a zero first block row (M T^-1's (0, w) block, eq. new_dynamics), which is
+    # all Zdot = [-Jdot_b^T, 0, 0] sees; so N1dot w = A^-1 Z Mdot c, with Z = (T^-1[:, 6:])^T.
+    (R00, R01, R02), (R10, R11, R12), (R20, R21, R22) = Rl
+    c0, c1, c2 = xi.tolist()[0:3]  # rdot_c
+    s0, s1, s2 = R00 * c0 + R10 * c1 + R20 * c2, R01 * c0 + R11 * c1 + R21 * c2, R02 * c0 + R12 * c1 + R22 * c2
+    d0, d1, d2 = Mdot.dot(V).tolist()[0:3]
+    w0, w1, w2 = w_l
+    a0, a1, a2 = w1 * s2 - w2 * s1 + d0 / m, w2 * s0 - w0 * s2 + d1 / m, w0 * s1 - w1 * s0 + d2 / m
+    N1dot_w = A_inv.dot(Mdot.dot(T_inv[:, 3:6].dot(w)).dot(T_inv[:, 6:])).tolist()
+    # r_c = p_WB + R r_b; Tdot V, r_b and r_c as views of one array (numpy's cost is per call)
+    p0, p1, p2 = p_l
+    rb0, rb1, rb2 = rb
+    Tv_r = np.array([R00 * a0 + R01 * a1 + R02 * a2, R10 * a0 + R11 * a1 + R12 * a2, R20 * a0 + R21 * a1 + R22 * a2,
+                     0.0, 0.0, 0.0, *N1dot_w, rb0, rb1, rb2, p0 + (R00 * rb0 + R01 * rb1 + R02 * rb2),
+                     p1 + (R10 * rb0 + R11 * rb1 + R12 * rb2), p2 + (R20 * rb0 + R21 * rb1 + R22 * rb2)])
+    Tdot_V = Tv_r[0:nv]
+
     Lambda_xi = T_inv.T.dot(M).dot(T_inv)
     Lambda_xi_inv = _mass_block_inverse(nv, m).copy()
-    Lambda_xi_inv[3:6, 3:6] = linalg3.inv(Lambda_xi[3:6, 3:6])
+    Lambda_xi_inv[3:6, 3:6] = linalg3.inv_sym(Lambda_xi[3:6, 3:6])
     Lambda_xi_inv[6:, 6:] = A_inv
-    Gamma_xi_xi = T_inv.T.dot(C.dot(V)) - Lambda_xi.dot(Tdot_V)  # T^-T (C V - M T^-1 Tdot V)
+    Gamma_xi_xi = C.dot(V).dot(T_inv) - Lambda_xi.dot(Tdot_V)  # T^-T (C V - M T^-1 Tdot V)
 
-    terms = DecoupledTerms(
-        M=M, C=C, V=V, R_WB=R, r_c=state.p_WB + R.dot(r_b), r_b=r_b, J_b=J_b, N1=N1,
-        T=T, T_inv=T_inv, Tdot_V=Tdot_V, xi=xi, Lambda_xi=Lambda_xi,
-        Lambda_xi_inv=Lambda_xi_inv, Gamma_xi_xi=Gamma_xi_xi, Mdot=Mdot,
+    terms = DecoupledTerms(  # positional, in field order (matching 16 keywords costs more)
+        M, C, V, R, Tv_r[nv + 3:], Tv_r[nv:nv + 3], J_b, N1,  # M, C, V, R_WB, r_c, r_b, J_b, N1
+        T, T_inv, Tdot_V, xi, Lambda_xi,  # T, T_inv, Tdot_V, xi, Lambda_xi
+        Lambda_xi_inv, Gamma_xi_xi, Mdot,  # Lambda_xi_inv, Gamma_xi_xi, Mdot
     )
     if full:
+        r_b = terms.r_b
         Jdot_b = Mdot[0:3, 6:] / m
         hr = hat(r_b)
         rdot_b = J_b @ state.qdot
         Rhw = R @ hat(w)
+        ZMdot = Mdot[6:] - Mdot[0:3, 6:].T @ Mv_m - J_b.T @ Mdot[0:3]  # d/dt (Z M)
         N1dot = A_inv @ (ZMdot[:, 3:6] - ZMdot[:, 6:] @ N1)
         Tdot = np.zeros((nv, nv))
         Tdot[0:3, 0:3] = Rhw
@@ -231,13 +255,44 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
 
 
 @lru_cache(maxsize=None)
-def _strictly_lower(nv: int) -> np.ndarray:
-    return np.tri(nv, k=-1, dtype=bool)
+def _crba_returns_symmetric() -> bool:
+    """Whether pin.crba returns the whole M. Its C++ fills the upper triangle only; the Python
+    binding has long copied it to the lower one. Checked once, on pinocchio's sample arm."""
+    pm = pin.buildSampleModelManipulator()
+    M = pin.crba(pm, pm.createData(), pin.randomConfiguration(pm))
+    return bool(np.array_equal(M, M.T))
+
+
+def _pin_qv(state: AmState, R_rows: list, p: list, w: list) -> tuple[np.ndarray, np.ndarray]:
+    """(state.pin_q(), state.pin_v()) as two views of one new array (one numpy call, not three);
+    R_rows, p, w: state.R_WB, p_WB, w_B as lists."""
+    quat = state.quat_xyzw
+    if quat is None:
+        quat = quat_xyzw_of_rows(R_rows)
+    q = state.q.tolist()
+    nq = 7 + len(q)
+    qv = np.fromiter([*p, *quat, *q, *state.v_B.tolist(), *w, *state.qdot.tolist()],
+                     float, nq + 6 + len(q))  # fromiter with a count: cheaper than np.array for long lists
+    return qv[0:nq], qv[nq:]
 
 
 @lru_cache(maxsize=None)
 def _identity(nv: int) -> np.ndarray:
     out = np.eye(nv)
+    out.flags.writeable = False
+    return out
+
+
+def _eye(nv: int) -> np.ndarray:
+    """A fresh identity (copying a cached one costs a sixth of np.eye)."""
+    return _identity(nv).copy()
+
+
+@lru_cache(maxsize=None)
+def _mass_rows(nv: int, m: float) -> np.ndarray:
+    """A (3, nv) array of m: dividing by it gives M[0:3] / m exactly, without numpy's per-call
+    conversion of a Python scalar."""
+    out = np.full((3, nv), m)
     out.flags.writeable = False
     return out
 
@@ -249,11 +304,6 @@ def _mass_block_inverse(nv: int, m: float) -> np.ndarray:
     out[0:3, 0:3] = np.eye(3) / m
     out.flags.writeable = False
     return out
-
-
-def _eye(nv: int) -> np.ndarray:
-    """A fresh identity (copying a cached one costs a sixth of np.eye)."""
-    return _identity(nv).copy()
 
 
 def generalized_gravity(model: AmModel, data: pin.Data, state: AmState) -> np.ndarray:

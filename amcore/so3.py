@@ -19,32 +19,35 @@ def vee(S: np.ndarray) -> np.ndarray:
 
 def quat_wxyz_to_R(qwxyz: np.ndarray) -> np.ndarray:
     """Rotation matrix of a unit quaternion given as (w, x, y, z); normalises first."""
-    w, x, y, z = (float(v) for v in qwxyz)
+    w, x, y, z = qwxyz.tolist() if isinstance(qwxyz, np.ndarray) else map(float, qwxyz)  # Python floats
     n = math.sqrt(w * w + x * x + y * y + z * z)
     w, x, y, z = w / n, x / n, y / n, z / n
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    return np.array((
+        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+    )).reshape(3, 3)  # a flat tuple: cheaper than nested lists
 
 
 def quat_xyzw_of_R(R: np.ndarray) -> list[float]:
     """Unit quaternion [x, y, z, w] of a rotation matrix, as Eigen (and so pinocchio) builds
     it from a matrix, on Python floats (half the cost of pin.Quaternion(R) for a 3x3)."""
-    m = R.tolist()
-    t = m[0][0] + m[1][1] + m[2][2]
-    q = [0.0, 0.0, 0.0, 0.0]
+    return quat_xyzw_of_rows(R.tolist())
+
+
+def quat_xyzw_of_rows(m) -> list[float]:
+    """quat_xyzw_of_R for a rotation matrix given by its rows (R.tolist())."""
+    (m00, _, _), (_, m11, _), (_, _, m22) = m
+    t = m00 + m11 + m22
     if t > 0.0:
         t = math.sqrt(t + 1.0)
-        q[3] = 0.5 * t
+        w = 0.5 * t
         t = 0.5 / t
-        q[0], q[1], q[2] = (m[2][1] - m[1][2]) * t, (m[0][2] - m[2][0]) * t, (m[1][0] - m[0][1]) * t
+        x, y, z = (m[2][1] - m[1][2]) * t, (m[0][2] - m[2][0]) * t, (m[1][0] - m[0][1]) * t
     else:
-        i = 1 if m[1][1] > m[0][0] else 0
-        i = 2 if m[2][2] > m[i][i] else i
+        q = [0.0, 0.0, 0.0, 0.0]
+        i = 1 if m11 > m00 else 0
+        i = 2 if m22 > m[i][i] else i
         j, k = (i + 1) % 3, (i + 2) % 3
         t = math.sqrt(m[i][i] - m[j][j] - m[k][k] + 1.0)
         q[i] = 0.5 * t
@@ -52,8 +55,9 @@ def quat_xyzw_of_R(R: np.ndarray) -> list[float]:
         q[3] = (m[k][j] - m[j][k]) * t
         q[j] = (m[j][i] + m[i][j]) * t
         q[k] = (m[k][i] + m[i][k]) * t
-    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    return [q[0] / n, q[1] / n, q[2] / n, q[3] / n]
+        x, y, z, w = q
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    return [x / n, y / n, z / n, w / n]
 
 
 def R_to_quat_wxyz(R: np.ndarray) -> np.ndarray:

@@ -19,14 +19,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 import pinocchio as pin
 
 from .model import AmModel, DecoupledTerms
 from .so3 import hat
-from .vec3 import cross, mtv, mv
 
 _ANGLE_AXES = {"roll": (1, 2, 0), "pitch": (2, 0, 1), "yaw": (0, 1, 2)}  # (i, j, k)
 _POS_AXES = {"x": 0, "y": 1, "z": 2}
@@ -38,6 +37,14 @@ class TaskFrame:
 
     R_WT: np.ndarray
     p_WT: np.ndarray
+
+    @cached_property
+    def H_TW(self) -> np.ndarray:
+        """The homogeneous transform {t} <- {w}, [[R_WT^T, -R_WT^T p_WT], [0, 1]] (computed once)."""
+        H = np.eye(4)
+        H[0:3, 0:3] = self.R_WT.T
+        H[0:3, 3] = -self.R_WT.T.dot(self.p_WT)
+        return H
 
 
 @dataclass
@@ -51,6 +58,7 @@ class TaskTerms:
     p_WE: np.ndarray
     R_WE: np.ndarray
     Jdot: np.ndarray | None = None  # (n, n+6), only with full=True
+    ydot: np.ndarray | None = None  # (n,) J_y V (= J xi), from {e}'s twist
 
 
 def angle_of(R_TE: np.ndarray, comp: str) -> float:
@@ -75,7 +83,8 @@ def task_terms(model: AmModel, data: pin.Data, terms: DecoupledTerms, frame: Tas
     """
     pm = model.pin_model
     fid = model.ee_frame_id
-    H_WE = data.oMf[fid].homogeneous  # a fresh 4x4 array
+    # the frame's placement, recomputed exactly as data.oMf[fid] (half the cost of indexing data.oMf)
+    H_WE = pin.updateFramePlacement(pm, data, fid).homogeneous  # a fresh 4x4 array
     R_WE, p_WE = H_WE[0:3, 0:3], H_WE[0:3, 3]
     J_e = pin.getFrameJacobian(pm, data, fid, pin.LOCAL)
     Jd_e = pin.getFrameJacobianTimeVariation(pm, data, fid, pin.LOCAL)
@@ -83,43 +92,51 @@ def task_terms(model: AmModel, data: pin.Data, terms: DecoupledTerms, frame: Tas
     v0, v1, v2, w0, w1, w2 = J_e.dot(V).tolist()  # {e}'s twist, in {e}
     d0, d1, d2, dw0, dw1, dw2 = Jd_e.dot(V).tolist()
     # classical acceleration of {e}'s origin at zero Vdot (the spatial one misses w x v), in {e}
-    acc = (d0 + (w1 * v2 - w2 * v1), d1 + (w2 * v0 - w0 * v2), d2 + (w0 * v1 - w1 * v0))
-    R_TE = frame.R_WT.T.dot(R_WE)
-    Rl = R_TE.tolist()
-    p_TE = frame.R_WT.T.dot(p_WE - frame.p_WT).tolist()
-    w_t = mv(Rl, (w0, w1, w2))  # w_e in {t}
+    a0, a1, a2 = d0 + (w1 * v2 - w2 * v1), d1 + (w2 * v0 - w0 * v2), d2 + (w0 * v1 - w1 * v0)
+    # [R_TE, p_TE] = H_TW H_WE, row by row
+    Rl = frame.H_TW.dot(H_WE).tolist()
+    (R00, R01, R02, _), (R10, R11, R12, _), (R20, R21, R22, _), _ = Rl
+    cols = ((R00, R10, R20), (R01, R11, R21), (R02, R12, R22))  # the axes of {e}, in {t}
+    t0, t1, t2 = R00 * w0 + R01 * w1 + R02 * w2, R10 * w0 + R11 * w1 + R12 * w2, R20 * w0 + R21 * w1 + R22 * w2  # w_e in {t}
 
-    y, W, Wd, jd = [], [], [], []
+    y, W, jd, yd, Wd = [], [], [], [], []
     for ax in _component_axes(tuple(components)):
         if len(ax) == 1:
-            row = Rl[ax[0]]
-            y.append(p_TE[ax[0]])
-            W += row + [0.0, 0.0, 0.0]
-            Wd.append([0.0] * 6)
-            jd.append(row[0] * acc[0] + row[1] * acc[1] + row[2] * acc[2])
+            r0, r1, r2, p_k = Rl[ax[0]]
+            y.append(p_k)
+            W += (r0, r1, r2, 0.0, 0.0, 0.0)
+            jd.append(r0 * a0 + r1 * a1 + r2 * a2)
+            yd.append(r0 * v0 + r1 * v1 + r2 * v2)
+            if full:
+                Wd.append([0.0] * 6)
             continue
         i, j, k = ax
-        u = (Rl[0][i], Rl[1][i], Rl[2][i])  # e_i of {e}, in {t}
+        u = u0, u1, u2 = cols[i]  # e_i of {e}, in {t}
         y.append(math.atan2(u[j], u[i]))
-        ud = cross(w_t, u)
+        ud = ud0, ud1, ud2 = t1 * u2 - t2 * u1, t2 * u0 - t0 * u2, t0 * u1 - t1 * u0  # w_t x u
         uk, udk = u[k], ud[k]
         D = 1.0 - uk * uk
         g = 2.0 * uk * udk / D**2
-        a = [-uk * u[0], -uk * u[1], -uk * u[2]]  # e_k - u_k u
+        a = [-uk * u0, -uk * u1, -uk * u2]  # e_k - u_k u
         a[k] += 1.0
-        ad = ((-udk * u[0] - uk * ud[0]) / D + a[0] * g, (-udk * u[1] - uk * ud[1]) / D + a[1] * g,
-              (-udk * u[2] - uk * ud[2]) / D + a[2] * g)
-        aR = mtv(Rl, (a[0] / D, a[1] / D, a[2] / D))  # R_TE^T a
-        adR = mtv(Rl, ad)
-        W += (0.0, 0.0, 0.0, aR[0], aR[1], aR[2])
-        Wd.append([0.0, 0.0, 0.0, adR[0], adR[1], adR[2]])
+        b0, b1, b2 = a[0] / D, a[1] / D, a[2] / D
+        c0, c1, c2 = ((-udk * u0 - uk * ud0) / D + a[0] * g, (-udk * u1 - uk * ud1) / D + a[1] * g,
+                      (-udk * u2 - uk * ud2) / D + a[2] * g)  # adot
+        aR = (R00 * b0 + R10 * b1 + R20 * b2, R01 * b0 + R11 * b1 + R21 * b2, R02 * b0 + R12 * b1 + R22 * b2)  # R_TE^T a / D
+        adR = (R00 * c0 + R10 * c1 + R20 * c2, R01 * c0 + R11 * c1 + R21 * c2, R02 * c0 + R12 * c1 + R22 * c2)
+        W += (0.0, 0.0, 0.0) + aR
         jd.append(aR[0] * dw0 + aR[1] * dw1 + aR[2] * dw2 + (adR[0] * w0 + adR[1] * w1 + adR[2] * w2))
-    W = np.array(W).reshape(-1, 6)  # rows W_r (a flat list is the cheapest to convert)
+        yd.append(aR[0] * w0 + aR[1] * w1 + aR[2] * w2)
+        if full:
+            Wd.append((0.0, 0.0, 0.0) + adR)
+    n = len(y)
+    W = np.array(W).reshape(n, 6)  # rows W_r (a flat list is the cheapest to convert)
     J_y = W.dot(J_e)
-    Jdot_y_V = np.array(jd)
+    y_jd = np.array(y + jd + yd)  # y, Jdot_y V and ydot in one array
     J = J_y.dot(terms.T_inv)
-    Jdot_xi = Jdot_y_V - J.dot(terms.Tdot_V)
-    out = TaskTerms(y=np.array(y), J_y=J_y, Jdot_y_V=Jdot_y_V, J=J, Jdot_xi=Jdot_xi, J_e=J_e, p_WE=p_WE, R_WE=R_WE)
+    Jdot_y_V = y_jd[n:2 * n]
+    # positional, in field order (y, J_y, Jdot_y_V, J, Jdot_xi, J_e, p_WE, R_WE, Jdot, ydot): matching keywords costs more
+    out = TaskTerms(y_jd[0:n], J_y, Jdot_y_V, J, Jdot_y_V - J.dot(terms.Tdot_V), J_e, p_WE, R_WE, None, y_jd[2 * n:])
     if full:
         if terms.Tdot is None:
             raise ValueError("task_terms(full=True) needs decoupled_terms(full=True)")

@@ -78,7 +78,12 @@ class SmoothPath:
         return list(self.eval_array(t, orders))
 
     def eval_array(self, t: float, orders: int) -> np.ndarray:
-        """Rows p, pdot, ..., p^(orders) at time t [s], as one (orders + 1, dim) array.
+        """Rows p, pdot, ..., p^(orders) at time t [s], as one (orders + 1, dim) array."""
+        return np.array(self.eval_flat(t, orders)).reshape(orders + 1, -1)
+
+    def eval_flat(self, t: float, orders: int) -> list[float]:
+        """p, pdot, ..., p^(orders) at time t [s], concatenated, on Python floats (numpy's
+        per-call cost exceeds the arithmetic here). Row 0 is p0 + s d, row k (s^(k) / T^k) d.
 
         The last move that has started gives the value (the ones before it have ended).
         """
@@ -88,21 +93,31 @@ class SmoothPath:
                 break
             current = seg
         if current is None:
-            out = np.zeros((orders + 1, np.size(self.start)))
-            out[0] = self.start
-            return out
+            return self._start + [0.0] * (orders * len(self._start))
         t0, T, p0, d = current
-        tau = (t - t0) / T
-        s = _smoothstep_derivs(tau, orders)
-        scale = [s[0]] + [s[k] / T**k for k in range(1, orders + 1)]
-        out = np.multiply.outer(scale, d)
-        out[0] += p0
+        s = _smoothstep_derivs((t - t0) / T, orders)
+        s0 = s[0]
+        out = [a + b * s0 for a, b in zip(p0, d)]
+        for k in range(1, orders + 1):
+            sk = s[k] / T**k
+            out += [b * sk for b in d]
         return out
 
     @cached_property
-    def _segments(self) -> tuple[tuple[float, float, np.ndarray, np.ndarray], ...]:
-        """(t0, duration, p0, p1 - p0) of each move."""
-        return tuple((mv.t0, mv.t1 - mv.t0, mv.p0, mv.p1 - mv.p0) for mv in self.moves)
+    def _start(self) -> list[float]:
+        return np.asarray(self.start, dtype=float).ravel().tolist()
+
+    @cached_property
+    def _segments(self) -> tuple[tuple[float, float, list[float], list[float]], ...]:
+        """(t0, duration, p0, p1 - p0) of each move, the points as lists of floats."""
+        return tuple((mv.t0, mv.t1 - mv.t0, np.asarray(mv.p0, dtype=float).tolist(),
+                      np.asarray(mv.p1 - mv.p0, dtype=float).tolist()) for mv in self.moves)
+
+    def transformed(self, R: np.ndarray, p: np.ndarray) -> "SmoothPath":
+        """The path of R x + p (every derivative turns with R)."""
+        def f(x):
+            return R.dot(x) + p
+        return SmoothPath(f(self.start), tuple(Move(mv.t0, mv.t1, f(mv.p0), f(mv.p1)) for mv in self.moves))
 
 
 def path_through(start: np.ndarray, moves: list[tuple[float, float, np.ndarray]]) -> SmoothPath:

@@ -4,6 +4,8 @@ At this size numpy's cost is its per-call overhead (0.5-1.5 us per operation), s
 times the arithmetic itself; the control laws' chains of 3-vector operations (eqs.
 Com_controller, Rd, ori_controller) therefore run on plain floats. Vectors are 3-tuples
 (any 3-sequence is accepted), matrices nested lists as returned by ndarray.tolist().
+Each function unpacks its arguments into locals first (mv: a third cheaper than indexing
+them term by term).
 """
 from __future__ import annotations
 
@@ -11,48 +13,60 @@ Vec = tuple[float, float, float]
 
 
 def dot(a, b) -> float:
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    return a0 * b0 + a1 * b1 + a2 * b2
 
 
 def cross(a, b) -> Vec:
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    return (a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0)
 
 
 def add(a, b) -> Vec:
-    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    return (a0 + b0, a1 + b1, a2 + b2)
 
 
 def sub(a, b) -> Vec:
-    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    return (a0 - b0, a1 - b1, a2 - b2)
 
 
 def scale(s: float, a) -> Vec:
-    return (s * a[0], s * a[1], s * a[2])
+    a0, a1, a2 = a
+    return (s * a0, s * a1, s * a2)
 
 
 def div(a, s: float) -> Vec:
-    return (a[0] / s, a[1] / s, a[2] / s)
+    a0, a1, a2 = a
+    return (a0 / s, a1 / s, a2 / s)
 
 
 def mv(M, x) -> Vec:
     """M x."""
-    return (M[0][0] * x[0] + M[0][1] * x[1] + M[0][2] * x[2],
-            M[1][0] * x[0] + M[1][1] * x[1] + M[1][2] * x[2],
-            M[2][0] * x[0] + M[2][1] * x[1] + M[2][2] * x[2])
+    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = M
+    x0, x1, x2 = x
+    return (m00 * x0 + m01 * x1 + m02 * x2, m10 * x0 + m11 * x1 + m12 * x2, m20 * x0 + m21 * x1 + m22 * x2)
 
 
 def mtv(M, x) -> Vec:
     """M^T x."""
-    return (M[0][0] * x[0] + M[1][0] * x[1] + M[2][0] * x[2],
-            M[0][1] * x[0] + M[1][1] * x[1] + M[2][1] * x[2],
-            M[0][2] * x[0] + M[1][2] * x[1] + M[2][2] * x[2])
+    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = M
+    x0, x1, x2 = x
+    return (m00 * x0 + m10 * x1 + m20 * x2, m01 * x0 + m11 * x1 + m21 * x2, m02 * x0 + m12 * x1 + m22 * x2)
 
 
 def cols_mv(c0, c1, c2, x) -> Vec:
     """[c0 c1 c2] x for a matrix given by its columns."""
-    return (c0[0] * x[0] + c1[0] * x[1] + c2[0] * x[2],
-            c0[1] * x[0] + c1[1] * x[1] + c2[1] * x[2],
-            c0[2] * x[0] + c1[2] * x[1] + c2[2] * x[2])
+    a0, a1, a2 = c0
+    b0, b1, b2 = c1
+    d0, d1, d2 = c2
+    x0, x1, x2 = x
+    return (a0 * x0 + b0 * x1 + d0 * x2, a1 * x0 + b1 * x1 + d1 * x2, a2 * x0 + b2 * x1 + d2 * x2)
 
 
 def vee_RtX(R_cols, X_cols) -> Vec:

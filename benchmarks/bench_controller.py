@@ -9,7 +9,10 @@ timed in place, the control laws are the remainder: eqs. Com_controller, Rd, ori
 u3, the wrench filter and the result objects), and also for the model and task terms
 called on their own in a tight loop, where caches stay warm. The rows are timed in
 interleaved rounds so that a change in machine load hits all of them alike.
-mission.reference is called by the companion every step besides; it has its own line.
+The companion calls, every step besides, mission.reference and the wire conversions of
+companion/adapter.py (state_from_frame, setpoint_from_result); each has its own line, and
+the last line times the companion's whole step from a sensor frame to its setpoint (the
+state then carries the frame's quaternion, AmState.quat_xyzw).
 """
 from __future__ import annotations
 
@@ -25,8 +28,10 @@ from amcore import control
 from amcore.control import ControllerMemory, ControllerParams, step
 from amcore.mission import am_mission
 from amcore.model import AmState, build_model, create_data, decoupled_terms
-from amcore.so3 import exp_so3
+from amcore.so3 import R_to_quat_wxyz, exp_so3
 from amcore.task import task_terms
+from amlink.types import SensorFrame
+from companion.adapter import setpoint_from_result, state_from_frame
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -47,7 +52,11 @@ def main() -> None:
                    0.1 * rng.normal(size=3)) for _ in range(64)]
     refs = [mission.reference(t) for t in np.linspace(0, 20, 64)]
     F = rng.normal(size=6)
-    mem = [ControllerMemory()]
+    # the same states as sensor frames (the wire carries the quaternion as float32)
+    frames = [SensorFrame(step=k, time_s=0.0, p_WB=s.p_WB, quat_WB_wxyz=R_to_quat_wxyz(s.R_WB).astype(np.float32),
+                          v_B=s.v_B, w_B=s.w_B, q=s.q, qdot=s.qdot, wrench_E=F) for k, s in enumerate(sts)]
+    thrust_max = spec.vehicle.rotors.thrust_max_n * spec.vehicle.rotors.count
+    mem = [ControllerMemory(), ControllerMemory()]
     inside = {"model": [], "task": []}
     clock = time.perf_counter_ns
 
@@ -62,6 +71,12 @@ def main() -> None:
     def run_step(i):
         mem[0] = step(model, data, params, sts[i % 64], refs[i % 64], F, mem[0], 1e-3 * i).memory
 
+    def run_companion(i):  # companion.pilot's per-frame work, without its outcome bookkeeping
+        frame, t = frames[i % 64], 0.0067 * i
+        res = step(model, data, params, state_from_frame(frame), mission.reference(t), frame.wrench_E, mem[1], t)
+        mem[1] = res.memory
+        setpoint_from_result(i, res, thrust_max)
+
     def run_step_split(i):
         control.decoupled_terms, control.task_terms = timed_model, timed_task
         try:
@@ -71,12 +86,16 @@ def main() -> None:
 
     timed_model, timed_task = timed(decoupled_terms, "model"), timed(task_terms, "task")
     tm = decoupled_terms(model, data, sts[0])
+    res0 = step(model, data, params, sts[0], refs[0], F, ControllerMemory(), 0.0)
     parts = {
         "step": run_step,
         "step, split": run_step_split,
         "model": lambda i: decoupled_terms(model, data, sts[i % 64]),
         "task": lambda i: task_terms(model, data, tm, params.task_frame, params.components),
         "reference": lambda i: mission.reference(0.0067 * i),
+        "state_from_frame": lambda i: state_from_frame(frames[i % 64]),
+        "setpoint_from_result": lambda i: setpoint_from_result(i, res0, thrust_max),
+        "companion": run_companion,
     }
     for i in range(300):
         for fn in parts.values():
@@ -108,7 +127,11 @@ def main() -> None:
     print("  called on their own (warm caches):")
     row("    decoupled_terms", samples["model"])
     row("    task_terms", samples["task"])
-    row("mission.reference (7th-order paths)", samples["reference"])
+    print("  called by the companion every step besides:")
+    row("    mission.reference (7th-order paths)", samples["reference"])
+    row("    adapter.state_from_frame", samples["state_from_frame"])
+    row("    adapter.setpoint_from_result", samples["setpoint_from_result"])
+    row("companion step: frame -> state, reference, step, setpoint", samples["companion"])
     med = np.median(samples["step"]) / 1e3
     print(f"load average (1 min) {load_before[0]:.2f} before, {load_after[0]:.2f} after; {os.cpu_count()} CPUs")
     print(f"target: median <= 150 us (goal 60 us): {'met' if med <= 150 else 'NOT met'} at {med:.1f} us")

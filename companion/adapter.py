@@ -1,26 +1,51 @@
-"""Conversions between the wire types (amlink.types) and the controller's (amcore); no I/O."""
+"""Conversions between the wire types (amlink.types) and the controller's (amcore); no I/O.
+
+Both run every step; they work on Python floats and build each array in one numpy call
+(numpy's cost is per call at these sizes).
+"""
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
 from amcore.control import StepResult
 from amcore.model import AmState
-from amcore.so3 import R_to_quat_wxyz, quat_wxyz_to_R
-from amlink.types import AttitudeTarget, SensorFrame, TorqueSetpoint
+from amcore.so3 import quat_wxyz_to_R, quat_xyzw_of_R
+from amlink.types import (MAX_JOINTS, AttitudeTarget, SensorFrame, TorqueSetpoint, attitude_target_from_wire,
+                          torque_setpoint_from_wire)
 
 
 def state_from_frame(frame: SensorFrame) -> AmState:
-    """Measured state of the AM: base pose in W, base twist in B, joint state."""
-    q = np.asarray(frame.quat_WB_wxyz, dtype=float)
-    return AmState(p_WB=np.array(frame.p_WB), R_WB=quat_wxyz_to_R(q / np.linalg.norm(q)), v_B=np.array(frame.v_B),
-                   w_B=np.array(frame.w_B), q=np.array(frame.q), qdot=np.array(frame.qdot))
+    """Measured state of the AM: base pose in W, base twist in B, joint state.
+
+    The frame's quaternion, renormalized, gives R_WB and is handed on to pinocchio as is
+    (AmState.quat_xyzw), so the controller need not recover it from R_WB.
+    """
+    w, x, y, z = np.asarray(frame.quat_WB_wxyz, dtype=float).tolist()
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w / n, x / n, y / n, z / n
+    # positional (p_WB, R_WB, v_B, w_B, q, qdot, quat_xyzw): matching keywords costs more than the rest
+    return AmState(np.array(frame.p_WB), quat_wxyz_to_R((w, x, y, z)), np.array(frame.v_B), np.array(frame.w_B),
+                   np.array(frame.q), np.array(frame.qdot), (x, y, z, w))
 
 
 def setpoint_from_result(step: int, res: StepResult, thrust_max_n: float) -> tuple[TorqueSetpoint, AttitudeTarget]:
     """The torque-level setpoint the simulator applies, and the attitude target (R_b,d as a
     quaternion, w_b,d, thrust normalized by the vehicle's maximum) that goes with it."""
     c, d = res.command, res.diagnostics
-    sp = TorqueSetpoint(step=step, thrust_n=c.thrust_n, tau_B_nm=c.tau_B_nm, tau_q_nm=c.tau_q_nm)
-    att = AttitudeTarget(step=step, quat_wxyz=R_to_quat_wxyz(d.R_d), rates_rad_s=d.w_bd,
-                         thrust_normalized=float(np.clip(c.thrust_n / thrust_max_n, 0.0, 1.0)))
+    n = c.tau_q_nm.shape[0]
+    x, y, z, w = quat_xyzw_of_R(d.R_d)
+    if w < 0.0:  # the representative with w >= 0 (so3.R_to_quat_wxyz)
+        x, y, z, w = -x, -y, -z, -w
+    thrust = c.thrust_n / thrust_max_n
+    thrust = min(max(thrust, 0.0), 1.0)  # np.clip, which costs ~15x more on a float
+    if not (0 <= step < 1 << 64 and n <= MAX_JOINTS):  # the validating constructors say why
+        return (TorqueSetpoint(step=step, thrust_n=c.thrust_n, tau_B_nm=c.tau_B_nm, tau_q_nm=c.tau_q_nm),
+                AttitudeTarget(step=step, quat_wxyz=np.array([w, x, y, z]), rates_rad_s=d.w_bd,
+                               thrust_normalized=thrust))
+    # within the wire's bounds, the decoders' constructors build the same immutable instances
+    # without re-checking them
+    sp = torque_setpoint_from_wire(step, c.thrust_n, [*c.tau_B_nm.tolist(), *c.tau_q_nm.tolist()], n, 0)
+    att = attitude_target_from_wire(step, [w, x, y, z, *d.w_bd.tolist(), thrust])
     return sp, att

@@ -193,3 +193,56 @@ def test_error_saturation_is_reported(model, mission, params):
     res = step(model, create_data(model), params, far, mission.reference(0.0), np.zeros(6), ControllerMemory(), 0.0)
     assert res.diagnostics.com_err_saturated and res.diagnostics.y_err_saturated
     assert np.all(np.isfinite(res.diagnostics.tau))
+
+
+def test_diagnostics_fields_hold_what_their_names_say(model, mission, params):
+    """step builds Diagnostics positionally: every field checked against its meaning."""
+    from amcore.task import task_terms
+
+    rng = np.random.default_rng(8)
+    t = 6.0
+    st = near_reference(mission, model, t, rng, scale=0.5)
+    F_e = rng.normal(size=6)
+    ref = mission.reference(t)
+    res = step(model, create_data(model), params, st, ref, F_e, steady_memory(model, st, F_e, t), t)
+    d, c = res.diagnostics, res.command
+    data = create_data(model)
+    tm = decoupled_terms(model, data, st)
+    tk = task_terms(model, data, tm, params.task_frame, params.components)
+    close = lambda a, b: np.abs(np.asarray(a) - np.asarray(b)).max() < 1e-9 * (1 + np.abs(b).max())  # noqa: E731
+    assert close(d.r_c, tm.r_c) and close(d.r_c_d, ref.r_c) and close(d.r_c_err, tm.r_c - ref.r_c)
+    assert close(d.rdot_c, tm.xi[0:3]) and close(d.R_WB, st.R_WB)
+    assert close(d.R_d.T @ d.R_d, np.eye(3)) and close(d.R_d[:, 2], d.f_d / np.linalg.norm(d.f_d))
+    assert close(d.w_bd, st.R_WB.T @ d.R_d @ d.Omega_d) and close(d.e_w, st.w_B - d.w_bd)
+    E = d.R_d.T @ st.R_WB - st.R_WB.T @ d.R_d
+    assert close(d.e_R, 0.5 * np.array([E[2, 1], E[0, 2], E[1, 0]]))
+    assert close(d.y, tk.y) and close(d.y_d, ref.y) and close(d.y_err, tk.y - ref.y) and close(d.ydot, tk.J @ tm.xi)
+    R_e = tk.R_WE
+    W = np.concatenate([R_e @ F_e[0:3], R_e @ F_e[3:6]])  # the filter sits at steady state
+    assert close(d.wrench_W_filtered, W) and close(d.F_rc, W[0:3])
+    assert close(d.wrench_E_filtered, F_e)
+    assert close(d.F_y, d.Lambda_y @ tk.J @ tm.Lambda_xi_inv @ tm.T_inv.T @ tk.J_e.T @ F_e)
+    assert close(d.Lambda_y, np.linalg.inv(tk.J @ tm.Lambda_xi_inv @ tk.J.T))
+    assert close(d.tau, tm.T.T @ d.u) and close(d.u[0:3], c.thrust_n * st.R_WB[:, 2])
+    assert close(c.tau_B_nm, d.tau[3:6]) and close(c.tau_q_nm, d.tau[6:])
+    assert d.Lambda_y_dot is None and d.damping == 0.0 and d.sigma_min_J3 > params.sigma_damping
+    assert d.com_err_saturated is False and d.y_err_saturated is False
+    assert res.memory.t_s == t and close(res.memory.wrench.x, W) and close(res.memory.wrench.xdot, np.zeros(6))
+    # the command and the next step's memory do not share memory with the diagnostics
+    assert not np.shares_memory(c.tau_q_nm, d.tau) and not np.shares_memory(res.memory.wrench.x, d.wrench_W_filtered)
+
+
+def test_carried_quaternion_gives_the_same_step(model, mission, params):
+    """AmState.quat_xyzw (as state_from_frame sets it) only saves recovering it from R_WB."""
+    from amcore.so3 import quat_xyzw_of_R
+
+    rng = np.random.default_rng(9)
+    for t in (1.0, 7.0):
+        st = near_reference(mission, model, t, rng)
+        x, y, z, w = quat_xyzw_of_R(st.R_WB)
+        st_q = dataclasses.replace(st, quat_xyzw=(-x, -y, -z, -w))  # the other sign: same rotation
+        ref = mission.reference(t)
+        a = step(model, create_data(model), params, st, ref, np.ones(6), ControllerMemory(), t)
+        b = step(model, create_data(model), params, st_q, ref, np.ones(6), ControllerMemory(), t)
+        assert np.abs(a.diagnostics.tau - b.diagnostics.tau).max() < 1e-12 * np.abs(a.diagnostics.tau).max()
+        assert np.array_equal(st_q.pin_q()[3:7], [-x, -y, -z, -w])

@@ -103,3 +103,18 @@ def test_trajectory_evaluation_is_bit_identical_to_the_literal_one():
             assert len(got) == orders + 1
             for a, b in zip(got, ref):
                 assert np.array_equal(a, b)
+
+
+def test_float_filter_update_is_the_array_one():
+    """lowpass_update_floats (the controller's) gives lowpass_update's values, including the
+    first sample (no state) and a repeated time stamp (dt = 0)."""
+    from amcore.filters import lowpass_update_floats
+
+    f = LowPass2(15.0, 0.9)
+    rng = np.random.default_rng(6)
+    st = None
+    for dt in (1e-3, 1e-3, 0.0, 2e-3, 1e-3):
+        u = rng.normal(size=6)
+        x, xd = lowpass_update_floats(f, st, u.tolist(), dt)
+        st = lowpass_update(f, st, u, dt)
+        assert np.array_equal(x, st.x) and np.array_equal(xd, st.xdot)

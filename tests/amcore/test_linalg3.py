@@ -82,3 +82,31 @@ def test_other_sizes_fall_back_to_numpy(n):
     assert np.array_equal(linalg3.inv(A), np.linalg.inv(A))
     assert np.array_equal(linalg3.solve(A, b), np.linalg.solve(A, b))
     assert linalg3.sigma_min(A) == np.linalg.svd(A, compute_uv=False)[-1]
+
+
+def test_symmetric_inverse_matches_numpy():
+    """inv_sym reads the upper triangle of a symmetric matrix; as accurate as inv."""
+    rng = np.random.default_rng(5)
+    for s in _spectra(rng, 400):
+        s = np.clip(s, 1e-6, None)
+        U, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        A = U @ np.diag(s * rng.choice([-1.0, 1.0], size=3)) @ U.T  # symmetric, possibly indefinite
+        A = np.triu(A) + np.triu(A, 1).T  # exactly symmetric
+        cond = s.max() / s.min()
+        Ai = np.linalg.inv(A)
+        assert np.abs(linalg3.inv_sym(A) - Ai).max() <= 1e-14 * cond * np.abs(Ai).max()
+    with pytest.raises(np.linalg.LinAlgError):
+        linalg3.inv_sym(np.array([[1.0, 2.0, 0.0], [2.0, 4.0, 0.0], [0.0, 0.0, 0.0]]))
+    A = rng.normal(size=(4, 4))
+    A = A + A.T + 8 * np.eye(4)
+    assert np.array_equal(linalg3.inv_sym(A), np.linalg.inv(A))
+
+
+def test_sigma_min_and_solve_as_list():
+    rng = np.random.default_rng(7)
+    for n in (3, 2):
+        A = rng.normal(size=(n, n)) + 3 * np.eye(n)
+        b = rng.normal(size=n)
+        s, x = linalg3.sigma_min_and_solve(A, b)
+        s2, x2 = linalg3.sigma_min_and_solve(A, b, as_list=True)
+        assert s == s2 and isinstance(x2, list) and x2 == x.tolist()

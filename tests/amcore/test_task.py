@@ -95,3 +95,18 @@ def test_model_pass_fills_the_kinematics_task_terms_reads(model, mission):
                 assert np.abs(pin.getFrameJacobian(pm, d, f, rf) - pin.getFrameJacobian(pm, ref, f, rf)).max() < 1e-14
                 assert np.abs(pin.getFrameJacobianTimeVariation(pm, d, f, rf)
                               - pin.getFrameJacobianTimeVariation(pm, ref, f, rf)).max() < 1e-14
+
+
+def test_mission_reference_is_the_task_frame_path_in_world(mission):
+    """mission.reference evaluates the CoM path taken to {w} once; it equals p_WT + R_WT c(t)."""
+    R, p = mission.frame.R_WT, mission.frame.p_WT
+    for t in np.linspace(-0.5, 25.0, 203):
+        ref = mission.reference(t)
+        c = mission.com_path_t.eval_array(t, 4)
+        y = mission.y_path.eval_array(t, 2)
+        got = [ref.r_c, ref.r_c_d1, ref.r_c_d2, ref.r_c_d3, ref.r_c_d4]
+        want = [p + R @ c[0]] + [R @ c[k] for k in range(1, 5)]
+        for g, w in zip(got, want):
+            assert np.abs(g - w).max() < 1e-14 * (1 + np.abs(w).max())
+        assert np.array_equal(ref.y, y[0]) and np.array_equal(ref.y_d1, y[1]) and np.array_equal(ref.y_d2, y[2])
+        assert ref.psi == mission.psi and ref.psi_d1 == 0.0 and ref.psi_d2 == 0.0

@@ -35,3 +35,41 @@ def test_setpoint_carries_the_command_and_the_attitude_target(spec, model):
     np.testing.assert_array_equal(sp.tau_q_nm, res.command.tau_q_nm)
     np.testing.assert_allclose(quat_wxyz_to_R(att.quat_wxyz), res.diagnostics.R_d, atol=1e-12)
     assert att.thrust_normalized == np.clip(res.command.thrust_n / 48.0, 0, 1)
+
+
+def test_setpoint_matches_the_validating_constructors(spec, model):
+    """setpoint_from_result builds its setpoint and attitude target with amlink's decoder
+    constructors; they equal what the validating ones build."""
+    from amlink.types import AttitudeTarget, TorqueSetpoint
+
+    m = am_mission(spec, spec.ams[1], model)
+    params = ControllerParams.from_vehicle(spec.vehicle, m.frame)
+    x = m.initial_state()
+    res = step(model, create_data(model), params, x, m.reference(2.0), np.ones(6), ControllerMemory(), 2.0)
+    for thrust_max in (48.0, 1.0, 1e6):
+        sp, att = setpoint_from_result(2**64 - 1, res, thrust_max_n=thrust_max)
+        c, d = res.command, res.diagnostics
+        sp2 = TorqueSetpoint(step=2**64 - 1, thrust_n=c.thrust_n, tau_B_nm=c.tau_B_nm, tau_q_nm=c.tau_q_nm)
+        att2 = AttitudeTarget(step=2**64 - 1, quat_wxyz=R_to_quat_wxyz(d.R_d), rates_rad_s=d.w_bd,
+                              thrust_normalized=float(np.clip(c.thrust_n / thrust_max, 0.0, 1.0)))
+        for a, b in ((sp, sp2), (att, att2)):
+            assert type(a) is type(b) and a.__dict__.keys() == b.__dict__.keys()
+            for k in a.__dict__:
+                va, vb = getattr(a, k), getattr(b, k)
+                assert type(va) is type(vb)
+                if isinstance(va, np.ndarray):
+                    assert np.array_equal(va, vb) and va.dtype == vb.dtype and not va.flags.writeable
+                else:
+                    assert va == vb
+
+
+def test_state_from_frame_carries_the_quaternion():
+    R = exp_so3(np.array([0.3, 2.9, -0.4]))
+    q = R_to_quat_wxyz(R).astype(np.float32)
+    f = SensorFrame(step=0, time_s=0.0, p_WB=[0, 0, 1], quat_WB_wxyz=q, v_B=np.zeros(3), w_B=np.zeros(3),
+                    q=[0.1, 0.2, 0.3], qdot=np.zeros(3), wrench_E=np.zeros(6))
+    s = state_from_frame(f)
+    w, x, y, z = q.astype(float) / np.linalg.norm(q.astype(float))
+    np.testing.assert_allclose(s.quat_xyzw, [x, y, z, w], atol=1e-15)
+    np.testing.assert_allclose(s.R_WB, quat_wxyz_to_R(q), atol=1e-15)
+    np.testing.assert_allclose(s.pin_q()[3:7], [x, y, z, w], atol=1e-15)
