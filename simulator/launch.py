@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
             logs.append(rlog)
             procs["recorder"] = subprocess.Popen(
                 _command("ground-station") + ["record", "--out", str(mcap), "--zenoh-listen", endpoint],
-                stdout=rlog, stderr=subprocess.STDOUT, env=env)
+                stdout=rlog, stderr=subprocess.STDOUT, env=env, preexec_fn=_lower_priority)
             _wait_listening(endpoint, procs["recorder"], time.monotonic() + a.startup_timeout)
         log = open(run_dir / "simulator.log", "w")
         logs.append(log)
@@ -202,6 +202,16 @@ def _follow(sim: subprocess.Popen, procs: dict[str, subprocess.Popen], bar: _Bar
             what = "the run goes on without its log" if name == "recorder" else "its vehicle is in failsafe"
             print(f"\nam-run: {name} exited with code {code}; {what} (see {name.replace(' ', '-')}.log)",
                   file=sys.stderr)
+
+
+def _lower_priority() -> None:
+    """In the recorder's child process: nice 10, so that on a machine with fewer cores than
+    processes the logger takes the time the lockstep leaves idle (its inbox buffers) rather
+    than the simulator's and companions'."""
+    try:
+        os.nice(10)
+    except (AttributeError, OSError):
+        pass
 
 
 def _stop_all(procs: dict[str, subprocess.Popen], grace_s: float = 10.0) -> None:
