@@ -14,6 +14,7 @@ pose (paper Sec. IV, "CoM trajectory"), computed from the URDF, not entered.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -22,10 +23,10 @@ import pinocchio as pin
 
 from .config import AmSpec, ObjectSpec, ScenarioSpec
 from .control import Reference
-from .model import AmModel, AmState, create_data
+from .model import AmModel, AmState, create_data, decoupled_terms
 from .so3 import Rz
-from .task import TaskFrame, angle_of
-from .trajectory import SmoothPath, path_through
+from .task import TaskFrame, angle_of, task_terms
+from .trajectory import SmoothPath, _smoothstep_derivs, path_through
 
 
 @dataclass(frozen=True)
@@ -135,3 +136,49 @@ def am_mission(spec: ScenarioSpec, am: AmSpec, model: AmModel) -> AmMission:
                         nominal=geo, q_nominal=tuple(spec.vehicle.q_nominal_rad),
                         phase_ends_s=(t_a, t_g, ms.hover_end_s))
     return mission
+
+
+@dataclass(frozen=True)
+class JoinBlend:
+    """References for a controller that starts while its vehicle is away from the mission:
+    a companion restarted during a run, whose vehicle the flight controller's failsafe has
+    held while the mission moved on. They start at rest at the vehicle's own CoM and task
+    values at t0 (so the first command holds it where it is, instead of a jump the actuators
+    cannot make) and join the mission's over duration_s along the minimum-snap profile s of
+    amcore.trajectory (C3, as eq. Rd needs):
+
+        r_c,d(t) = r_0 + s(tau) (r_mission(t) - r_0),  tau = (t - t0) / duration_s,
+
+    with derivatives by Leibniz's rule; likewise y_d from y_0. The heading is the mission's."""
+
+    t0: float
+    duration_s: float
+    r_c0: tuple[float, ...]
+    y0: tuple[float, ...]
+
+    def apply(self, ref: Reference, t: float) -> Reference:
+        """`ref` (the mission's at t) blended; the mission's own once the blend is over."""
+        tau = (t - self.t0) / self.duration_s
+        if tau >= 1.0:
+            return ref
+        s = _smoothstep_derivs(max(tau, 0.0), 4)
+        s = [sk / self.duration_s ** k for k, sk in enumerate(s)]  # d^k s / dt^k
+        r = [ref.r_c - np.array(self.r_c0), ref.r_c_d1, ref.r_c_d2, ref.r_c_d3, ref.r_c_d4]
+        y = [ref.y - np.array(self.y0), ref.y_d1, ref.y_d2]
+
+        def d(k, e):  # d^k/dt^k (s e) = sum_j C(k, j) s^(j) e^(k-j)
+            return sum(math.comb(k, j) * s[j] * e[k - j] for j in range(k + 1))
+
+        return Reference(self.r_c0 + d(0, r), d(1, r), d(2, r), d(3, r), d(4, r), ref.psi, ref.psi_d1,
+                         ref.psi_d2, self.y0 + d(0, y), d(1, y), d(2, y))
+
+
+def join_blend(model: AmModel, mission: AmMission, components: tuple[str, ...], state: AmState, t0: float,
+               duration_s: float) -> JoinBlend:
+    """The JoinBlend from `state` at t0 into `mission` (CoM and task values from the model)."""
+    if not duration_s > 0.0:
+        raise ValueError(f"join blend duration must be > 0, got {duration_s}")
+    data = create_data(model)
+    tm = decoupled_terms(model, data, state)
+    tk = task_terms(model, data, tm, mission.frame, components)
+    return JoinBlend(t0=t0, duration_s=duration_s, r_c0=tuple(tm.r_c.tolist()), y0=tuple(tk.y.tolist()))

@@ -4,19 +4,24 @@
 entry, and the paper's controller; `pilot.step(frame)` returns the torque setpoint and
 attitude target for that frame, and keeps the per-phase error summary
 (`companion.outcome`); `command` and `record` are its two halves, for a caller that sends
-the setpoint before the bookkeeping. The companion process wraps it in the MAVLink link; the
+the setpoint before the bookkeeping. A pilot whose first frame comes after t = 0 (a
+companion restarted during a run) starts its references at its vehicle's state and joins
+the mission's over JOIN_BLEND_S (`amcore.mission.JoinBlend`). The companion process wraps it in the MAVLink link; the
 in-process runner (`simulator.inprocess`) calls it directly.
 """
 from __future__ import annotations
 
 from amcore.config import ScenarioSpec
 from amcore.control import ControllerMemory, ControllerParams, StepResult, step
-from amcore.mission import am_mission
+from amcore.mission import JoinBlend, am_mission, join_blend
 from amcore.model import build_model, create_data
 from amlink.types import AttitudeTarget, SensorFrame, TorqueSetpoint
 
 from .adapter import setpoint_from_result, state_from_frame
 from .outcome import Outcome
+
+
+JOIN_BLEND_S = 3.0  # a companion that starts mid-run joins the mission's references over this time [s]
 
 
 class Pilot:
@@ -36,6 +41,8 @@ class Pilot:
                               ("settle_check", spec.duration_s - 2.0)], key=lambda x: x[1])
         self.last: tuple[float, object] | None = None
         self.steps = 0
+        self._started = False
+        self._blend: JoinBlend | None = None  # set when the first frame comes after t = 0 (a rejoin)
 
     def step(self, frame: SensorFrame) -> tuple[TorqueSetpoint, AttitudeTarget, StepResult]:
         """`command`, then `record`: the setpoint answering `frame`, its errors summarized."""
@@ -47,8 +54,15 @@ class Pilot:
         """The controller's answer to `frame`, and nothing else: in lockstep the simulator is
         waiting for it, so the companion sends it before it does any bookkeeping (`record`)."""
         t = frame.time_s
-        res = step(self.model, self.data, self.params, state_from_frame(frame), self.mission.reference(t),
-                   frame.wrench_E, self.memory, t)
+        state = state_from_frame(frame)
+        if not self._started:
+            self._started = True
+            if t > 0.0:  # joining a run in progress (a restart): from where the vehicle is
+                self._blend = join_blend(self.model, self.mission, self.params.components, state, t, JOIN_BLEND_S)
+        ref = self.mission.reference(t)
+        if self._blend is not None:
+            ref = self._blend.apply(ref, t)
+        res = step(self.model, self.data, self.params, state, ref, frame.wrench_E, self.memory, t)
         self.memory = res.memory
         sp, att = setpoint_from_result(frame.step, res, self.thrust_max_n)
         return sp, att, res

@@ -128,6 +128,38 @@ def test_sigterm_stops_a_companion_cleanly_and_its_vehicle_goes_to_failsafe(tmp_
         sim.kill()
 
 
+def test_companion_restarted_seconds_later_takes_its_vehicle_back_from_where_it_is(tmp_path):
+    """Restarted while its vehicle has been held by the failsafe for seconds and the mission
+    has moved on: it starts from the vehicle's state (companion.pilot, amcore.mission.JoinBlend)
+    and takes over for good. Before, its first ~2500 setpoints exceeded the simulator's
+    plausibility bounds and were rejected, and the vehicle ended the run in failsafe."""
+    sim = Sim("two_am_comp.toml", tmp_path, "--step-timeout", "2", "--peer-timeout", "30", "--duration", "6")
+    c4, c5 = companion(4, sim.bind), companion(5, sim.bind)
+    c5b = None
+    try:
+        _wait_for(sim.proc.stdout, '"progress"')
+        c5.kill()
+        _wait_for(sim.proc.stderr, "failsafe")
+        time.sleep(3.0)  # the run goes on without it
+        c5b = companion(5, sim.bind, "two_am_comp.toml", "--outcome", str(tmp_path / "am5.json"))
+        code, err = sim.wait(timeout_s=180)
+        assert code == 0, err
+        o = json.loads((tmp_path / "outcome.json").read_text())
+        events = o["events"]
+        assert [e["event"] for e in events] == ["lost", "rejoined"], events
+        assert events[1]["t"] - events[0]["t"] > 1.0  # a late rejoin
+        assert o["failsafe_at_end"] == [] and o["link"]["rejected_setpoints"] == 0
+        c5b.communicate(timeout=30)
+        assert c5b.returncode == 0
+        am5 = json.loads((tmp_path / "am5.json").read_text())
+        assert am5["at"]["end"]["r_c_err"] < 0.01
+    finally:
+        for p in (c4, c5, c5b):
+            if p is not None and p.poll() is None:
+                p.kill()
+        sim.kill()
+
+
 def test_sigkilled_companion_is_detected_and_a_restarted_one_rejoins(tmp_path):
     sim = Sim("two_am_comp.toml", tmp_path, "--step-timeout", "2", "--peer-timeout", "30", "--duration", "6")
     c4, c5 = companion(4, sim.bind), companion(5, sim.bind)

@@ -1,0 +1,73 @@
+"""Pilot: a companion started during a run joins the mission from where its vehicle is."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from amcore.config import load_scenario
+from amlink.types import sensor_frame_from_wire
+from companion.pilot import JOIN_BLEND_S, Pilot
+
+from ..conftest import SCENARIO
+
+
+def _frame(step: int, t: float, state, psi: float):
+    quat = [math.cos(psi / 2), 0.0, 0.0, math.sin(psi / 2)]  # the state's R_WB = Rz(psi)
+    values = [*state.p_WB, *quat, *state.v_B, *state.w_B, *state.q, *state.qdot, *[0.0] * 6]
+    return sensor_frame_from_wire(step, t, values, len(state.q), 0)
+
+
+@pytest.fixture(scope="module")
+def spec():
+    return load_scenario(SCENARIO)
+
+
+def test_restarted_pilot_holds_its_vehicle_where_it_is_then_joins_the_mission(spec):
+    """The vehicle hovers where the mission started (held there by a failsafe) while the
+    mission is 3 s on: the restarted pilot's first command holds it (zero errors, thrust
+    ~ m g) instead of commanding the mission's jump, and its references are the mission's
+    again JOIN_BLEND_S later."""
+    p = Pilot(spec, 4)
+    x0 = p.mission.initial_state()
+    t0 = 3.0
+    _, _, res = p.command(_frame(3000, t0, x0, p.mission.psi))
+    d = res.diagnostics
+    assert np.linalg.norm(p.mission.reference(t0).r_c - p.mission.reference(0.0).r_c) > 0.1  # far from the mission
+    np.testing.assert_allclose(d.r_c_err, 0.0, atol=1e-9)
+    np.testing.assert_allclose(d.y_err, 0.0, atol=1e-9)
+    m_g = p.model.mass_kg * p.model.gravity_mps2
+    assert abs(res.command.thrust_n - m_g) < 0.05 * m_g
+    fresh = Pilot(spec, 4)  # what a pilot without the blend would command from the same state
+    fresh._started = True
+    _, _, jump = fresh.command(_frame(3000, t0, x0, p.mission.psi))
+    assert np.linalg.norm(jump.command.tau_q_nm) > 10 * np.linalg.norm(res.command.tau_q_nm)
+    t1 = t0 + JOIN_BLEND_S
+    mission = p.mission.reference(t1)
+    assert p._blend.apply(mission, t1) is mission
+
+
+def test_join_blend_references_are_smooth(spec):
+    """C3 as eq. Rd needs: each blended derivative is the finite difference of the one below."""
+    p = Pilot(spec, 4)
+    x0 = p.mission.initial_state()
+    p.command(_frame(1500, 1.5, x0, p.mission.psi))
+
+    def ref(t):
+        return p._blend.apply(p.mission.reference(t), t)
+
+    h = 1e-5
+    for t in (1.5 + 1e-3, 2.2, 3.9, 4.49):
+        a, b, c = ref(t - h), ref(t), ref(t + h)
+        for lo, hi in (("r_c", "r_c_d1"), ("r_c_d1", "r_c_d2"), ("r_c_d2", "r_c_d3"), ("r_c_d3", "r_c_d4"),
+                       ("y", "y_d1"), ("y_d1", "y_d2")):
+            fd = (getattr(c, lo) - getattr(a, lo)) / (2 * h)
+            np.testing.assert_allclose(fd, getattr(b, hi), rtol=1e-4, atol=1e-4 * (1 + np.abs(getattr(b, hi)).max()))
+
+
+def test_pilot_started_with_the_run_uses_the_mission_as_it_is(spec):
+    p = Pilot(spec, 4)
+    x0 = p.mission.initial_state()
+    p.command(_frame(0, 0.0, x0, p.mission.psi))
+    assert p._blend is None
