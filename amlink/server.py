@@ -210,9 +210,10 @@ class SimServer:
         ``frames``: sysid -> frame, or (sysid, frame) pairs produced lazily: with
         ``partial=True`` each frame is sent as soon as it is produced, so that
         companion computes while the next one is read (``partial=False`` checks
-        every peer first, so it takes them all before sending).  ``while_waiting``, if given, is called once after
-        the frames are out and before the first answer is read: work that need not
-        delay the companions (the simulator's bookkeeping) runs while they compute.
+        every peer first, so it takes them all before sending).  ``while_waiting``,
+        if given, is called once after the frames are out and before the first
+        answer is read: work that need not delay the companions (the simulator's
+        bookkeeping) runs while they compute.
         ``on_setpoint(sysid, setpoint)``, if given, is called for each accepted
         setpoint as it arrives (the flight controller applies it while the others
         are awaited); the returned dict holds them all the same.
@@ -240,18 +241,14 @@ class SimServer:
         udp = self._require_open()
         timeout = self.timeout_s if timeout_s is None else timeout_s
         expected: dict[int, int] = {}
+        pairs = frames.items() if isinstance(frames, Mapping) else frames
         if not partial:  # every peer must be known and have said hello before anything is sent
-            frames = list(frames.items() if isinstance(frames, Mapping) else frames)
-            for sysid, _ in frames:
-                peer = self._peers.get(sysid)
-                if peer is None:
-                    raise ValueError(f"sysid {sysid} is not one of {self.sysids}")
-                if peer.addr is None:
+            pairs = list(pairs)
+            for sysid, _ in pairs:
+                if self._peer(sysid).addr is None:
                     raise PeerMissingError([sysid], 0.0, "HEARTBEAT (call wait_for_peers first)")
-        for sysid, frame in (frames.items() if isinstance(frames, Mapping) else frames):
-            peer = self._peers.get(sysid)
-            if peer is None:
-                raise ValueError(f"sysid {sysid} is not one of {self.sysids}")
+        for sysid, frame in pairs:
+            peer = self._peer(sysid)
             peer.batch = fastcodec.sensor_frame_payloads(frame, self.scenario.scenario_id)
             expected[sysid] = frame.step
             if peer.addr is not None:
@@ -306,6 +303,12 @@ class SimServer:
             peer.batch = None
         self.last_missing = tuple(sorted(set(expected).difference(results)))
         return results
+
+    def _peer(self, sysid: int) -> _Peer:
+        peer = self._peers.get(sysid)
+        if peer is None:
+            raise ValueError(f"sysid {sysid} is not one of {self.sysids}")
+        return peer
 
     def _awaited(self, expected: dict[int, int], partial: bool) -> set[int]:
         if not partial:

@@ -255,12 +255,9 @@ class World:
     def state(self, sysid: int) -> AmState:
         """Exact state of one AM (velocities in B, see `amcore.model.AmState`)."""
         c, am = self._c(), self._am(sysid)
-        p, quat = pb.getBasePositionAndOrientation(am.body_id, physicsClientId=c)
-        v_W, w_W = pb.getBaseVelocity(am.body_id, physicsClientId=c)
-        R = _R(quat)
-        joints = pb.getJointStates(am.body_id, list(am.arm_joint_ids), physicsClientId=c)
-        return AmState(p_WB=np.array(p), R_WB=R, v_B=R.T @ np.array(v_W), w_B=R.T @ np.array(w_W),
-                       q=np.array([j[0] for j in joints]), qdot=np.array([j[1] for j in joints]))
+        p, _, R, v_B, w_B, q, qdot = self._base_and_joints(c, sysid, am)
+        return AmState(p_WB=np.array(p), R_WB=np.array(R).reshape(3, 3), v_B=np.array(v_B), w_B=np.array(w_B),
+                       q=np.array(q), qdot=np.array(qdot))
 
     def sensor_values(self, sysid: int) -> list[float]:
         """One sensor frame's values as Python floats: p_WB, quat_WB (w, x, y, z; w >= 0),
@@ -270,13 +267,18 @@ class World:
         the per-step path, where numpy's per-call cost on 3-vectors would dominate.
         """
         c, am = self._c(), self._am(sysid)
+        p, quat, _, v_B, w_B, q, qdot = self._base_and_joints(c, sysid, am)
+        return [*p, *quat, *v_B, *w_B, *q, *qdot, *self._wrench_E(c, sysid, am)]
+
+    def _base_and_joints(self, c: int, sysid: int, am: scene.AmBody):
+        """(p_WB, quat_WB (w, x, y, z; w >= 0), R_WB row-major as 9 floats, v_B, w_B, q, qdot)
+        read from PyBullet, on Python floats."""
         p, (x, y, z, w) = pb.getBasePositionAndOrientation(am.body_id, physicsClientId=c)
         v_W, w_W = pb.getBaseVelocity(am.body_id, physicsClientId=c)
         R = pb.getMatrixFromQuaternion((x, y, z, w))  # row-major 3x3 as a 9-tuple
         joints = pb.getJointStates(am.body_id, self._arm_ids[sysid], physicsClientId=c)
-        quat = [w, x, y, z] if w >= 0.0 else [-w, -x, -y, -z]
-        return [*p, *quat, *_mtv(R, v_W), *_mtv(R, w_W), *[j[0] for j in joints], *[j[1] for j in joints],
-                *self._wrench_E(c, sysid, am)]
+        quat = (w, x, y, z) if w >= 0.0 else (-w, -x, -y, -z)
+        return (p, quat, R, _mtv(R, v_W), _mtv(R, w_W), [j[0] for j in joints], [j[1] for j in joints])
 
     def wrench_ee(self, sysid: int) -> np.ndarray:
         """(6,) [f_E [N]; m_E [N m]]: wrench the environment applies on the end-effector,
