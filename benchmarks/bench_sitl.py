@@ -8,6 +8,14 @@ Each N runs the ten_am scenario's object (5 kg cylinder, r = 0.6 m) with N AMs e
 around it, for --duration simulated seconds of the approach phase. The SITL figure is the
 simulator's own (simulated time / wall time from the first lockstep step, start-up
 excluded). Targets (issue 3): 2 AMs >= 2x real time, 10 AMs >= 0.5x; goals 5x and 1x.
+
+Two more columns take the whole apart, measured in the same run:
+- "echo": the same simulator and lockstep with `echo_companion.py` in place of each
+  companion (same client, codec and signing; it answers every frame at once with a fixed
+  setpoint, no controller, no telemetry). What the simulator, MAVLink and the processes
+  cost when the controller costs nothing: an upper bound on the SITL's real-time factor.
+- "UDP": one Python process exchanging a datagram per step with N forked processes that
+  answer at once (no MAVLink, no physics): the floor of the lockstep's message pattern.
 """
 from __future__ import annotations
 
@@ -15,6 +23,7 @@ import argparse
 import json
 import os
 import re
+import socket
 import subprocess
 import sys
 import tempfile
@@ -75,19 +84,97 @@ def sitl_rtf(path: Path, duration: float, run_dir: Path) -> tuple[float, float]:
     return json.loads((run_dir / "outcome.json").read_text())["real_time_factor"], wall
 
 
+def echo_rtf(path: Path, duration: float, run_dir: Path) -> float:
+    """The SITL with echo companions (no controller, no telemetry); see the module doc."""
+    spec = load_scenario(path)
+    bin_dir = Path(sys.executable).parent
+    sim_exe = bin_dir / "simulator"
+    sim_cmd = [str(sim_exe)] if sim_exe.exists() else [sys.executable, "-m", "simulator"]
+    sim = subprocess.Popen(sim_cmd + ["--config", str(path), "--bind", "udp:127.0.0.1:0", "--run-dir", str(run_dir),
+                                      "--progress", "jsonl", "--no-telemetry", "--duration", str(duration)],
+                           stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=ROOT)
+    echoes: list[subprocess.Popen] = []
+    try:
+        bind = None
+        while bind is None:
+            line = sim.stdout.readline()
+            if not line:
+                raise RuntimeError(f"the simulator did not start (exit {sim.wait()})")
+            event = json.loads(line)
+            bind = event.get("bind") if event.get("event") == "ready" else None
+        echoes = [subprocess.Popen([sys.executable, str(ROOT / "benchmarks" / "echo_companion.py"), "--sysid",
+                                    str(am.sysid), "--sim", bind, "--config", str(path)], stderr=subprocess.DEVNULL)
+                  for am in spec.ams]
+        sim.stdout.read()
+        if sim.wait(timeout=600) != 0:
+            raise RuntimeError(f"echo SITL run failed (simulator exit {sim.returncode})")
+        for e in echoes:
+            e.wait(timeout=30)
+    finally:
+        for p in [sim, *echoes]:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    return json.loads((run_dir / "outcome.json").read_text())["real_time_factor"]
+
+
+def udp_rtf(n: int, steps: int = 3000) -> float:
+    """One process sends a 200-byte datagram to each of n forked processes per step and waits
+    for their n 60-byte answers: the lockstep's message pattern alone, as x real time at 1 kHz."""
+    hub = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    hub.bind(("127.0.0.1", 0))
+    hub_addr = hub.getsockname()
+    leaves, pids = [], []
+    try:
+        for _ in range(n):
+            leaf = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            leaf.bind(("127.0.0.1", 0))
+            leaves.append(leaf.getsockname())
+            pid = os.fork()
+            if pid == 0:  # the child answers until it reads b"q"
+                try:
+                    hub.close()
+                    while leaf.recv(2048) != b"q":
+                        leaf.sendto(b"a" * 60, hub_addr)
+                finally:
+                    os._exit(0)
+            leaf.close()
+            pids.append(pid)
+        frame = b"f" * 200
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            for addr in leaves:
+                hub.sendto(frame, addr)
+            for _ in range(n):
+                hub.recv(2048)
+        wall = time.perf_counter() - t0
+    finally:
+        for addr in leaves:
+            hub.sendto(b"q", addr)
+        for pid in pids:
+            os.waitpid(pid, 0)
+        hub.close()
+    return steps * 1e-3 / wall
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=3.0)
     ap.add_argument("--n", type=int, nargs="+", default=[1, 2, 5, 10])
     a = ap.parse_args()
     print(f"load average before: {os.getloadavg()[0]:.2f}; {os.cpu_count()} cores; {a.duration} s simulated per N")
-    print(f"{'N':>3} {'SITL x real time':>17} {'bare PyBullet x real time':>26} {'ratio':>7} {'wall incl. start-up':>20}")
+    print("x real time (simulated s / wall s), each column measured in this run:")
+    print(f"{'N':>3} {'SITL':>7} {'echo':>7} {'UDP':>7} {'bare PyBullet':>14} {'bare/SITL':>10} {'wall incl. start-up':>20}")
     with tempfile.TemporaryDirectory() as tmp:
         for n in a.n:
             path = scenario_with(n, Path(tmp))
             bare = bare_rtf(path, a.duration)
             rtf, wall = sitl_rtf(path, a.duration, Path(tmp) / f"run{n}")
-            print(f"{n:>3} {rtf:17.2f} {bare:26.1f} {bare / rtf:7.0f} {wall:19.1f}s", flush=True)
+            echo = echo_rtf(path, a.duration, Path(tmp) / f"echo{n}")
+            udp = udp_rtf(n)
+            print(f"{n:>3} {rtf:7.2f} {echo:7.2f} {udp:7.1f} {bare:14.1f} {bare / rtf:10.0f} {wall:19.1f}s", flush=True)
+    print("SITL: the product (am-run, telemetry on). echo: same lockstep, companions without a controller.\n"
+          "UDP: the message pattern alone. Targets: 2 AMs >= 2x, 10 AMs >= 0.5x (goals 5x, 1x).")
 
 
 if __name__ == "__main__":

@@ -1,0 +1,48 @@
+"""A companion without a controller, for measuring the lockstep's own cost.
+
+    python benchmarks/echo_companion.py --sysid 2 --sim udp:127.0.0.1:PORT --config scenario.toml
+
+It connects, arms and answers every sensor frame at once with the same torque setpoint
+(the vehicle's hover thrust, zero torques), through the same `amlink` client, codec and
+signing as the real companion. `bench_sitl.py` runs it in place of `companion` to report
+what the simulator, MAVLink and the processes cost when the controller costs nothing.
+Not a product: the vehicles it flies are not controlled.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from amcore.config import load_scenario  # noqa: E402
+from amcore.model import build_model  # noqa: E402
+from amlink import signing  # noqa: E402
+from amlink.lockstep import CompanionClient  # noqa: E402
+from amlink.types import TorqueSetpoint  # noqa: E402
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sysid", type=int, required=True)
+    ap.add_argument("--sim", required=True)
+    ap.add_argument("--config", type=Path, required=True)
+    a = ap.parse_args()
+    spec = load_scenario(a.config)
+    keys, _ = signing.keys_for_run(spec, None)
+    model = build_model(spec.vehicle)
+    hover_n = model.mass_kg * model.gravity_mps2
+    zero3, zero_q = np.zeros(3), np.zeros(model.n)
+    with CompanionClient(a.sysid, a.sim, signing_key=None if keys is None else keys[a.sysid]) as client:
+        client.connect(timeout_s=60.0)
+        client.arm(timeout_s=5.0)
+        while (frame := client.recv_frame(timeout_s=10.0)) is not None:
+            client.send_setpoint(TorqueSetpoint(frame.step, hover_n, zero3, zero_q))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
