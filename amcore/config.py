@@ -148,6 +148,7 @@ class MissionSpec:
     pre_gap_m: float = 0.02  # end of approach: pad this far from the surface
     squeeze_m: float = 0.04  # grasp: y_x,d this deep inside the object
     lift_m: float = 0.3
+    join_blend_s: float = 3.0  # a companion started mid-run (a restart) blends into the references over this
 
 
 @dataclass(frozen=True)
@@ -381,6 +382,8 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
     mission = MissionSpec(**_build(MissionSpec, data.get("mission", {}), f"{where}: [mission]"))
     if not (0 < mission.approach_end_s < mission.grasp_end_s < mission.hover_end_s):
         raise ConfigError(f"{where}: [mission]: need 0 < approach_end_s < grasp_end_s < hover_end_s")
+    if not mission.join_blend_s > 0:
+        raise ConfigError(f"{where}: [mission].join_blend_s must be > 0 s, got {mission.join_blend_s}")
     am_tables = data.get("am", [])
     if not isinstance(am_tables, list) or not am_tables:
         raise ConfigError(f"{where}: needs at least one [[am]] entry")

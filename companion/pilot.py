@@ -6,8 +6,9 @@ attitude target for that frame, and keeps the per-phase error summary
 (`companion.outcome`); `command` and `record` are its two halves, for a caller that sends
 the setpoint before the bookkeeping. A pilot whose first frame comes after t = 0 (a
 companion restarted during a run) starts its references at its vehicle's state and joins
-the mission's over JOIN_BLEND_S (`amcore.mission.JoinBlend`). The companion process wraps it in the MAVLink link; the
-in-process runner (`simulator.inprocess`) calls it directly.
+the mission's over [mission].join_blend_s (`amcore.mission.JoinBlend`). The companion
+process wraps it in the MAVLink link; the in-process runner (`simulator.inprocess`) calls
+it directly.
 """
 from __future__ import annotations
 
@@ -19,9 +20,6 @@ from amlink.types import AttitudeTarget, SensorFrame, TorqueSetpoint
 
 from .adapter import setpoint_from_result, state_from_frame
 from .outcome import Outcome
-
-
-JOIN_BLEND_S = 3.0  # a companion that starts mid-run joins the mission's references over this time [s]
 
 
 class Pilot:
@@ -58,7 +56,8 @@ class Pilot:
         if not self._started:
             self._started = True
             if t > 0.0:  # joining a run in progress (a restart): from where the vehicle is
-                self._blend = join_blend(self.model, self.mission, self.params.components, state, t, JOIN_BLEND_S)
+                self._blend = join_blend(self.model, self.mission, self.params.components, state, t,
+                                         self.spec.mission.join_blend_s)
         ref = self.mission.reference(t)
         if self._blend is not None:
             ref = self._blend.apply(ref, t)

@@ -38,6 +38,7 @@ BASE = (ROOT / "configs" / "scenarios" / "two_am_comp.toml").read_text()
     ("squeeze_m = 0.03", "squeeze_m = [0.03]", "[mission].squeeze_m: expected a number"),
     ("[object]", "[objekt]", "unknown table [objekt]"),
     ("approach_end_s = 5.0", "approach_end_s = 15.0", "approach_end_s < grasp_end_s"),
+    ("squeeze_m = 0.03", "squeeze_m = 0.03\njoin_blend_s = 0.0", "[mission].join_blend_s must be > 0"),
 ])
 def test_malformed_scenario_names_file_and_key(tmp_path, old, new, key):
     assert old in BASE

@@ -1,6 +1,7 @@
 """Pilot: a companion started during a run joins the mission from where its vehicle is."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -8,7 +9,7 @@ import pytest
 
 from amcore.config import load_scenario
 from amlink.types import sensor_frame_from_wire
-from companion.pilot import JOIN_BLEND_S, Pilot
+from companion.pilot import Pilot
 
 from ..conftest import SCENARIO
 
@@ -28,7 +29,7 @@ def test_restarted_pilot_holds_its_vehicle_where_it_is_then_joins_the_mission(sp
     """The vehicle hovers where the mission started (held there by a failsafe) while the
     mission is 3 s on: the restarted pilot's first command holds it (zero errors, thrust
     ~ m g) instead of commanding the mission's jump, and its references are the mission's
-    again JOIN_BLEND_S later."""
+    again [mission].join_blend_s later."""
     p = Pilot(spec, 4)
     x0 = p.mission.initial_state()
     t0 = 3.0
@@ -43,7 +44,7 @@ def test_restarted_pilot_holds_its_vehicle_where_it_is_then_joins_the_mission(sp
     fresh._started = True
     _, _, jump = fresh.command(_frame(3000, t0, x0, p.mission.psi))
     assert np.linalg.norm(jump.command.tau_q_nm) > 10 * np.linalg.norm(res.command.tau_q_nm)
-    t1 = t0 + JOIN_BLEND_S
+    t1 = t0 + spec.mission.join_blend_s
     mission = p.mission.reference(t1)
     assert p._blend.apply(mission, t1) is mission
 
@@ -71,3 +72,15 @@ def test_pilot_started_with_the_run_uses_the_mission_as_it_is(spec):
     x0 = p.mission.initial_state()
     p.command(_frame(0, 0.0, x0, p.mission.psi))
     assert p._blend is None
+
+
+def test_join_blend_duration_comes_from_the_scenario(spec):
+    """[mission].join_blend_s sets when a restarted pilot's references are the mission's again."""
+    short = dataclasses.replace(spec, mission=dataclasses.replace(spec.mission, join_blend_s=0.5))
+    p = Pilot(short, 4)
+    x0 = p.mission.initial_state()
+    p.command(_frame(3000, 3.0, x0, p.mission.psi))
+    inside = p._blend.apply(p.mission.reference(3.4), 3.4)
+    assert np.linalg.norm(inside.r_c - p.mission.reference(3.4).r_c) > 1e-3  # still blending at 0.4 s
+    after = p.mission.reference(3.5)
+    assert p._blend.apply(after, 3.5) is after  # done at 0.5 s, where the default (3 s) would not be
