@@ -19,6 +19,10 @@ class ConfigError(ValueError):
     """A configuration file is malformed; the message names the file and the key."""
 
 
+# the scenario every process main runs when none is given: the paper's two-AM grasp
+DEFAULT_SCENARIO = Path(__file__).resolve().parents[1] / "configs" / "scenarios" / "two_am_comp.toml"
+
+
 # ----------------------------------------------------------------------------- vehicle
 @dataclass(frozen=True)
 class RotorParams:

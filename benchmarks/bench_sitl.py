@@ -158,7 +158,7 @@ def udp_rtf(n: int, steps: int = 3000) -> float:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--duration", type=float, default=3.0)
     ap.add_argument("--n", type=int, nargs="+", default=[1, 2, 5, 10])
     a = ap.parse_args()

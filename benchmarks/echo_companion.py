@@ -26,7 +26,7 @@ from amlink.types import TorqueSetpoint  # noqa: E402
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--sysid", type=int, required=True)
     ap.add_argument("--sim", required=True)
     ap.add_argument("--config", type=Path, required=True)

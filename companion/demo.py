@@ -15,18 +15,17 @@ from pathlib import Path
 
 import numpy as np
 
-from amcore.config import ConfigError, load_scenario
+from amcore.config import DEFAULT_SCENARIO, ConfigError, load_scenario
 from amcore.control import ControllerParams
 from amcore.ideal import run_closed_loop
 from amcore.mission import am_mission
 from amcore.model import AmState, build_model
 from amcore.so3 import exp_so3
 
-DEFAULT_SCENARIO = Path(__file__).resolve().parents[1] / "configs" / "scenarios" / "two_am_comp.toml"
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--config", type=Path, default=DEFAULT_SCENARIO)
     ap.add_argument("--sysid", type=int, default=None)
     ap.add_argument("--duration", type=float, default=5.0)

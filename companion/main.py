@@ -18,7 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-from amcore.config import ConfigError, load_scenario, scenario_id
+from amcore.config import DEFAULT_SCENARIO, ConfigError, load_scenario, scenario_id
 from amlink import signing
 from amlink.errors import LinkError, SimulatorUnreachableError
 from amlink.lockstep import CompanionClient
@@ -29,7 +29,6 @@ from telemetry.wiring import CompanionTelemetry
 
 from .pilot import Pilot
 
-DEFAULT_SCENARIO = Path(__file__).resolve().parents[1] / "configs" / "scenarios" / "two_am_comp.toml"
 
 
 class _Stop(Exception):
@@ -41,7 +40,7 @@ def _on_signal(signum, _frame):
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="companion", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="companion", description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--sysid", type=int, required=True, help="this AM's MAVLink system id (its [[am]] entry)")
     ap.add_argument("--sim", default="udp:127.0.0.1:14550", help="simulator endpoint udp:HOST:PORT")
     ap.add_argument("--config", type=Path, default=DEFAULT_SCENARIO, help="scenario TOML")

@@ -35,7 +35,7 @@ def holds(o: dict) -> tuple[bool, str]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--scenario", default=str(ROOT / "configs" / "scenarios" / "two_am_comp.toml"))
     ap.add_argument("--loss", type=float, nargs="+", default=[0.0, 0.2, 0.4, 0.6, 0.8])
     ap.add_argument("--delay-ms", type=float, nargs="+", default=[0.0, 5.0, 10.0, 20.0, 40.0])

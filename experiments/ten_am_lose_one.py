@@ -1,8 +1,8 @@
 """Ten AMs hold a 5 kg cylinder; one companion dies in the hover phase (issue 5).
 
 Runs ten_am in-process (`simulator.inprocess`, the SITL minus sockets) with the companion
-of one AM silent from --lose-at on: its flight controller goes to failsafe (hold position,
-attitude and arm pose, then land; `simulator.failsafe`) while the other nine keep their
+of one AM silent from --lose-at on: its flight controller goes to failsafe (hold position
+and attitude with a compliant arm, then land; `simulator.failsafe`) while the other nine keep their
 decentralized control. Reports whether the object stays held and how the load is shared.
 
     python experiments/ten_am_lose_one.py [--lose-at 14] [--sysid 2]
@@ -21,7 +21,7 @@ from simulator.inprocess import run  # noqa: E402
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--lose-at", type=float, default=14.0)
     ap.add_argument("--sysid", type=int, default=2)
     ap.add_argument("--scenario", default=str(ROOT / "configs" / "scenarios" / "ten_am.toml"))

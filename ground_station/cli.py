@@ -94,7 +94,7 @@ def _review(a: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="ground-station", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="ground-station", description=" ".join(__doc__.split("\n\n")[0].split()))
     sub = ap.add_subparsers(dest="command", required=True)
     r = sub.add_parser("record", help="subscribe to the telemetry and write an MCAP log")
     r.add_argument("--out", type=Path, required=True, help="MCAP file to write")

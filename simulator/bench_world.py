@@ -91,7 +91,7 @@ def bench(spec: ScenarioSpec, steps: int) -> dict[str, float]:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     parser.add_argument("--steps", type=int, default=2000)
     args = parser.parse_args(argv)
     base = load_scenario(SCENARIO)

@@ -58,7 +58,7 @@ def run(spec: ScenarioSpec, duration_s: float | None = None,
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m simulator.inprocess", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m simulator.inprocess", description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("scenario")
     ap.add_argument("--duration", type=float, default=None)
     a = ap.parse_args(argv)

@@ -21,9 +21,7 @@ import sys
 import time
 from pathlib import Path
 
-from amcore.config import ConfigError, load_scenario
-
-from .main import DEFAULT_SCENARIO
+from amcore.config import DEFAULT_SCENARIO, ConfigError, load_scenario
 
 
 def _command(name: str) -> list[str]:
@@ -54,7 +52,7 @@ class _Bar:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="am-run", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="am-run", description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("scenario", nargs="?", type=Path, default=DEFAULT_SCENARIO, help="scenario TOML")
     ap.add_argument("--run-dir", type=Path, default=None, help="run folder (default runs/<name>-<time>)")
     ap.add_argument("--duration", type=float, default=None, help="override the scenario's duration [s]")

@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 
 
-from amcore.config import ConfigError, load_scenario, scenario_id
+from amcore.config import DEFAULT_SCENARIO, ConfigError, load_scenario, scenario_id
 from amlink import signing
 from amlink.errors import LinkError
 from amlink.limits import SetpointLimits
@@ -34,7 +34,6 @@ from telemetry.wiring import SimulatorTelemetry
 
 from .core import SitlCore
 
-DEFAULT_SCENARIO = Path(__file__).resolve().parents[1] / "configs" / "scenarios" / "two_am_comp.toml"
 
 
 class _Stop(Exception):
@@ -80,7 +79,7 @@ class Progress:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="simulator", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="simulator", description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--config", type=Path, default=DEFAULT_SCENARIO, help="scenario TOML")
     ap.add_argument("--bind", default="udp:127.0.0.1:14550",
                     help="MAVLink endpoint udp:HOST:PORT (0.0.0.0 to serve other hosts, port 0 = any free port)")
