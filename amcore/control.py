@@ -231,7 +231,6 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     tm = decoupled_terms(model, data, state, full=need_full)
     tk = task_terms(model, data, tm, p.task_frame, p.components, full=need_full)
     R = state.R_WB
-    xi = tm.xi
     comp = p.force_compensation
     s = 1.0 if comp else 0.0
 
@@ -260,9 +259,9 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     w0, w1, w2 = state.w_B.tolist()
     b3 = (R02, R12, R22)
     b3_d = (R00 * w1 - R01 * w0, R10 * w1 - R11 * w0, R20 * w1 - R21 * w0)  # R (w x e3)
-    xi_l = xi.tolist()
+    rdot_c = tm.rdot_c.tolist()
     e = v3.sub(tm.r_c.tolist(), ref.r_c.tolist())
-    ed = v3.sub(xi_l[0:3], ref.r_c_d1.tolist())
+    ed = v3.sub(rdot_c, ref.r_c_d1.tolist())
     scale, P = _saturation(e, p.com_err_max)
     K, D = fg.K_t, fg.D_t
     r_d2, r_d3, r_d4 = ref.r_c_d2.tolist(), ref.r_c_d3.tolist(), ref.r_c_d4.tolist()
@@ -313,7 +312,7 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     k_R, k_w = p.k_R, p.k_w
     k_e = v3.mv(fg.Lambda_wb_d_inv, (k_R * e_R[0] + k_w * e_w[0], k_R * e_R[1] + k_w * e_w[1],
                                      k_R * e_R[2] + k_w * e_w[2]))
-    L_w = v3.mv(tm.Lambda_xi[3:6, 3:6].tolist(), v3.sub(wdot_bd, k_e))
+    L_w = v3.mv(tm.Lambda_w.tolist(), v3.sub(wdot_bd, k_e))
     F_w = F_xi.tolist()[3:6]
     u2 = (L_w[0] + G_w[0] - s * F_w[0], L_w[1] + G_w[1] - s * F_w[1], L_w[2] + G_w[2] - s * F_w[2])
 
@@ -352,11 +351,12 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
         damping = p.damping_max**2 * (1.0 - (sigma_min / p.sigma_damping) ** 2)
         u3_G3 = (J3.T @ np.linalg.solve(J3 @ J3.T + damping * np.eye(n), r)).tolist()
 
+    u3 = list(map(float.__sub__, Gxi[6:], u3_G3))
     # u and the diagnostics' vectors (and R_d's rows) as views of one array: numpy's cost is per
     # call (the memory's filter state too: its own, non-overlapping slices)
     v = np.fromiter([*f_d, *e_R, *e_w, *w_bd, *wdot_bd, *Om_d, d1[0], d2[0], d3[0], d1[1], d2[1], d3[1],
-                     d1[2], d2[2], d3[2], *e, *xi_l[0:3], *x_W, *wrench_E_f, *x_W, *xd_W, *y_err_l,
-                     *u1_b3, *u2, *map(float.__sub__, Gxi[6:], u3_G3)], float, 63 + 2 * n)
+                     d1[2], d2[2], d3[2], *e, *rdot_c, *x_W, *wrench_E_f, *x_W, *xd_W, *y_err_l,
+                     *u1_b3, *u2, *u3], float, 63 + 2 * n)
     u = v[57 + n:]
     tau = u.dot(tm.T)  # T^T u
     F_y = Jbar.dot(F_xi)

@@ -18,7 +18,7 @@ skew-consistent (Christoffel) one; Gamma_xi's zero blocks rely on that choice.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 import pinocchio as pin
@@ -119,7 +119,9 @@ class AmState:
 class DecoupledTerms:
     """Model terms at one state (eq. dynamics, eq. new_coord, eq. new_dynamics).
 
-    All arrays are in the paper's coordinates; `xi` = [rdot_c, w_b, rho].
+    All arrays are in the paper's coordinates; `xi` = [rdot_c, w_b, rho]. The controller
+    needs xi, Lambda_xi and Mdot only through products or one block, so those three are
+    formed on first access (tests and diagnostics read them; the 1 kHz step does not).
     """
 
     M: np.ndarray  # (n+6, n+6) joint-space inertia
@@ -133,17 +135,26 @@ class DecoupledTerms:
     T: np.ndarray
     T_inv: np.ndarray
     Tdot_V: np.ndarray  # Tdot @ V
-    xi: np.ndarray
-    Lambda_xi: np.ndarray
+    rdot_c: np.ndarray  # CoM velocity in {w} [m/s], xi's first block
+    Lambda_w: np.ndarray  # (3, 3) Lambda_xi's middle block (eq. new_dynamics)
     Lambda_xi_inv: np.ndarray
     Gamma_xi_xi: np.ndarray  # Gamma_xi @ xi
-    Mdot: np.ndarray  # C + C^T
     Tdot: np.ndarray | None = None  # only with full=True
     Gamma_xi: np.ndarray | None = None  # only with full=True
 
-    @property
-    def rdot_c(self) -> np.ndarray:
-        return self.xi[0:3]
+    @cached_property
+    def xi(self) -> np.ndarray:
+        return self.T @ self.V
+
+    @cached_property
+    def Lambda_xi(self) -> np.ndarray:
+        """T^-T M T^-1 (eq. new_dynamics), block diagonal: m I, Lambda_w, Lambda_rho."""
+        return self.T_inv.T @ self.M @ self.T_inv
+
+    @cached_property
+    def Mdot(self) -> np.ndarray:
+        """dM/dt = C + C^T (pinocchio's C is skew-consistent)."""
+        return self.C + self.C.T
 
     @property
     def rho(self) -> np.ndarray:
@@ -191,50 +202,55 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     A_inv = linalg3.inv_sym(ZM[:, 6:])
     N1 = A_inv.dot(ZM[:, 3:6])
 
-    T = _eye(nv)
-    R.dot(Mv_m, out=T[0:3])  # R [I, -hat(r_b), J_b]
-    T[0:3, 0:3] = R
-    T[6:, 3:6] = N1
-
     # (negating contiguous results, then assigning: ufuncs writing into strided blocks cost more)
     T_inv = _eye(nv)
     T_inv[0:3, 0:3] = R.T
     T_inv[6:, 3:6] = -N1
     T_inv[0:3, 3:] = -Mv_m[:, 3:].dot(T_inv[3:, 3:])  # [hat(r_b) + J_b N_1, -J_b]
-    xi = T.dot(V)
+
+    T = _eye(nv)
+    R.dot(Mv_m, out=T[0:3])  # R [I, -hat(r_b), J_b]
+    T[0:3, 0:3] = R
+    T[6:, 3:6] = N1
 
     # Tdot V. First block row R [I, -hat(r_b), J_b]: its rate applied to V is, with
-    # s = R^T rdot_c, R (hat(w) s + [0, -hat(rdot_b), Jdot_b] V), and m [0, -hat(rdot_b), Jdot_b]
-    # is Mdot's first block row (its first block, d(m I)/dt, is zero).
+    # s = R^T rdot_c = [I, -hat(r_b), J_b] V, R (hat(w) s + [0, -hat(rdot_b), Jdot_b] V), and
+    # m [0, -hat(rdot_b), Jdot_b] is Mdot's first block row (its first block, d(m I)/dt, is zero).
     # Last block row: N1dot w = A^-1 (Bdot w - Adot N_1 w) = A^-1 d/dt(Z M) c with
     # c = T^-1 [0; w; 0] = [(hat(r_b) + J_b N_1) w; w; -N_1 w]. d/dt(Z M) = Zdot M + Z Mdot
     # and M c has a zero first block row (M T^-1's (0, w) block, eq. new_dynamics), which is
     # all Zdot = [-Jdot_b^T, 0, 0] sees; so N1dot w = A^-1 Z Mdot c, with Z = (T^-1[:, 6:])^T.
     (R00, R01, R02), (R10, R11, R12), (R20, R21, R22) = Rl
-    c0, c1, c2 = xi.tolist()[0:3]  # rdot_c
-    s0, s1, s2 = R00 * c0 + R10 * c1 + R20 * c2, R01 * c0 + R11 * c1 + R21 * c2, R02 * c0 + R12 * c1 + R22 * c2
+    s0, s1, s2 = Mv_m.dot(V).tolist()
     d0, d1, d2 = Mdot.dot(V).tolist()[0:3]
     w0, w1, w2 = w_l
     a0, a1, a2 = w1 * s2 - w2 * s1 + d0 / m, w2 * s0 - w0 * s2 + d1 / m, w0 * s1 - w1 * s0 + d2 / m
-    N1dot_w = A_inv.dot(Mdot.dot(T_inv[:, 3:6].dot(w)).dot(T_inv[:, 6:])).tolist()
-    # r_c = p_WB + R r_b; Tdot V, r_b and r_c as views of one array (numpy's cost is per call)
+    aW = (R00 * a0 + R01 * a1 + R02 * a2, R10 * a0 + R11 * a1 + R12 * a2, R20 * a0 + R21 * a1 + R22 * a2)
+    ZMdot_c = Mdot.dot(T_inv[:, 3:6].dot(w)).dot(T_inv[:, 6:])  # = A N1dot w
+    N1dot_w = A_inv.dot(ZMdot_c).tolist()
+    # Lambda_xi Tdot V = [m R a; 0; A N1dot w] (Lambda_xi is blockdiag(m I, Lambda_w, A) and
+    # Tdot V's middle block is zero); r_c = p_WB + R r_b; rdot_c = R s. All of them, and Tdot V,
+    # as views of one array (numpy's cost is per call)
     p0, p1, p2 = p_l
     rb0, rb1, rb2 = rb
-    Tv_r = np.array([R00 * a0 + R01 * a1 + R02 * a2, R10 * a0 + R11 * a1 + R12 * a2, R20 * a0 + R21 * a1 + R22 * a2,
-                     0.0, 0.0, 0.0, *N1dot_w, rb0, rb1, rb2, p0 + (R00 * rb0 + R01 * rb1 + R02 * rb2),
-                     p1 + (R10 * rb0 + R11 * rb1 + R12 * rb2), p2 + (R20 * rb0 + R21 * rb1 + R22 * rb2)])
-    Tdot_V = Tv_r[0:nv]
+    out = np.array([*aW, 0.0, 0.0, 0.0, *N1dot_w, m * aW[0], m * aW[1], m * aW[2], 0.0, 0.0, 0.0, *ZMdot_c.tolist(),
+                    rb0, rb1, rb2, p0 + (R00 * rb0 + R01 * rb1 + R02 * rb2), p1 + (R10 * rb0 + R11 * rb1 + R12 * rb2),
+                    p2 + (R20 * rb0 + R21 * rb1 + R22 * rb2), R00 * s0 + R01 * s1 + R02 * s2,
+                    R10 * s0 + R11 * s1 + R12 * s2, R20 * s0 + R21 * s1 + R22 * s2])
+    Tdot_V = out[0:nv]
 
-    Lambda_xi = T_inv.T.dot(M).dot(T_inv)
+    # Lambda_xi's middle block: M c = [0; Lambda_w; 0] for c = T^-1[:, 3:6] (see above; the last
+    # block row is B - A N_1 = 0), so Lambda_w = c^T M c is M's middle block row times c
+    Lambda_w = M[3:6].dot(T_inv[:, 3:6])
     Lambda_xi_inv = _mass_block_inverse(nv, m).copy()
-    Lambda_xi_inv[3:6, 3:6] = linalg3.inv_sym(Lambda_xi[3:6, 3:6])
+    Lambda_xi_inv[3:6, 3:6] = linalg3.inv_sym(Lambda_w)
     Lambda_xi_inv[6:, 6:] = A_inv
-    Gamma_xi_xi = C.dot(V).dot(T_inv) - Lambda_xi.dot(Tdot_V)  # T^-T (C V - M T^-1 Tdot V)
+    Gamma_xi_xi = C.dot(V).dot(T_inv) - out[nv:2 * nv]  # T^-T (C V - M T^-1 Tdot V)
 
-    terms = DecoupledTerms(  # positional, in field order (matching 16 keywords costs more)
-        M, C, V, R, Tv_r[nv + 3:], Tv_r[nv:nv + 3], J_b, N1,  # M, C, V, R_WB, r_c, r_b, J_b, N1
-        T, T_inv, Tdot_V, xi, Lambda_xi,  # T, T_inv, Tdot_V, xi, Lambda_xi
-        Lambda_xi_inv, Gamma_xi_xi, Mdot,  # Lambda_xi_inv, Gamma_xi_xi, Mdot
+    terms = DecoupledTerms(  # positional, in field order (matching 15 keywords costs more)
+        M, C, V, R, out[2 * nv + 3:2 * nv + 6], out[2 * nv:2 * nv + 3], J_b, N1,  # M, C, V, R_WB, r_c, r_b, J_b, N1
+        T, T_inv, Tdot_V, out[2 * nv + 6:], Lambda_w,  # T, T_inv, Tdot_V, rdot_c, Lambda_w
+        Lambda_xi_inv, Gamma_xi_xi,  # Lambda_xi_inv, Gamma_xi_xi
     )
     if full:
         r_b = terms.r_b
