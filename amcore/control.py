@@ -317,10 +317,12 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     u2 = (L_w[0] + G_w[0] - s * F_w[0], L_w[1] + G_w[1] - s * F_w[1], L_w[2] + G_w[2] - s * F_w[2])
 
     # --- end-effector impedance law, eq. u3
-    J = tk.J
-    LiJt = tm.Lambda_xi_inv.dot(J.T)
-    Lambda_y = linalg3.inv_sym(J.dot(LiJt))
-    Jbar = Lambda_y.dot(LiJt.T)  # (J^{Lambda+})^T = Lambda_y J Lambda_xi^-1
+    # With J = J_y T^-1 and Lambda_xi^-1 = T M^-1 T^T: J Lambda_xi^-1 = J_y M^-1 T^T and
+    # Lambda_y^-1 = J Lambda_xi^-1 J^T = J_y M^-1 J_y^T (T cancels)
+    J_y = tk.J_y
+    JyMi = J_y.dot(tm.M_inv)
+    Lambda_y = linalg3.inv_sym(JyMi.dot(J_y.T))
+    Jbar = Lambda_y.dot(JyMi.dot(tm.T.T))  # (J^{Lambda+})^T = Lambda_y J Lambda_xi^-1
     y_err_l = list(map(float.__sub__, tk.y.tolist(), ref.y.tolist()))
     y_err_s = [lim if x > lim else (-lim if x < -lim else x) for x, lim in zip(y_err_l, fg.y_err_max)]  # np.clip
     ydot = tk.ydot  # J_y V = J xi
@@ -337,6 +339,7 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     if p.compensate_Lambda_y_dot:
         Lxi_dot = tm.Gamma_xi + tm.Gamma_xi.T
         Jd = tk.Jdot
+        LiJt = tm.Lambda_xi_inv @ tk.J.T
         inner = Jd @ LiJt + LiJt.T @ Jd.T - LiJt.T @ Lxi_dot @ LiJt
         Lambda_y_dot = -Lambda_y @ inner @ Lambda_y
         r = r + 0.5 * Lambda_y_dot @ np.array(yd_err)

@@ -137,7 +137,7 @@ class DecoupledTerms:
     Tdot_V: np.ndarray  # Tdot @ V
     rdot_c: np.ndarray  # CoM velocity in {w} [m/s], xi's first block
     Lambda_w: np.ndarray  # (3, 3) Lambda_xi's middle block (eq. new_dynamics)
-    Lambda_xi_inv: np.ndarray
+    M_inv: np.ndarray  # M^-1
     Gamma_xi_xi: np.ndarray  # Gamma_xi @ xi
     Tdot: np.ndarray | None = None  # only with full=True
     Gamma_xi: np.ndarray | None = None  # only with full=True
@@ -152,6 +152,11 @@ class DecoupledTerms:
         return self.T_inv.T @ self.M @ self.T_inv
 
     @cached_property
+    def Lambda_xi_inv(self) -> np.ndarray:
+        """T M^-1 T^T: blockdiag(I / m, Lambda_w^-1, A^-1)."""
+        return self.T @ self.M_inv @ self.T.T
+
+    @cached_property
     def Mdot(self) -> np.ndarray:
         """dM/dt = C + C^T (pinocchio's C is skew-consistent)."""
         return self.C + self.C.T
@@ -162,7 +167,8 @@ class DecoupledTerms:
 
 
 def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool = False) -> DecoupledTerms:
-    """Evaluate M, C, T, T^-1, Tdot V, xi, Lambda_xi, Gamma_xi xi at `state`.
+    """Evaluate M, M^-1, C, T, T^-1, Tdot V, Lambda_w, Gamma_xi xi at `state` (xi, Lambda_xi,
+    Lambda_xi^-1 and Mdot on first access).
 
     Also runs pinocchio's forward kinematics, Jacobians and their time variation into
     `data`, which `amcore.task` then reads (computeCoriolisMatrix fills data.J and data.dJ
@@ -171,8 +177,10 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     too; the controller only needs products.
 
     Lambda_xi = T^-T M T^-1 is block diagonal (eq. new_dynamics) with blocks m I, Lambda_w
-    and Lambda_rho = (N M^-1 N^T)^-1 = Z M Z^T = A, so its inverse is formed blockwise.
-    At these sizes numpy's cost is per call, not per flop, so the code below keeps the
+    and Lambda_rho = (N M^-1 N^T)^-1 = Z M Z^T = A. Its inverse T M^-1 T^T is read off
+    pinocchio's M^-1 (computeMinverse): the step needs Lambda_w, N_1 and products with
+    Lambda_xi^-1, all of which follow from M^-1 with one 3x3 inverse (not two: A^-1 is never
+    formed). At these sizes numpy's cost is per call, not per flop, so the code below keeps the
     number of calls low: whole block rows at once, ndarray.dot (half the cost of `@`), and
     3-vectors on Python floats.
     """
@@ -186,6 +194,7 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     M = pin.crba(pm, data, q_pin)
     if not _crba_returns_symmetric():
         M = np.triu(M) + np.triu(M, 1).T
+    M_inv = pin.computeMinverse(pm, data, q_pin)  # one C++ pass: replaces forming Z M, A and A^-1
     C = pin.computeCoriolisMatrix(pm, data, q_pin, V)
     pin.updateFramePlacements(pm, data)
     Mdot = C.T.copy()  # Mdot = C + C^T; `C + C.T` (mixed memory layouts) measured ~2 us slower in the step
@@ -197,15 +206,17 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     rb = (x, y, z)
     J_b = Mv_m[:, 6:]
 
-    # Z M with Z = [-J_b^T, 0, I] (eq. new_coord, in {b}) is [0, B, A]: A = Z M Z^T, N_1 = A^-1 B.
-    ZM = M[6:] - J_b.T.dot(M[0:3])
-    A_inv = linalg3.inv_sym(ZM[:, 6:])
-    N1 = A_inv.dot(ZM[:, 3:6])
+    # Lambda_xi^-1 = T M^-1 T^T is block diagonal (eq. new_dynamics). T's middle block row is
+    # [0, I, 0], so Lambda_w^-1 is M^-1's middle block; the (w, rho) block, [0, I, 0] M^-1 [0, N_1, I]^T
+    # = 0, gives N_1 = -(M^-1)_(rho,w) Lambda_w. (Equivalently N_1 = A^-1 B with [0, B, A] = Z M.)
+    Lambda_w = linalg3.inv_sym(M_inv[3:6, 3:6])
+    N1_neg = M_inv[6:, 3:6].dot(Lambda_w)
+    N1 = -N1_neg
 
     # (negating contiguous results, then assigning: ufuncs writing into strided blocks cost more)
     T_inv = _eye(nv)
     T_inv[0:3, 0:3] = R.T
-    T_inv[6:, 3:6] = -N1
+    T_inv[6:, 3:6] = N1_neg
     T_inv[0:3, 3:] = -Mv_m[:, 3:].dot(T_inv[3:, 3:])  # [hat(r_b) + J_b N_1, -J_b]
 
     T = _eye(nv)
@@ -226,8 +237,11 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     w0, w1, w2 = w_l
     a0, a1, a2 = w1 * s2 - w2 * s1 + d0 / m, w2 * s0 - w0 * s2 + d1 / m, w0 * s1 - w1 * s0 + d2 / m
     aW = (R00 * a0 + R01 * a1 + R02 * a2, R10 * a0 + R11 * a1 + R12 * a2, R20 * a0 + R21 * a1 + R22 * a2)
-    ZMdot_c = Mdot.dot(T_inv[:, 3:6].dot(w)).dot(T_inv[:, 6:])  # = A N1dot w
-    N1dot_w = A_inv.dot(ZMdot_c).tolist()
+    Mdot_c = Mdot.dot(T_inv[:, 3:6].dot(w))
+    ZMdot_c = Mdot_c.dot(T_inv[:, 6:])  # = A N1dot w
+    # A^-1 is Lambda_xi^-1's last block, and Lambda_xi^-1 T^-T = T M^-1, so A^-1 Z Mdot c = (T M^-1 Mdot c)'s
+    # last block = [0, N_1, I] M^-1 Mdot c
+    N1dot_w = T[6:].dot(M_inv.dot(Mdot_c)).tolist()
     # Lambda_xi Tdot V = [m R a; 0; A N1dot w] (Lambda_xi is blockdiag(m I, Lambda_w, A) and
     # Tdot V's middle block is zero); r_c = p_WB + R r_b; rdot_c = R s. All of them, and Tdot V,
     # as views of one array (numpy's cost is per call)
@@ -239,18 +253,12 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
                     R10 * s0 + R11 * s1 + R12 * s2, R20 * s0 + R21 * s1 + R22 * s2])
     Tdot_V = out[0:nv]
 
-    # Lambda_xi's middle block: M c = [0; Lambda_w; 0] for c = T^-1[:, 3:6] (see above; the last
-    # block row is B - A N_1 = 0), so Lambda_w = c^T M c is M's middle block row times c
-    Lambda_w = M[3:6].dot(T_inv[:, 3:6])
-    Lambda_xi_inv = _mass_block_inverse(nv, m).copy()
-    Lambda_xi_inv[3:6, 3:6] = linalg3.inv_sym(Lambda_w)
-    Lambda_xi_inv[6:, 6:] = A_inv
     Gamma_xi_xi = C.dot(V).dot(T_inv) - out[nv:2 * nv]  # T^-T (C V - M T^-1 Tdot V)
 
     terms = DecoupledTerms(  # positional, in field order (matching 15 keywords costs more)
         M, C, V, R, out[2 * nv + 3:2 * nv + 6], out[2 * nv:2 * nv + 3], J_b, N1,  # M, C, V, R_WB, r_c, r_b, J_b, N1
         T, T_inv, Tdot_V, out[2 * nv + 6:], Lambda_w,  # T, T_inv, Tdot_V, rdot_c, Lambda_w
-        Lambda_xi_inv, Gamma_xi_xi,  # Lambda_xi_inv, Gamma_xi_xi
+        M_inv, Gamma_xi_xi,  # M_inv, Gamma_xi_xi
     )
     if full:
         r_b = terms.r_b
@@ -259,6 +267,7 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
         rdot_b = J_b @ state.qdot
         Rhw = R @ hat(w)
         ZMdot = Mdot[6:] - Mdot[0:3, 6:].T @ Mv_m - J_b.T @ Mdot[0:3]  # d/dt (Z M)
+        A_inv = np.linalg.inv(M[6:, 6:] - J_b.T @ M[0:3, 6:])  # A = Z M Z^T
         N1dot = A_inv @ (ZMdot[:, 3:6] - ZMdot[:, 6:] @ N1)
         Tdot = np.zeros((nv, nv))
         Tdot[0:3, 0:3] = Rhw
@@ -309,15 +318,6 @@ def _mass_rows(nv: int, m: float) -> np.ndarray:
     """A (3, nv) array of m: dividing by it gives M[0:3] / m exactly, without numpy's per-call
     conversion of a Python scalar."""
     out = np.full((3, nv), m)
-    out.flags.writeable = False
-    return out
-
-
-@lru_cache(maxsize=None)
-def _mass_block_inverse(nv: int, m: float) -> np.ndarray:
-    """blockdiag(I_3 / m, 0, 0): the constant part of Lambda_xi^-1."""
-    out = np.zeros((nv, nv))
-    out[0:3, 0:3] = np.eye(3) / m
     out.flags.writeable = False
     return out
 
