@@ -120,11 +120,12 @@ class DecoupledTerms:
     """Model terms at one state (eq. dynamics, eq. new_coord, eq. new_dynamics).
 
     All arrays are in the paper's coordinates; `xi` = [rdot_c, w_b, rho]. The controller
-    needs xi, Lambda_xi and Mdot only through products or one block, so those three are
-    formed on first access (tests and diagnostics read them; the 1 kHz step does not).
+    needs M, xi, Lambda_xi and Mdot only through products, one block or pinocchio's M^-1 and
+    CoM Jacobian, so those four are formed on first access (tests read them; the step does not).
     """
 
-    M: np.ndarray  # (n+6, n+6) joint-space inertia
+    q_pin: np.ndarray  # pinocchio's configuration [p_WB, quat_xyzw, q]
+    pin_model: pin.Model = field(repr=False)
     C: np.ndarray  # (n+6, n+6) skew-consistent Coriolis matrix
     V: np.ndarray
     R_WB: np.ndarray
@@ -141,6 +142,12 @@ class DecoupledTerms:
     Gamma_xi_xi: np.ndarray  # Gamma_xi @ xi
     Tdot: np.ndarray | None = None  # only with full=True
     Gamma_xi: np.ndarray | None = None  # only with full=True
+
+    @cached_property
+    def M(self) -> np.ndarray:
+        """(n+6, n+6) joint-space inertia (eq. dynamics)."""
+        M = pin.crba(self.pin_model, self.pin_model.createData(), self.q_pin)
+        return M if _crba_returns_symmetric() else np.triu(M) + np.triu(M, 1).T
 
     @cached_property
     def xi(self) -> np.ndarray:
@@ -167,8 +174,8 @@ class DecoupledTerms:
 
 
 def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool = False) -> DecoupledTerms:
-    """Evaluate M, M^-1, C, T, T^-1, Tdot V, Lambda_w, Gamma_xi xi at `state` (xi, Lambda_xi,
-    Lambda_xi^-1 and Mdot on first access).
+    """Evaluate M^-1, C, T, T^-1, Tdot V, Lambda_w, Gamma_xi xi at `state` (M, xi, Lambda_xi,
+    Lambda_xi^-1 and Mdot on first access). T's first block row is pinocchio's CoM Jacobian.
 
     Also runs pinocchio's forward kinematics, Jacobians and their time variation into
     `data`, which `amcore.task` then reads (computeCoriolisMatrix fills data.J and data.dJ
@@ -191,20 +198,18 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     Rl = R.tolist()
     p_l, w_l = state.p_WB.tolist(), state.w_B.tolist()
     q_pin, V = _pin_qv(state, Rl, p_l, w_l)
-    M = pin.crba(pm, data, q_pin)
-    if not _crba_returns_symmetric():
-        M = np.triu(M) + np.triu(M, 1).T
-    M_inv = pin.computeMinverse(pm, data, q_pin)  # one C++ pass: replaces forming Z M, A and A^-1
+    Jcom = pin.jacobianCenterOfMass(pm, data, q_pin, False)  # R [I, -hat(r_b), J_b], T's first block row
+    M_inv = pin.computeMinverse(pm, data, q_pin)  # one C++ pass: replaces forming M, Z M, A and A^-1
     C = pin.computeCoriolisMatrix(pm, data, q_pin, V)
     pin.updateFramePlacements(pm, data)
     Mdot = C.T.copy()  # Mdot = C + C^T; `C + C.T` (mixed memory layouts) measured ~2 us slower in the step
     Mdot += C
 
     w = state.w_B
-    Mv_m = M[0:3] / _mass_rows(nv, m)  # [I, -hat(r_b), J_b]; M's first block row is m times this
-    (_, z, _), (_, _, x), (y, _, _) = Mv_m[:, 3:6].tolist()  # -hat(r_b)
+    Mv = R.T.dot(Jcom)  # [I, -hat(r_b), J_b] (eq. new_coord, in {b})
+    (_, z, _), (_, _, x), (y, _, _) = Mv[:, 3:6].tolist()  # -hat(r_b)
     rb = (x, y, z)
-    J_b = Mv_m[:, 6:]
+    J_b = Mv[:, 6:]
 
     # Lambda_xi^-1 = T M^-1 T^T is block diagonal (eq. new_dynamics). T's middle block row is
     # [0, I, 0], so Lambda_w^-1 is M^-1's middle block; the (w, rho) block, [0, I, 0] M^-1 [0, N_1, I]^T
@@ -217,11 +222,10 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     T_inv = _eye(nv)
     T_inv[0:3, 0:3] = R.T
     T_inv[6:, 3:6] = N1_neg
-    T_inv[0:3, 3:] = -Mv_m[:, 3:].dot(T_inv[3:, 3:])  # [hat(r_b) + J_b N_1, -J_b]
+    T_inv[0:3, 3:] = -Mv[:, 3:].dot(T_inv[3:, 3:])  # [hat(r_b) + J_b N_1, -J_b]
 
     T = _eye(nv)
-    R.dot(Mv_m, out=T[0:3])  # R [I, -hat(r_b), J_b]
-    T[0:3, 0:3] = R
+    T[0:3] = Jcom
     T[6:, 3:6] = N1
 
     # Tdot V. First block row R [I, -hat(r_b), J_b]: its rate applied to V is, with
@@ -232,7 +236,7 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     # and M c has a zero first block row (M T^-1's (0, w) block, eq. new_dynamics), which is
     # all Zdot = [-Jdot_b^T, 0, 0] sees; so N1dot w = A^-1 Z Mdot c, with Z = (T^-1[:, 6:])^T.
     (R00, R01, R02), (R10, R11, R12), (R20, R21, R22) = Rl
-    s0, s1, s2 = Mv_m.dot(V).tolist()
+    s0, s1, s2 = Mv.dot(V).tolist()
     d0, d1, d2 = Mdot.dot(V).tolist()[0:3]
     w0, w1, w2 = w_l
     a0, a1, a2 = w1 * s2 - w2 * s1 + d0 / m, w2 * s0 - w0 * s2 + d1 / m, w0 * s1 - w1 * s0 + d2 / m
@@ -255,8 +259,9 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
 
     Gamma_xi_xi = C.dot(V).dot(T_inv) - out[nv:2 * nv]  # T^-T (C V - M T^-1 Tdot V)
 
-    terms = DecoupledTerms(  # positional, in field order (matching 15 keywords costs more)
-        M, C, V, R, out[2 * nv + 3:2 * nv + 6], out[2 * nv:2 * nv + 3], J_b, N1,  # M, C, V, R_WB, r_c, r_b, J_b, N1
+    terms = DecoupledTerms(  # positional, in field order (matching 16 keywords costs more)
+        q_pin, pm, C, V, R, out[2 * nv + 3:2 * nv + 6], out[2 * nv:2 * nv + 3], J_b, N1,  # q_pin, pin_model, C, V, R_WB,
+        # r_c, r_b, J_b, N1
         T, T_inv, Tdot_V, out[2 * nv + 6:], Lambda_w,  # T, T_inv, Tdot_V, rdot_c, Lambda_w
         M_inv, Gamma_xi_xi,  # M_inv, Gamma_xi_xi
     )
@@ -266,7 +271,8 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
         hr = hat(r_b)
         rdot_b = J_b @ state.qdot
         Rhw = R @ hat(w)
-        ZMdot = Mdot[6:] - Mdot[0:3, 6:].T @ Mv_m - J_b.T @ Mdot[0:3]  # d/dt (Z M)
+        ZMdot = Mdot[6:] - Mdot[0:3, 6:].T @ Mv - J_b.T @ Mdot[0:3]  # d/dt (Z M)
+        M = terms.M
         A_inv = np.linalg.inv(M[6:, 6:] - J_b.T @ M[0:3, 6:])  # A = Z M Z^T
         N1dot = A_inv @ (ZMdot[:, 3:6] - ZMdot[:, 6:] @ N1)
         Tdot = np.zeros((nv, nv))
@@ -311,15 +317,6 @@ def _identity(nv: int) -> np.ndarray:
 def _eye(nv: int) -> np.ndarray:
     """A fresh identity (copying a cached one costs a sixth of np.eye)."""
     return _identity(nv).copy()
-
-
-@lru_cache(maxsize=None)
-def _mass_rows(nv: int, m: float) -> np.ndarray:
-    """A (3, nv) array of m: dividing by it gives M[0:3] / m exactly, without numpy's per-call
-    conversion of a Python scalar."""
-    out = np.full((3, nv), m)
-    out.flags.writeable = False
-    return out
 
 
 def generalized_gravity(model: AmModel, data: pin.Data, state: AmState) -> np.ndarray:
