@@ -211,18 +211,21 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     rb = (x, y, z)
     J_b = Mv[:, 6:]
 
-    # Lambda_xi^-1 = T M^-1 T^T is block diagonal (eq. new_dynamics). T's middle block row is
-    # [0, I, 0], so Lambda_w^-1 is M^-1's middle block; the (w, rho) block, [0, I, 0] M^-1 [0, N_1, I]^T
-    # = 0, gives N_1 = -(M^-1)_(rho,w) Lambda_w. (Equivalently N_1 = A^-1 B with [0, B, A] = Z M.)
+    # Lambda_xi^-1 = T M^-1 T^T is block diagonal (eq. new_dynamics) and T's middle block row is
+    # [0, I, 0], so Lambda_w^-1 is M^-1's middle block. T^-1 is stored transposed (T^-T: the
+    # products below then read contiguous rows, which numpy does not copy first). Its middle block
+    # row, T^-1's middle block column [hat(r_b) + J_b N_1; I; -N_1], is Lambda_w (M^-1)_(w,:): from
+    # T M^-1 = Lambda_xi^-1 T^-T, whose middle block row is (M^-1)_(w,:) = Lambda_w^-1 (T^-T)_(w,:).
+    # (Negations act on whole contiguous arrays, then a block is taken: a ufunc on a strided
+    # block takes numpy's slow path, ~1 us more at this size.)
     Lambda_w = linalg3.inv_sym(M_inv[3:6, 3:6])
-    N1_neg = M_inv[6:, 3:6].dot(Lambda_w)
-    N1 = -N1_neg
-
-    # (negating contiguous results, then assigning: ufuncs writing into strided blocks cost more)
-    T_inv = _eye(nv)
-    T_inv[0:3, 0:3] = R.T
-    T_inv[6:, 3:6] = N1_neg
-    T_inv[0:3, 3:] = -Mv[:, 3:].dot(T_inv[3:, 3:])  # [hat(r_b) + J_b N_1, -J_b]
+    K = Lambda_w.dot(M_inv[3:6])
+    T_invT = _eye(nv)
+    T_invT[0:3, 0:3] = R
+    T_invT[3:6] = K
+    T_invT[6:, 0:3] = (-Mv)[:, 6:].T  # -J_b^T
+    T_inv = T_invT.T  # [[R^T, hat(r_b) + J_b N_1, -J_b], [0, I, 0], [0, -N_1, I]]
+    N1 = (-K)[:, 6:].T
 
     T = _eye(nv)
     T[0:3] = Jcom
@@ -241,8 +244,8 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     w0, w1, w2 = w_l
     a0, a1, a2 = w1 * s2 - w2 * s1 + d0 / m, w2 * s0 - w0 * s2 + d1 / m, w0 * s1 - w1 * s0 + d2 / m
     aW = (R00 * a0 + R01 * a1 + R02 * a2, R10 * a0 + R11 * a1 + R12 * a2, R20 * a0 + R21 * a1 + R22 * a2)
-    Mdot_c = Mdot.dot(T_inv[:, 3:6].dot(w))
-    ZMdot_c = Mdot_c.dot(T_inv[:, 6:])  # = A N1dot w
+    Mdot_c = Mdot.dot(w.dot(T_invT[3:6]))
+    ZMdot_c = T_invT[6:].dot(Mdot_c)  # = A N1dot w
     # A^-1 is Lambda_xi^-1's last block, and Lambda_xi^-1 T^-T = T M^-1, so A^-1 Z Mdot c = (T M^-1 Mdot c)'s
     # last block = [0, N_1, I] M^-1 Mdot c
     N1dot_w = T[6:].dot(M_inv.dot(Mdot_c)).tolist()
@@ -257,7 +260,7 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
                     R10 * s0 + R11 * s1 + R12 * s2, R20 * s0 + R21 * s1 + R22 * s2])
     Tdot_V = out[0:nv]
 
-    Gamma_xi_xi = C.dot(V).dot(T_inv) - out[nv:2 * nv]  # T^-T (C V - M T^-1 Tdot V)
+    Gamma_xi_xi = T_invT.dot(C.dot(V)) - out[nv:2 * nv]  # T^-T (C V - M T^-1 Tdot V)
 
     terms = DecoupledTerms(  # positional, in field order (matching 16 keywords costs more)
         q_pin, pm, C, V, R, out[2 * nv + 3:2 * nv + 6], out[2 * nv:2 * nv + 3], J_b, N1,  # q_pin, pin_model, C, V, R_WB,
