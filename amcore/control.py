@@ -235,7 +235,7 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     s = 1.0 if comp else 0.0
 
     # --- measured wrench: world-aligned at {e}, low-pass filtered (exact derivatives)
-    (e00, e01, e02), (e10, e11, e12), (e20, e21, e22) = tk.R_WE.tolist()
+    (e00, e01, e02, _), (e10, e11, e12, _), (e20, e21, e22, _), _ = tk.H_WE.tolist()  # R_WE's rows
     f0, f1, f2, t0, t1, t2 = np.asarray(wrench_E, dtype=float).tolist()
     raw_W = [e00 * f0 + e01 * f1 + e02 * f2, e10 * f0 + e11 * f1 + e12 * f2, e20 * f0 + e21 * f1 + e22 * f2,
              e00 * t0 + e01 * t1 + e02 * t2, e10 * t0 + e11 * t1 + e12 * t2, e20 * t0 + e21 * t1 + e22 * t2]  # [R_e f_e; R_e tau_e]
@@ -358,21 +358,21 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     # u and the diagnostics' vectors (and R_d's rows) as views of one array: numpy's cost is per
     # call (the memory's filter state too: its own, non-overlapping slices)
     v = np.fromiter([*f_d, *e_R, *e_w, *w_bd, *wdot_bd, *Om_d, d1[0], d2[0], d3[0], d1[1], d2[1], d3[1],
-                     d1[2], d2[2], d3[2], *e, *rdot_c, *x_W, *wrench_E_f, *x_W, *xd_W, *y_err_l,
-                     *u1_b3, *u2, *u3], float, 63 + 2 * n)
-    u = v[57 + n:]
+                     d1[2], d2[2], d3[2], *e, *x_W, *wrench_E_f, *x_W, *xd_W, *y_err_l,
+                     *u1_b3, *u2, *u3], float, 60 + 2 * n)
+    u = v[54 + n:]
     tau = u.dot(tm.T)  # T^T u
     F_y = Jbar.dot(F_xi)
     tau_cmd = tau.copy()  # the command does not share memory with the diagnostics
     cmd = Command(tau.item(2), tau_cmd[3:6], tau_cmd[6:])  # (thrust_n, tau_B_nm, tau_q_nm); positional: half the cost
     diag = Diagnostics(  # positional, in field order: matching 28 keywords would cost ~1.4 us more
-        tm.r_c, ref.r_c, v[27:30], v[30:33],  # r_c, r_c_d, r_c_err, rdot_c
+        tm.r_c, ref.r_c, v[27:30], tm.rdot_c,  # r_c, r_c_d, r_c_err, rdot_c
         v[3:6], v[6:9], R, v[18:27].reshape(3, 3),  # e_R, e_w, R_WB, R_d
         v[9:12], v[12:15], v[15:18], v[0:3],  # w_bd, wdot_bd, Omega_d, f_d
-        tk.y, ref.y, v[57:57 + n], ydot, F_y,  # y, y_d, y_err, ydot, F_y
-        v[33:36], v[39:45],  # F_rc, wrench_E_filtered
+        tk.y, ref.y, v[54:54 + n], ydot, F_y,  # y, y_d, y_err, ydot, F_y
+        v[30:33], v[36:42],  # F_rc, wrench_E_filtered
         sigma_min, damping, P is not None,  # sigma_min_J3, damping, com_err_saturated
         any(map(float.__ne__, y_err_s, y_err_l)),  # y_err_saturated: the clip changed something
-        u, tau, Lambda_y, Lambda_y_dot, v[33:39],  # u, tau, Lambda_y, Lambda_y_dot, wrench_W_filtered
+        u, tau, Lambda_y, Lambda_y_dot, v[30:36],  # u, tau, Lambda_y, Lambda_y_dot, wrench_W_filtered
     )
-    return StepResult(cmd, diag, ControllerMemory(t_s, FilterState(v[45:51], v[51:57])))
+    return StepResult(cmd, diag, ControllerMemory(t_s, FilterState(v[42:48], v[48:54])))

@@ -206,10 +206,10 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     Mdot += C
 
     w = state.w_B
-    Mv = R.T.dot(Jcom)  # [I, -hat(r_b), J_b] (eq. new_coord, in {b})
-    (_, z, _), (_, _, x), (y, _, _) = Mv[:, 3:6].tolist()  # -hat(r_b)
+    Mv_T = Jcom.T.dot(R)  # [I, -hat(r_b), J_b]^T (eq. new_coord, in {b}), transposed: its blocks are row blocks
+    (_, _, y), (z, _, _), (_, x, _) = Mv_T[3:6].tolist()  # hat(r_b)
     rb = (x, y, z)
-    J_b = Mv[:, 6:]
+    J_b = Mv_T[6:].T
 
     # Lambda_xi^-1 = T M^-1 T^T is block diagonal (eq. new_dynamics) and T's middle block row is
     # [0, I, 0], so Lambda_w^-1 is M^-1's middle block. T^-1 is stored transposed (T^-T: the
@@ -223,7 +223,7 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     T_invT = _eye(nv)
     T_invT[0:3, 0:3] = R
     T_invT[3:6] = K
-    T_invT[6:, 0:3] = (-Mv)[:, 6:].T  # -J_b^T
+    T_invT[6:, 0:3] = -Mv_T[6:]  # -J_b^T
     T_inv = T_invT.T  # [[R^T, hat(r_b) + J_b N_1, -J_b], [0, I, 0], [0, -N_1, I]]
     N1 = (-K)[:, 6:].T
 
@@ -239,7 +239,7 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     # and M c has a zero first block row (M T^-1's (0, w) block, eq. new_dynamics), which is
     # all Zdot = [-Jdot_b^T, 0, 0] sees; so N1dot w = A^-1 Z Mdot c, with Z = (T^-1[:, 6:])^T.
     (R00, R01, R02), (R10, R11, R12), (R20, R21, R22) = Rl
-    s0, s1, s2 = Mv.dot(V).tolist()
+    s0, s1, s2 = V.dot(Mv_T).tolist()
     d0, d1, d2 = Mdot.dot(V).tolist()[0:3]
     w0, w1, w2 = w_l
     a0, a1, a2 = w1 * s2 - w2 * s1 + d0 / m, w2 * s0 - w0 * s2 + d1 / m, w0 * s1 - w1 * s0 + d2 / m
@@ -274,7 +274,7 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
         hr = hat(r_b)
         rdot_b = J_b @ state.qdot
         Rhw = R @ hat(w)
-        ZMdot = Mdot[6:] - Mdot[0:3, 6:].T @ Mv - J_b.T @ Mdot[0:3]  # d/dt (Z M)
+        ZMdot = Mdot[6:] - Mdot[0:3, 6:].T @ Mv_T.T - J_b.T @ Mdot[0:3]  # d/dt (Z M)
         M = terms.M
         A_inv = np.linalg.inv(M[6:, 6:] - J_b.T @ M[0:3, 6:])  # A = Z M Z^T
         N1dot = A_inv @ (ZMdot[:, 3:6] - ZMdot[:, 6:] @ N1)

@@ -55,10 +55,17 @@ class TaskTerms:
     J: np.ndarray  # (n, n+6): ydot = J xi
     Jdot_xi: np.ndarray  # (n,)
     J_e: np.ndarray  # (6, n+6) body Jacobian of {e} (eq. dynamics), LOCAL frame
-    p_WE: np.ndarray
-    R_WE: np.ndarray
+    H_WE: np.ndarray  # (4, 4) pose of {e} in {w}: [[R_WE, p_WE], [0, 1]]
     Jdot: np.ndarray | None = None  # (n, n+6), only with full=True
     ydot: np.ndarray | None = None  # (n,) J_y V (= J xi), from {e}'s twist
+
+    @property
+    def R_WE(self) -> np.ndarray:
+        return self.H_WE[0:3, 0:3]
+
+    @property
+    def p_WE(self) -> np.ndarray:
+        return self.H_WE[0:3, 3]
 
 
 def angle_of(R_TE: np.ndarray, comp: str) -> float:
@@ -85,7 +92,6 @@ def task_terms(model: AmModel, data: pin.Data, terms: DecoupledTerms, frame: Tas
     fid = model.ee_frame_id
     # the frame's placement, recomputed exactly as data.oMf[fid] (half the cost of indexing data.oMf)
     H_WE = pin.updateFramePlacement(pm, data, fid).homogeneous  # a fresh 4x4 array
-    R_WE, p_WE = H_WE[0:3, 0:3], H_WE[0:3, 3]
     J_e = pin.getFrameJacobian(pm, data, fid, pin.LOCAL)
     Jd_e = pin.getFrameJacobianTimeVariation(pm, data, fid, pin.LOCAL)
     V = terms.V
@@ -135,8 +141,8 @@ def task_terms(model: AmModel, data: pin.Data, terms: DecoupledTerms, frame: Tas
     y_jd = np.array(y + jd + yd)  # y, Jdot_y V and ydot in one array
     J = J_y.dot(terms.T_inv)
     Jdot_y_V = y_jd[n:2 * n]
-    # positional, in field order (y, J_y, Jdot_y_V, J, Jdot_xi, J_e, p_WE, R_WE, Jdot, ydot): matching keywords costs more
-    out = TaskTerms(y_jd[0:n], J_y, Jdot_y_V, J, Jdot_y_V - J.dot(terms.Tdot_V), J_e, p_WE, R_WE, None, y_jd[2 * n:])
+    # positional, in field order (y, J_y, Jdot_y_V, J, Jdot_xi, J_e, H_WE, Jdot, ydot): matching keywords costs more
+    out = TaskTerms(y_jd[0:n], J_y, Jdot_y_V, J, Jdot_y_V - J.dot(terms.Tdot_V), J_e, H_WE, None, y_jd[2 * n:])
     if full:
         if terms.Tdot is None:
             raise ValueError("task_terms(full=True) needs decoupled_terms(full=True)")
