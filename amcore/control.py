@@ -244,7 +244,7 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     f0, f1, f2, t0, t1, t2 = x_W
     wrench_E_f = [e00 * f0 + e10 * f1 + e20 * f2, e01 * f0 + e11 * f1 + e21 * f2, e02 * f0 + e12 * f1 + e22 * f2,
                   e00 * t0 + e10 * t1 + e20 * t2, e01 * t0 + e11 * t1 + e21 * t2, e02 * t0 + e12 * t1 + e22 * t2]  # [R_e^T f; R_e^T tau]
-    F_xi = np.array(wrench_E_f).dot(tk.J_e_xi)  # T^-T J_e^T F
+    F_xi = np.array(wrench_E_f).dot(tk.J_e_xi)  # (J_e T^-1)^T F = T^-T J_e^T F
     sF_W = (s * f0, s * f1, s * f2)  # the filtered force, if compensated
     if p.force_rate_feedforward:
         sF_W_d = v3.scale(s, xd_W[0:3])

@@ -244,7 +244,7 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     w0, w1, w2 = w_l
     a0, a1, a2 = w1 * s2 - w2 * s1 + d0 / m, w2 * s0 - w0 * s2 + d1 / m, w0 * s1 - w1 * s0 + d2 / m
     aW = (R00 * a0 + R01 * a1 + R02 * a2, R10 * a0 + R11 * a1 + R12 * a2, R20 * a0 + R21 * a1 + R22 * a2)
-    Mdot_c = Mdot.dot(w.dot(T_invT[3:6]))
+    Mdot_c = Mdot.dot(w.dot(K))  # c = T^-1 [0; w; 0] = K^T w
     ZMdot_c = T_invT[6:].dot(Mdot_c)  # = A N1dot w
     # A^-1 is Lambda_xi^-1's last block, and Lambda_xi^-1 T^-T = T M^-1, so A^-1 Z Mdot c = (T M^-1 Mdot c)'s
     # last block = [0, N_1, I] M^-1 Mdot c
@@ -263,8 +263,8 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     Gamma_xi_xi = T_invT.dot(C.dot(V)) - out[nv:2 * nv]  # T^-T (C V - M T^-1 Tdot V)
 
     terms = DecoupledTerms(  # positional, in field order (matching 16 keywords costs more)
-        q_pin, pm, C, V, R, out[2 * nv + 3:2 * nv + 6], out[2 * nv:2 * nv + 3], J_b, N1,  # q_pin, pin_model, C, V, R_WB,
-        # r_c, r_b, J_b, N1
+        q_pin, pm, C, V, R,  # q_pin, pin_model, C, V, R_WB
+        out[2 * nv + 3:2 * nv + 6], out[2 * nv:2 * nv + 3], J_b, N1,  # r_c, r_b, J_b, N1
         T, T_inv, Tdot_V, out[2 * nv + 6:], Lambda_w,  # T, T_inv, Tdot_V, rdot_c, Lambda_w
         M_inv, Gamma_xi_xi,  # M_inv, Gamma_xi_xi
     )
