@@ -231,12 +231,11 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     tm = decoupled_terms(model, data, state, full=need_full)
     tk = task_terms(model, data, tm, p.task_frame, p.components, full=need_full)
     R = state.R_WB
-    xi = tm.xi
     comp = p.force_compensation
     s = 1.0 if comp else 0.0
 
     # --- measured wrench: world-aligned at {e}, low-pass filtered (exact derivatives)
-    (e00, e01, e02), (e10, e11, e12), (e20, e21, e22) = tk.R_WE.tolist()
+    (e00, e01, e02, _), (e10, e11, e12, _), (e20, e21, e22, _), _ = tk.H_WE.tolist()  # R_WE's rows
     f0, f1, f2, t0, t1, t2 = np.asarray(wrench_E, dtype=float).tolist()
     raw_W = [e00 * f0 + e01 * f1 + e02 * f2, e10 * f0 + e11 * f1 + e12 * f2, e20 * f0 + e21 * f1 + e22 * f2,
              e00 * t0 + e01 * t1 + e02 * t2, e10 * t0 + e11 * t1 + e12 * t2, e20 * t0 + e21 * t1 + e22 * t2]  # [R_e f_e; R_e tau_e]
@@ -245,7 +244,7 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     f0, f1, f2, t0, t1, t2 = x_W
     wrench_E_f = [e00 * f0 + e10 * f1 + e20 * f2, e01 * f0 + e11 * f1 + e21 * f2, e02 * f0 + e12 * f1 + e22 * f2,
                   e00 * t0 + e10 * t1 + e20 * t2, e01 * t0 + e11 * t1 + e21 * t2, e02 * t0 + e12 * t1 + e22 * t2]  # [R_e^T f; R_e^T tau]
-    F_xi = np.array(wrench_E_f).dot(tk.J_e).dot(tm.T_inv)  # T^-T J_e^T F
+    F_xi = np.array(wrench_E_f).dot(tk.J_e_xi)  # (J_e T^-1)^T F = T^-T J_e^T F
     sF_W = (s * f0, s * f1, s * f2)  # the filtered force, if compensated
     if p.force_rate_feedforward:
         sF_W_d = v3.scale(s, xd_W[0:3])
@@ -260,9 +259,9 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     w0, w1, w2 = state.w_B.tolist()
     b3 = (R02, R12, R22)
     b3_d = (R00 * w1 - R01 * w0, R10 * w1 - R11 * w0, R20 * w1 - R21 * w0)  # R (w x e3)
-    xi_l = xi.tolist()
+    rdot_c = tm.rdot_c.tolist()
     e = v3.sub(tm.r_c.tolist(), ref.r_c.tolist())
-    ed = v3.sub(xi_l[0:3], ref.r_c_d1.tolist())
+    ed = v3.sub(rdot_c, ref.r_c_d1.tolist())
     scale, P = _saturation(e, p.com_err_max)
     K, D = fg.K_t, fg.D_t
     r_d2, r_d3, r_d4 = ref.r_c_d2.tolist(), ref.r_c_d3.tolist(), ref.r_c_d4.tolist()
@@ -313,15 +312,17 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     k_R, k_w = p.k_R, p.k_w
     k_e = v3.mv(fg.Lambda_wb_d_inv, (k_R * e_R[0] + k_w * e_w[0], k_R * e_R[1] + k_w * e_w[1],
                                      k_R * e_R[2] + k_w * e_w[2]))
-    L_w = v3.mv(tm.Lambda_xi[3:6, 3:6].tolist(), v3.sub(wdot_bd, k_e))
+    L_w = v3.mv(tm.Lambda_w.tolist(), v3.sub(wdot_bd, k_e))
     F_w = F_xi.tolist()[3:6]
     u2 = (L_w[0] + G_w[0] - s * F_w[0], L_w[1] + G_w[1] - s * F_w[1], L_w[2] + G_w[2] - s * F_w[2])
 
     # --- end-effector impedance law, eq. u3
-    J = tk.J
-    LiJt = tm.Lambda_xi_inv.dot(J.T)
-    Lambda_y = linalg3.inv_sym(J.dot(LiJt))
-    Jbar = Lambda_y.dot(LiJt.T)  # (J^{Lambda+})^T = Lambda_y J Lambda_xi^-1
+    # With J = J_y T^-1 and Lambda_xi^-1 = T M^-1 T^T: J Lambda_xi^-1 = J_y M^-1 T^T and
+    # Lambda_y^-1 = J Lambda_xi^-1 J^T = J_y M^-1 J_y^T (T cancels)
+    J_y = tk.J_y
+    JyMi = J_y.dot(tm.M_inv)
+    Lambda_y = linalg3.inv_sym(JyMi.dot(J_y.T))
+    Jbar = Lambda_y.dot(JyMi.dot(tm.T.T))  # (J^{Lambda+})^T = Lambda_y J Lambda_xi^-1
     y_err_l = list(map(float.__sub__, tk.y.tolist(), ref.y.tolist()))
     y_err_s = [lim if x > lim else (-lim if x < -lim else x) for x, lim in zip(y_err_l, fg.y_err_max)]  # np.clip
     ydot = tk.ydot  # J_y V = J xi
@@ -338,6 +339,7 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     if p.compensate_Lambda_y_dot:
         Lxi_dot = tm.Gamma_xi + tm.Gamma_xi.T
         Jd = tk.Jdot
+        LiJt = tm.Lambda_xi_inv @ tk.J.T
         inner = Jd @ LiJt + LiJt.T @ Jd.T - LiJt.T @ Lxi_dot @ LiJt
         Lambda_y_dot = -Lambda_y @ inner @ Lambda_y
         r = r + 0.5 * Lambda_y_dot @ np.array(yd_err)
@@ -352,24 +354,25 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
         damping = p.damping_max**2 * (1.0 - (sigma_min / p.sigma_damping) ** 2)
         u3_G3 = (J3.T @ np.linalg.solve(J3 @ J3.T + damping * np.eye(n), r)).tolist()
 
+    u3 = list(map(float.__sub__, Gxi[6:], u3_G3))
     # u and the diagnostics' vectors (and R_d's rows) as views of one array: numpy's cost is per
     # call (the memory's filter state too: its own, non-overlapping slices)
     v = np.fromiter([*f_d, *e_R, *e_w, *w_bd, *wdot_bd, *Om_d, d1[0], d2[0], d3[0], d1[1], d2[1], d3[1],
-                     d1[2], d2[2], d3[2], *e, *xi_l[0:3], *x_W, *wrench_E_f, *x_W, *xd_W, *y_err_l,
-                     *u1_b3, *u2, *map(float.__sub__, Gxi[6:], u3_G3)], float, 63 + 2 * n)
-    u = v[57 + n:]
+                     d1[2], d2[2], d3[2], *e, *x_W, *wrench_E_f, *x_W, *xd_W, *y_err_l,
+                     *u1_b3, *u2, *u3], float, 60 + 2 * n)
+    u = v[54 + n:]
     tau = u.dot(tm.T)  # T^T u
     F_y = Jbar.dot(F_xi)
     tau_cmd = tau.copy()  # the command does not share memory with the diagnostics
     cmd = Command(tau.item(2), tau_cmd[3:6], tau_cmd[6:])  # (thrust_n, tau_B_nm, tau_q_nm); positional: half the cost
     diag = Diagnostics(  # positional, in field order: matching 28 keywords would cost ~1.4 us more
-        tm.r_c, ref.r_c, v[27:30], v[30:33],  # r_c, r_c_d, r_c_err, rdot_c
+        tm.r_c, ref.r_c, v[27:30], tm.rdot_c,  # r_c, r_c_d, r_c_err, rdot_c
         v[3:6], v[6:9], R, v[18:27].reshape(3, 3),  # e_R, e_w, R_WB, R_d
         v[9:12], v[12:15], v[15:18], v[0:3],  # w_bd, wdot_bd, Omega_d, f_d
-        tk.y, ref.y, v[57:57 + n], ydot, F_y,  # y, y_d, y_err, ydot, F_y
-        v[33:36], v[39:45],  # F_rc, wrench_E_filtered
+        tk.y, ref.y, v[54:54 + n], ydot, F_y,  # y, y_d, y_err, ydot, F_y
+        v[30:33], v[36:42],  # F_rc, wrench_E_filtered
         sigma_min, damping, P is not None,  # sigma_min_J3, damping, com_err_saturated
         any(map(float.__ne__, y_err_s, y_err_l)),  # y_err_saturated: the clip changed something
-        u, tau, Lambda_y, Lambda_y_dot, v[33:39],  # u, tau, Lambda_y, Lambda_y_dot, wrench_W_filtered
+        u, tau, Lambda_y, Lambda_y_dot, v[30:36],  # u, tau, Lambda_y, Lambda_y_dot, wrench_W_filtered
     )
-    return StepResult(cmd, diag, ControllerMemory(t_s, FilterState(v[45:51], v[51:57])))
+    return StepResult(cmd, diag, ControllerMemory(t_s, FilterState(v[42:48], v[48:54])))

@@ -18,7 +18,7 @@ skew-consistent (Christoffel) one; Gamma_xi's zero blocks rely on that choice.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 import pinocchio as pin
@@ -119,10 +119,13 @@ class AmState:
 class DecoupledTerms:
     """Model terms at one state (eq. dynamics, eq. new_coord, eq. new_dynamics).
 
-    All arrays are in the paper's coordinates; `xi` = [rdot_c, w_b, rho].
+    All arrays are in the paper's coordinates; `xi` = [rdot_c, w_b, rho]. The controller
+    needs M, xi, Lambda_xi and Mdot only through products, one block or pinocchio's M^-1 and
+    CoM Jacobian, so those four are formed on first access (tests read them; the step does not).
     """
 
-    M: np.ndarray  # (n+6, n+6) joint-space inertia
+    q_pin: np.ndarray  # pinocchio's configuration [p_WB, quat_xyzw, q]
+    pin_model: pin.Model = field(repr=False)
     C: np.ndarray  # (n+6, n+6) skew-consistent Coriolis matrix
     V: np.ndarray
     R_WB: np.ndarray
@@ -133,17 +136,37 @@ class DecoupledTerms:
     T: np.ndarray
     T_inv: np.ndarray
     Tdot_V: np.ndarray  # Tdot @ V
-    xi: np.ndarray
-    Lambda_xi: np.ndarray
-    Lambda_xi_inv: np.ndarray
+    rdot_c: np.ndarray  # CoM velocity in {w} [m/s], xi's first block
+    Lambda_w: np.ndarray  # (3, 3) Lambda_xi's middle block (eq. new_dynamics)
+    M_inv: np.ndarray  # M^-1
     Gamma_xi_xi: np.ndarray  # Gamma_xi @ xi
-    Mdot: np.ndarray  # C + C^T
     Tdot: np.ndarray | None = None  # only with full=True
     Gamma_xi: np.ndarray | None = None  # only with full=True
 
-    @property
-    def rdot_c(self) -> np.ndarray:
-        return self.xi[0:3]
+    @cached_property
+    def M(self) -> np.ndarray:
+        """(n+6, n+6) joint-space inertia (eq. dynamics)."""
+        M = pin.crba(self.pin_model, self.pin_model.createData(), self.q_pin)
+        return M if _crba_returns_symmetric() else np.triu(M) + np.triu(M, 1).T
+
+    @cached_property
+    def xi(self) -> np.ndarray:
+        return self.T @ self.V
+
+    @cached_property
+    def Lambda_xi(self) -> np.ndarray:
+        """T^-T M T^-1 (eq. new_dynamics), block diagonal: m I, Lambda_w, Lambda_rho."""
+        return self.T_inv.T @ self.M @ self.T_inv
+
+    @cached_property
+    def Lambda_xi_inv(self) -> np.ndarray:
+        """T M^-1 T^T: blockdiag(I / m, Lambda_w^-1, A^-1)."""
+        return self.T @ self.M_inv @ self.T.T
+
+    @cached_property
+    def Mdot(self) -> np.ndarray:
+        """dM/dt = C + C^T (pinocchio's C is skew-consistent)."""
+        return self.C + self.C.T
 
     @property
     def rho(self) -> np.ndarray:
@@ -151,7 +174,8 @@ class DecoupledTerms:
 
 
 def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool = False) -> DecoupledTerms:
-    """Evaluate M, C, T, T^-1, Tdot V, xi, Lambda_xi, Gamma_xi xi at `state`.
+    """Evaluate M^-1, C, T, T^-1, Tdot V, Lambda_w, Gamma_xi xi at `state` (M, xi, Lambda_xi,
+    Lambda_xi^-1 and Mdot on first access). T's first block row is pinocchio's CoM Jacobian.
 
     Also runs pinocchio's forward kinematics, Jacobians and their time variation into
     `data`, which `amcore.task` then reads (computeCoriolisMatrix fills data.J and data.dJ
@@ -160,8 +184,10 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     too; the controller only needs products.
 
     Lambda_xi = T^-T M T^-1 is block diagonal (eq. new_dynamics) with blocks m I, Lambda_w
-    and Lambda_rho = (N M^-1 N^T)^-1 = Z M Z^T = A, so its inverse is formed blockwise.
-    At these sizes numpy's cost is per call, not per flop, so the code below keeps the
+    and Lambda_rho = (N M^-1 N^T)^-1 = Z M Z^T = A. Its inverse T M^-1 T^T is read off
+    pinocchio's M^-1 (computeMinverse): the step needs Lambda_w, N_1 and products with
+    Lambda_xi^-1, all of which follow from M^-1 with one 3x3 inverse (not two: A^-1 is never
+    formed). At these sizes numpy's cost is per call, not per flop, so the code below keeps the
     number of calls low: whole block rows at once, ndarray.dot (half the cost of `@`), and
     3-vectors on Python floats.
     """
@@ -172,69 +198,75 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
     Rl = R.tolist()
     p_l, w_l = state.p_WB.tolist(), state.w_B.tolist()
     q_pin, V = _pin_qv(state, Rl, p_l, w_l)
-    M = pin.crba(pm, data, q_pin)
-    if not _crba_returns_symmetric():
-        M = np.triu(M) + np.triu(M, 1).T
+    Jcom = pin.jacobianCenterOfMass(pm, data, q_pin, False)  # R [I, -hat(r_b), J_b], T's first block row
+    M_inv = pin.computeMinverse(pm, data, q_pin)  # one C++ pass: replaces forming M, Z M, A and A^-1
     C = pin.computeCoriolisMatrix(pm, data, q_pin, V)
     pin.updateFramePlacements(pm, data)
     Mdot = C.T.copy()  # Mdot = C + C^T; `C + C.T` (mixed memory layouts) measured ~2 us slower in the step
     Mdot += C
 
     w = state.w_B
-    Mv_m = M[0:3] / _mass_rows(nv, m)  # [I, -hat(r_b), J_b]; M's first block row is m times this
-    (_, z, _), (_, _, x), (y, _, _) = Mv_m[:, 3:6].tolist()  # -hat(r_b)
+    Mv_T = Jcom.T.dot(R)  # [I, -hat(r_b), J_b]^T (eq. new_coord, in {b}), transposed: its blocks are row blocks
+    (_, _, y), (z, _, _), (_, x, _) = Mv_T[3:6].tolist()  # hat(r_b)
     rb = (x, y, z)
-    J_b = Mv_m[:, 6:]
+    J_b = Mv_T[6:].T
 
-    # Z M with Z = [-J_b^T, 0, I] (eq. new_coord, in {b}) is [0, B, A]: A = Z M Z^T, N_1 = A^-1 B.
-    ZM = M[6:] - J_b.T.dot(M[0:3])
-    A_inv = linalg3.inv_sym(ZM[:, 6:])
-    N1 = A_inv.dot(ZM[:, 3:6])
+    # Lambda_xi^-1 = T M^-1 T^T is block diagonal (eq. new_dynamics) and T's middle block row is
+    # [0, I, 0], so Lambda_w^-1 is M^-1's middle block. T^-1 is stored transposed (T^-T: the
+    # products below then read contiguous rows, which numpy does not copy first). Its middle block
+    # row, T^-1's middle block column [hat(r_b) + J_b N_1; I; -N_1], is Lambda_w (M^-1)_(w,:): from
+    # T M^-1 = Lambda_xi^-1 T^-T, whose middle block row is (M^-1)_(w,:) = Lambda_w^-1 (T^-T)_(w,:).
+    # (Negations act on whole contiguous arrays, then a block is taken: a ufunc on a strided
+    # block takes numpy's slow path, ~1 us more at this size.)
+    Lambda_w = linalg3.inv_sym(M_inv[3:6, 3:6])
+    K = Lambda_w.dot(M_inv[3:6])
+    T_invT = _eye(nv)
+    T_invT[0:3, 0:3] = R
+    T_invT[3:6] = K
+    T_invT[6:, 0:3] = -Mv_T[6:]  # -J_b^T
+    T_inv = T_invT.T  # [[R^T, hat(r_b) + J_b N_1, -J_b], [0, I, 0], [0, -N_1, I]]
+    N1 = (-K)[:, 6:].T
 
     T = _eye(nv)
-    R.dot(Mv_m, out=T[0:3])  # R [I, -hat(r_b), J_b]
-    T[0:3, 0:3] = R
+    T[0:3] = Jcom
     T[6:, 3:6] = N1
 
-    # (negating contiguous results, then assigning: ufuncs writing into strided blocks cost more)
-    T_inv = _eye(nv)
-    T_inv[0:3, 0:3] = R.T
-    T_inv[6:, 3:6] = -N1
-    T_inv[0:3, 3:] = -Mv_m[:, 3:].dot(T_inv[3:, 3:])  # [hat(r_b) + J_b N_1, -J_b]
-    xi = T.dot(V)
-
     # Tdot V. First block row R [I, -hat(r_b), J_b]: its rate applied to V is, with
-    # s = R^T rdot_c, R (hat(w) s + [0, -hat(rdot_b), Jdot_b] V), and m [0, -hat(rdot_b), Jdot_b]
-    # is Mdot's first block row (its first block, d(m I)/dt, is zero).
+    # s = R^T rdot_c = [I, -hat(r_b), J_b] V, R (hat(w) s + [0, -hat(rdot_b), Jdot_b] V), and
+    # m [0, -hat(rdot_b), Jdot_b] is Mdot's first block row (its first block, d(m I)/dt, is zero).
     # Last block row: N1dot w = A^-1 (Bdot w - Adot N_1 w) = A^-1 d/dt(Z M) c with
     # c = T^-1 [0; w; 0] = [(hat(r_b) + J_b N_1) w; w; -N_1 w]. d/dt(Z M) = Zdot M + Z Mdot
     # and M c has a zero first block row (M T^-1's (0, w) block, eq. new_dynamics), which is
     # all Zdot = [-Jdot_b^T, 0, 0] sees; so N1dot w = A^-1 Z Mdot c, with Z = (T^-1[:, 6:])^T.
     (R00, R01, R02), (R10, R11, R12), (R20, R21, R22) = Rl
-    c0, c1, c2 = xi.tolist()[0:3]  # rdot_c
-    s0, s1, s2 = R00 * c0 + R10 * c1 + R20 * c2, R01 * c0 + R11 * c1 + R21 * c2, R02 * c0 + R12 * c1 + R22 * c2
+    s0, s1, s2 = V.dot(Mv_T).tolist()
     d0, d1, d2 = Mdot.dot(V).tolist()[0:3]
     w0, w1, w2 = w_l
     a0, a1, a2 = w1 * s2 - w2 * s1 + d0 / m, w2 * s0 - w0 * s2 + d1 / m, w0 * s1 - w1 * s0 + d2 / m
-    N1dot_w = A_inv.dot(Mdot.dot(T_inv[:, 3:6].dot(w)).dot(T_inv[:, 6:])).tolist()
-    # r_c = p_WB + R r_b; Tdot V, r_b and r_c as views of one array (numpy's cost is per call)
+    aW = (R00 * a0 + R01 * a1 + R02 * a2, R10 * a0 + R11 * a1 + R12 * a2, R20 * a0 + R21 * a1 + R22 * a2)
+    Mdot_c = Mdot.dot(w.dot(K))  # c = T^-1 [0; w; 0] = K^T w
+    ZMdot_c = T_invT[6:].dot(Mdot_c)  # = A N1dot w
+    # A^-1 is Lambda_xi^-1's last block, and Lambda_xi^-1 T^-T = T M^-1, so A^-1 Z Mdot c = (T M^-1 Mdot c)'s
+    # last block = [0, N_1, I] M^-1 Mdot c
+    N1dot_w = T[6:].dot(M_inv.dot(Mdot_c)).tolist()
+    # Lambda_xi Tdot V = [m R a; 0; A N1dot w] (Lambda_xi is blockdiag(m I, Lambda_w, A) and
+    # Tdot V's middle block is zero); r_c = p_WB + R r_b; rdot_c = R s. All of them, and Tdot V,
+    # as views of one array (numpy's cost is per call)
     p0, p1, p2 = p_l
     rb0, rb1, rb2 = rb
-    Tv_r = np.array([R00 * a0 + R01 * a1 + R02 * a2, R10 * a0 + R11 * a1 + R12 * a2, R20 * a0 + R21 * a1 + R22 * a2,
-                     0.0, 0.0, 0.0, *N1dot_w, rb0, rb1, rb2, p0 + (R00 * rb0 + R01 * rb1 + R02 * rb2),
-                     p1 + (R10 * rb0 + R11 * rb1 + R12 * rb2), p2 + (R20 * rb0 + R21 * rb1 + R22 * rb2)])
-    Tdot_V = Tv_r[0:nv]
+    out = np.array([*aW, 0.0, 0.0, 0.0, *N1dot_w, m * aW[0], m * aW[1], m * aW[2], 0.0, 0.0, 0.0, *ZMdot_c.tolist(),
+                    rb0, rb1, rb2, p0 + (R00 * rb0 + R01 * rb1 + R02 * rb2), p1 + (R10 * rb0 + R11 * rb1 + R12 * rb2),
+                    p2 + (R20 * rb0 + R21 * rb1 + R22 * rb2), R00 * s0 + R01 * s1 + R02 * s2,
+                    R10 * s0 + R11 * s1 + R12 * s2, R20 * s0 + R21 * s1 + R22 * s2])
+    Tdot_V = out[0:nv]
 
-    Lambda_xi = T_inv.T.dot(M).dot(T_inv)
-    Lambda_xi_inv = _mass_block_inverse(nv, m).copy()
-    Lambda_xi_inv[3:6, 3:6] = linalg3.inv_sym(Lambda_xi[3:6, 3:6])
-    Lambda_xi_inv[6:, 6:] = A_inv
-    Gamma_xi_xi = C.dot(V).dot(T_inv) - Lambda_xi.dot(Tdot_V)  # T^-T (C V - M T^-1 Tdot V)
+    Gamma_xi_xi = T_invT.dot(C.dot(V)) - out[nv:2 * nv]  # T^-T (C V - M T^-1 Tdot V)
 
     terms = DecoupledTerms(  # positional, in field order (matching 16 keywords costs more)
-        M, C, V, R, Tv_r[nv + 3:], Tv_r[nv:nv + 3], J_b, N1,  # M, C, V, R_WB, r_c, r_b, J_b, N1
-        T, T_inv, Tdot_V, xi, Lambda_xi,  # T, T_inv, Tdot_V, xi, Lambda_xi
-        Lambda_xi_inv, Gamma_xi_xi, Mdot,  # Lambda_xi_inv, Gamma_xi_xi, Mdot
+        q_pin, pm, C, V, R,  # q_pin, pin_model, C, V, R_WB
+        out[2 * nv + 3:2 * nv + 6], out[2 * nv:2 * nv + 3], J_b, N1,  # r_c, r_b, J_b, N1
+        T, T_inv, Tdot_V, out[2 * nv + 6:], Lambda_w,  # T, T_inv, Tdot_V, rdot_c, Lambda_w
+        M_inv, Gamma_xi_xi,  # M_inv, Gamma_xi_xi
     )
     if full:
         r_b = terms.r_b
@@ -242,7 +274,9 @@ def decoupled_terms(model: AmModel, data: pin.Data, state: AmState, full: bool =
         hr = hat(r_b)
         rdot_b = J_b @ state.qdot
         Rhw = R @ hat(w)
-        ZMdot = Mdot[6:] - Mdot[0:3, 6:].T @ Mv_m - J_b.T @ Mdot[0:3]  # d/dt (Z M)
+        ZMdot = Mdot[6:] - Mdot[0:3, 6:].T @ Mv_T.T - J_b.T @ Mdot[0:3]  # d/dt (Z M)
+        M = terms.M
+        A_inv = np.linalg.inv(M[6:, 6:] - J_b.T @ M[0:3, 6:])  # A = Z M Z^T
         N1dot = A_inv @ (ZMdot[:, 3:6] - ZMdot[:, 6:] @ N1)
         Tdot = np.zeros((nv, nv))
         Tdot[0:3, 0:3] = Rhw
@@ -286,24 +320,6 @@ def _identity(nv: int) -> np.ndarray:
 def _eye(nv: int) -> np.ndarray:
     """A fresh identity (copying a cached one costs a sixth of np.eye)."""
     return _identity(nv).copy()
-
-
-@lru_cache(maxsize=None)
-def _mass_rows(nv: int, m: float) -> np.ndarray:
-    """A (3, nv) array of m: dividing by it gives M[0:3] / m exactly, without numpy's per-call
-    conversion of a Python scalar."""
-    out = np.full((3, nv), m)
-    out.flags.writeable = False
-    return out
-
-
-@lru_cache(maxsize=None)
-def _mass_block_inverse(nv: int, m: float) -> np.ndarray:
-    """blockdiag(I_3 / m, 0, 0): the constant part of Lambda_xi^-1."""
-    out = np.zeros((nv, nv))
-    out[0:3, 0:3] = np.eye(3) / m
-    out.flags.writeable = False
-    return out
 
 
 def generalized_gravity(model: AmModel, data: pin.Data, state: AmState) -> np.ndarray:

@@ -52,13 +52,27 @@ class TaskTerms:
     y: np.ndarray  # (n,)
     J_y: np.ndarray  # (n, n+6): ydot = J_y V
     Jdot_y_V: np.ndarray  # (n,)
-    J: np.ndarray  # (n, n+6): ydot = J xi
     Jdot_xi: np.ndarray  # (n,)
     J_e: np.ndarray  # (6, n+6) body Jacobian of {e} (eq. dynamics), LOCAL frame
-    p_WE: np.ndarray
-    R_WE: np.ndarray
+    J_e_xi: np.ndarray  # (6, n+6) J_e T^-1: {e}'s twist from xi; F_xi = (J_e T^-1)^T F_e
+    W: np.ndarray  # (n, 6) rows W_r: ydot_r = W_r J_e V
+    H_WE: np.ndarray  # (4, 4) pose of {e} in {w}: [[R_WE, p_WE], [0, 1]]
     Jdot: np.ndarray | None = None  # (n, n+6), only with full=True
     ydot: np.ndarray | None = None  # (n,) J_y V (= J xi), from {e}'s twist
+
+    @cached_property
+    def J(self) -> np.ndarray:
+        """(n, n+6) J = J_y T^-1 = W J_e T^-1: ydot = J xi (formed on first access; the step
+        needs J only through Jdot xi's J T^-1 Tdot V term)."""
+        return self.W @ self.J_e_xi
+
+    @property
+    def R_WE(self) -> np.ndarray:
+        return self.H_WE[0:3, 0:3]
+
+    @property
+    def p_WE(self) -> np.ndarray:
+        return self.H_WE[0:3, 3]
 
 
 def angle_of(R_TE: np.ndarray, comp: str) -> float:
@@ -79,27 +93,31 @@ def task_terms(model: AmModel, data: pin.Data, terms: DecoupledTerms, frame: Tas
     Each component's rate is a weighting of {e}'s body twist: ydot_r = W_r J_e V, with W_r =
     [e_k^T R_TE, 0] for a position and [0, a^T R_TE] for an angle. Its drift is W_r times
     {e}'s classical acceleration at zero Vdot plus Wdot_r J_e V (only angles have Wdot_r:
-    [0, adot^T R_TE]). The per-component work is on Python floats (3-vectors).
+    [0, adot^T R_TE]). The per-component work is on Python floats (3-vectors). The drift in xi,
+    Jdot xi = Jdot_y V - J_y T^-1 Tdot V = W (acc_e - J_e T^-1 Tdot V) + Wdot J_e V, is formed the
+    same way, from the 6-vector J_e T^-1 Tdot V (J itself is never needed as a matrix).
     """
     pm = model.pin_model
     fid = model.ee_frame_id
     # the frame's placement, recomputed exactly as data.oMf[fid] (half the cost of indexing data.oMf)
     H_WE = pin.updateFramePlacement(pm, data, fid).homogeneous  # a fresh 4x4 array
-    R_WE, p_WE = H_WE[0:3, 0:3], H_WE[0:3, 3]
     J_e = pin.getFrameJacobian(pm, data, fid, pin.LOCAL)
     Jd_e = pin.getFrameJacobianTimeVariation(pm, data, fid, pin.LOCAL)
     V = terms.V
     v0, v1, v2, w0, w1, w2 = J_e.dot(V).tolist()  # {e}'s twist, in {e}
     d0, d1, d2, dw0, dw1, dw2 = Jd_e.dot(V).tolist()
+    J_e_xi = J_e.dot(terms.T_inv)
+    e0, e1, e2, ew0, ew1, ew2 = J_e_xi.dot(terms.Tdot_V).tolist()  # J_e T^-1 Tdot V
     # classical acceleration of {e}'s origin at zero Vdot (the spatial one misses w x v), in {e}
     a0, a1, a2 = d0 + (w1 * v2 - w2 * v1), d1 + (w2 * v0 - w0 * v2), d2 + (w0 * v1 - w1 * v0)
+    x0, x1, x2, xw0, xw1, xw2 = a0 - e0, a1 - e1, a2 - e2, dw0 - ew0, dw1 - ew1, dw2 - ew2  # what Jdot xi weights
     # [R_TE, p_TE] = H_TW H_WE, row by row
     Rl = frame.H_TW.dot(H_WE).tolist()
     (R00, R01, R02, _), (R10, R11, R12, _), (R20, R21, R22, _), _ = Rl
     cols = ((R00, R10, R20), (R01, R11, R21), (R02, R12, R22))  # the axes of {e}, in {t}
     t0, t1, t2 = R00 * w0 + R01 * w1 + R02 * w2, R10 * w0 + R11 * w1 + R12 * w2, R20 * w0 + R21 * w1 + R22 * w2  # w_e in {t}
 
-    y, W, jd, yd, Wd = [], [], [], [], []
+    y, W, jd, yd, jx, Wd = [], [], [], [], [], []
     for ax in _component_axes(tuple(components)):
         if len(ax) == 1:
             r0, r1, r2, p_k = Rl[ax[0]]
@@ -107,6 +125,7 @@ def task_terms(model: AmModel, data: pin.Data, terms: DecoupledTerms, frame: Tas
             W += (r0, r1, r2, 0.0, 0.0, 0.0)
             jd.append(r0 * a0 + r1 * a1 + r2 * a2)
             yd.append(r0 * v0 + r1 * v1 + r2 * v2)
+            jx.append(r0 * x0 + r1 * x1 + r2 * x2)
             if full:
                 Wd.append([0.0] * 6)
             continue
@@ -125,18 +144,18 @@ def task_terms(model: AmModel, data: pin.Data, terms: DecoupledTerms, frame: Tas
         aR = (R00 * b0 + R10 * b1 + R20 * b2, R01 * b0 + R11 * b1 + R21 * b2, R02 * b0 + R12 * b1 + R22 * b2)  # R_TE^T a / D
         adR = (R00 * c0 + R10 * c1 + R20 * c2, R01 * c0 + R11 * c1 + R21 * c2, R02 * c0 + R12 * c1 + R22 * c2)
         W += (0.0, 0.0, 0.0) + aR
-        jd.append(aR[0] * dw0 + aR[1] * dw1 + aR[2] * dw2 + (adR[0] * w0 + adR[1] * w1 + adR[2] * w2))
+        wd = adR[0] * w0 + adR[1] * w1 + adR[2] * w2  # Wdot_r J_e V
+        jd.append(aR[0] * dw0 + aR[1] * dw1 + aR[2] * dw2 + wd)
         yd.append(aR[0] * w0 + aR[1] * w1 + aR[2] * w2)
+        jx.append(aR[0] * xw0 + aR[1] * xw1 + aR[2] * xw2 + wd)
         if full:
             Wd.append((0.0, 0.0, 0.0) + adR)
     n = len(y)
     W = np.array(W).reshape(n, 6)  # rows W_r (a flat list is the cheapest to convert)
     J_y = W.dot(J_e)
-    y_jd = np.array(y + jd + yd)  # y, Jdot_y V and ydot in one array
-    J = J_y.dot(terms.T_inv)
-    Jdot_y_V = y_jd[n:2 * n]
-    # positional, in field order (y, J_y, Jdot_y_V, J, Jdot_xi, J_e, p_WE, R_WE, Jdot, ydot): matching keywords costs more
-    out = TaskTerms(y_jd[0:n], J_y, Jdot_y_V, J, Jdot_y_V - J.dot(terms.Tdot_V), J_e, p_WE, R_WE, None, y_jd[2 * n:])
+    y_jd = np.array(y + jd + jx + yd)  # y, Jdot_y V, Jdot xi and ydot in one array
+    # positional, in field order (y, J_y, Jdot_y_V, Jdot_xi, J_e, J_e_xi, W, H_WE, Jdot, ydot): matching keywords costs more
+    out = TaskTerms(y_jd[0:n], J_y, y_jd[n:2 * n], y_jd[2 * n:3 * n], J_e, J_e_xi, W, H_WE, None, y_jd[3 * n:])
     if full:
         if terms.Tdot is None:
             raise ValueError("task_terms(full=True) needs decoupled_terms(full=True)")
@@ -145,5 +164,5 @@ def task_terms(model: AmModel, data: pin.Data, terms: DecoupledTerms, frame: Tas
         Jd_aug[0:3] += hwe @ J_e[0:3]
         Jd_aug[3:6] += hwe @ J_e[3:6]
         Jdot_y = W @ Jd_aug + np.array(Wd) @ J_e
-        out.Jdot = Jdot_y @ terms.T_inv - J @ terms.Tdot @ terms.T_inv
+        out.Jdot = Jdot_y @ terms.T_inv - out.J @ terms.Tdot @ terms.T_inv
     return out
