@@ -9,11 +9,13 @@ around it, for --duration simulated seconds of the approach phase. The SITL figu
 simulator's own (simulated time / wall time from the first lockstep step, start-up
 excluded). Targets (issue 3): 2 AMs >= 2x real time, 10 AMs >= 0.5x; goals 5x and 1x.
 
-Two more columns take the whole apart, measured in the same run:
+More columns take the whole apart, measured in the same run:
 - "echo": the same simulator and lockstep with `echo_companion.py` in place of each
   companion (same client, codec and signing; it answers every frame at once with a fixed
   setpoint, no controller, no telemetry). What the simulator, MAVLink and the processes
   cost when the controller costs nothing: an upper bound on the SITL's real-time factor.
+- "echo+Xus" (with --echo-spin-us X): the same, each echo busy-waiting X us per step: a
+  controller's compute time without its memory traffic and telemetry.
 - "UDP": one Python process exchanging a datagram per step with N forked processes that
   answer at once (no MAVLink, no physics): the floor of the lockstep's message pattern.
 """
@@ -84,8 +86,9 @@ def sitl_rtf(path: Path, duration: float, run_dir: Path) -> tuple[float, float]:
     return json.loads((run_dir / "outcome.json").read_text())["real_time_factor"], wall
 
 
-def echo_rtf(path: Path, duration: float, run_dir: Path) -> float:
-    """The SITL with echo companions (no controller, no telemetry); see the module doc."""
+def echo_rtf(path: Path, duration: float, run_dir: Path, spin_us: float = 0.0) -> float:
+    """The SITL with echo companions (no controller, no telemetry; each busy-waits spin_us
+    before answering); see the module doc."""
     spec = load_scenario(path)
     bin_dir = Path(sys.executable).parent
     sim_exe = bin_dir / "simulator"
@@ -103,7 +106,7 @@ def echo_rtf(path: Path, duration: float, run_dir: Path) -> float:
             event = json.loads(line)
             bind = event.get("bind") if event.get("event") == "ready" else None
         echoes = [subprocess.Popen([sys.executable, str(ROOT / "benchmarks" / "echo_companion.py"), "--sysid",
-                                    str(am.sysid), "--sim", bind, "--config", str(path)], stderr=subprocess.DEVNULL)
+                                    str(am.sysid), "--sim", bind, "--config", str(path), "--spin-us", str(spin_us)], stderr=subprocess.DEVNULL)
                   for am in spec.ams]
         sim.stdout.read()
         if sim.wait(timeout=600) != 0:
@@ -161,19 +164,26 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--duration", type=float, default=3.0)
     ap.add_argument("--n", type=int, nargs="+", default=[1, 2, 5, 10])
+    ap.add_argument("--echo-spin-us", type=float, default=None,
+                    help="also run echo companions that busy-wait this long per step (a controller's compute)")
     a = ap.parse_args()
     print(f"load average before: {os.getloadavg()[0]:.2f}; {os.cpu_count()} cores; {a.duration} s simulated per N")
     print("x real time (simulated s / wall s), each column measured in this run:")
-    print(f"{'N':>3} {'SITL':>7} {'echo':>7} {'UDP':>7} {'bare PyBullet':>14} {'bare/SITL':>10} {'wall incl. start-up':>20}")
+    spin = a.echo_spin_us
+    spin_head = f" {'echo+' + format(spin, 'g') + 'us':>12}" if spin is not None else ""
+    print(f"{'N':>3} {'SITL':>7} {'echo':>7}{spin_head} {'UDP':>7} {'bare PyBullet':>14} {'bare/SITL':>10} "
+          f"{'wall incl. start-up':>20}")
     with tempfile.TemporaryDirectory() as tmp:
         for n in a.n:
             path = scenario_with(n, Path(tmp))
             bare = bare_rtf(path, a.duration)
             rtf, wall = sitl_rtf(path, a.duration, Path(tmp) / f"run{n}")
             echo = echo_rtf(path, a.duration, Path(tmp) / f"echo{n}")
+            spun = f" {echo_rtf(path, a.duration, Path(tmp) / f'spin{n}', spin):12.2f}" if spin is not None else ""
             udp = udp_rtf(n)
-            print(f"{n:>3} {rtf:7.2f} {echo:7.2f} {udp:7.1f} {bare:14.1f} {bare / rtf:10.0f} {wall:19.1f}s", flush=True)
-    print("SITL: the product (am-run, telemetry on). echo: same lockstep, companions without a controller.\n"
+            print(f"{n:>3} {rtf:7.2f} {echo:7.2f}{spun} {udp:7.1f} {bare:14.1f} {bare / rtf:10.0f} {wall:19.1f}s", flush=True)
+    print("SITL: the product (am-run, telemetry on). echo: same lockstep, companions without a controller"
+          + (f" (echo+{spin:g}us: each busy-waits {spin:g} us per step)" if spin is not None else "") + ".\n"
           "UDP: the message pattern alone. Targets: 2 AMs >= 2x, 10 AMs >= 0.5x (goals 5x, 1x).")
 
 

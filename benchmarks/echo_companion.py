@@ -1,17 +1,20 @@
 """A companion without a controller, for measuring the lockstep's own cost.
 
-    python benchmarks/echo_companion.py --sysid 2 --sim udp:127.0.0.1:PORT --config scenario.toml
+    python benchmarks/echo_companion.py --sysid 2 --sim udp:127.0.0.1:PORT --config scenario.toml [--spin-us 175]
 
 It connects, arms and answers every sensor frame at once with the same torque setpoint
 (the vehicle's hover thrust, zero torques), through the same `amlink` client, codec and
 signing as the real companion. `bench_sitl.py` runs it in place of `companion` to report
 what the simulator, MAVLink and the processes cost when the controller costs nothing.
+With --spin-us it busy-waits that long before each answer: a controller's compute time
+without its memory traffic (`bench_controller.py`'s companion step is ~175 us).
 Not a product: the vehicles it flies are not controlled.
 """
 from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +33,9 @@ def main() -> int:
     ap.add_argument("--sysid", type=int, required=True)
     ap.add_argument("--sim", required=True)
     ap.add_argument("--config", type=Path, required=True)
+    ap.add_argument("--spin-us", type=float, default=0.0, help="busy-wait this long before each answer [us]")
     a = ap.parse_args()
+    spin_s = a.spin_us * 1e-6
     spec = load_scenario(a.config)
     keys, _ = signing.keys_for_run(spec, None)
     model = build_model(spec.vehicle)
@@ -40,6 +45,10 @@ def main() -> int:
         client.connect(timeout_s=60.0)
         client.arm(timeout_s=5.0)
         while (frame := client.recv_frame(timeout_s=10.0)) is not None:
+            if spin_s > 0.0:
+                until = time.perf_counter() + spin_s
+                while time.perf_counter() < until:
+                    pass
             client.send_setpoint(TorqueSetpoint(frame.step, hover_n, zero3, zero_q))
     return 0
 
