@@ -31,7 +31,9 @@ def test_two_am_grasp_across_four_hosts(tmp_path):
         rec = lan.popen("gs", [script("ground-station"), "record", "--out", str(mcap), "--zenoh-listen", gs_endpoint],
                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         procs.append(rec)
-        tele = ["--zenoh-connect", gs_endpoint]
+        # started by hand: each publisher waits for the recorder's subscription before its first
+        # sample, as the README says (zenoh drops what is put before the route exists)
+        tele = ["--zenoh-connect", gs_endpoint, "--telemetry-wait", "30"]
         sim = lan.popen("sim", [script("simulator"), "--config", cfg, "--bind", "udp:0.0.0.0:14550", "--key-file",
                                 str(key), "--run-dir", str(tmp_path), "--peer-timeout", "60", *tele],
                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
