@@ -85,7 +85,7 @@ class Safety:
 class ControllerOptions:
     force_compensation: bool = True
     compensate_Lambda_y_dot: bool = False
-    force_filter_hz: float = 30.0  # cutoff of the 2nd-order low-pass on the measured wrench
+    force_filter_hz: float = 3.0  # cutoff of the 2nd-order low-pass on the measured wrench (why: am3dof.toml)
     force_filter_zeta: float = 1.0
     # Feed the filtered wrench's rates into f_d's derivatives (hence Omega_d, Omegadot_d).
     # Off by default: a real wrist sensor also measures the tool's inertial force, and the
