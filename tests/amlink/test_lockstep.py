@@ -59,22 +59,23 @@ def test_bind_all_interfaces_and_ephemeral_port():
         server.close()
 
 
-def test_two_companions_200_lockstep_steps_matched_by_sysid_and_step():
-    server = server_for([2, 3], timeout_s=2.0)
-    server.open()
+@contextlib.contextmanager
+def _armed_companions(server, on_frame):
+    """Companions 2 and 3 in threads: each connects, arms and calls on_frame(client, frame,
+    sysid) for every frame until the server ends the run. Yields a dict sysid -> (the
+    scenario connect returned, the last STATUSTEXT) once both are armed (filled when they
+    end); on leaving, closes the server with "done", joins them and re-raises their errors."""
     errors: list[BaseException] = []
-    received: dict[int, list[int]] = {2: [], 3: []}
+    ends: dict[int, tuple] = {}
 
     def companion(sysid: int) -> None:
         try:
             with CompanionClient(sysid, sim=url(server)) as c:
-                assert c.connect(5.0) == SCENARIO
+                scenario = c.connect(5.0)
                 c.arm(2.0)
                 while (frame := c.recv_frame(5.0)) is not None:
-                    received[sysid].append(frame.step)
-                    att = AttitudeTarget(frame.step, frame.quat_WB_wxyz, [0.0, 0.0, sysid], 0.5)
-                    c.send_setpoint(answer(frame, sysid), att)
-                assert c.status_texts and c.status_texts[-1][1] == "done"
+                    on_frame(c, frame, sysid)
+                ends[sysid] = (scenario, c.status_texts[-1][1] if c.status_texts else None)
         except BaseException as exc:  # reported by the main thread
             errors.append(exc)
 
@@ -84,6 +85,25 @@ def test_two_companions_200_lockstep_steps_matched_by_sysid_and_step():
     try:
         server.wait_for_peers(5.0)
         server.wait_for_armed(5.0)
+        yield ends
+    finally:
+        server.close("done")
+        for t in threads:
+            t.join(5.0)
+    assert not errors, errors
+
+
+def test_two_companions_200_lockstep_steps_matched_by_sysid_and_step():
+    server = server_for([2, 3], timeout_s=2.0)
+    server.open()
+    received: dict[int, list[int]] = {2: [], 3: []}
+
+    def on_frame(c, frame, sysid):
+        received[sysid].append(frame.step)
+        att = AttitudeTarget(frame.step, frame.quat_WB_wxyz, [0.0, 0.0, sysid], 0.5)
+        c.send_setpoint(answer(frame, sysid), att)
+
+    with _armed_companions(server, on_frame) as ends:
         assert server.armed(2) and server.armed(3)
         for k in range(200):
             frames = {s: make_frame(s, k) for s in (2, 3)}
@@ -96,11 +116,7 @@ def test_two_companions_200_lockstep_steps_matched_by_sysid_and_step():
                 np.testing.assert_array_equal(sp.tau_B_nm, expect.tau_B_nm)
                 assert server.attitude_targets[s].step == k
                 assert server.attitude_targets[s].rates_rad_s[2] == pytest.approx(s)
-    finally:
-        server.close("done")
-        for t in threads:
-            t.join(5.0)
-    assert not errors, errors
+    assert ends == {2: (SCENARIO, "done"), 3: (SCENARIO, "done")}
     assert received == {2: list(range(200)), 3: list(range(200))}
     assert server.stats.stale_setpoints == server.stats.unknown_sysid == server.stats.bad_frames == 0
 
@@ -108,24 +124,7 @@ def test_two_companions_200_lockstep_steps_matched_by_sysid_and_step():
 def test_lazy_frames_leave_one_by_one_and_each_setpoint_is_handed_on_as_it_arrives():
     server = server_for([2, 3], timeout_s=2.0)
     server.open()
-    errors: list[BaseException] = []
-
-    def companion(sysid: int) -> None:
-        try:
-            with CompanionClient(sysid, sim=url(server)) as c:
-                c.connect(5.0)
-                c.arm(2.0)
-                while (frame := c.recv_frame(5.0)) is not None:
-                    c.send_setpoint(answer(frame, sysid))
-        except BaseException as exc:
-            errors.append(exc)
-
-    threads = [threading.Thread(target=companion, args=(s,)) for s in (2, 3)]
-    for t in threads:
-        t.start()
-    try:
-        server.wait_for_peers(5.0)
-        server.wait_for_armed(5.0)
+    with _armed_companions(server, lambda c, frame, sysid: c.send_setpoint(answer(frame, sysid))):
         for k in range(50):
             sent_before: list[int] = []
 
@@ -139,11 +138,6 @@ def test_lazy_frames_leave_one_by_one_and_each_setpoint_is_handed_on_as_it_arriv
             assert sent_before[1] == sent_before[0] + 1  # frame 2 was out before frame 3 was produced
             assert sorted(s for s, _ in arrived) == [2, 3] and all(sps[s] is sp for s, sp in arrived)
             assert all(sp.step == k for sp in sps.values())
-    finally:
-        server.close("done")
-        for t in threads:
-            t.join(5.0)
-    assert not errors, errors
 
 
 def test_missing_peer_raises_naming_it_within_timeout():

@@ -2,6 +2,7 @@
 Short runs (well under a simulated second) through the console scripts."""
 from __future__ import annotations
 
+import contextlib
 import json
 import signal
 import subprocess
@@ -128,20 +129,39 @@ def test_sigterm_stops_a_companion_cleanly_and_its_vehicle_goes_to_failsafe(tmp_
         sim.kill()
 
 
+@contextlib.contextmanager
+def _two_am_run_that_loses_companion_5(tmp_path):
+    """two_am_comp for 6 s; companion 5 SIGKILLed once the run is under way. Yields (sim,
+    seconds from the kill to the simulator's failsafe message, restart), restart() starting a
+    new companion 5 that writes am5.json; every process is killed on leaving."""
+    sim = Sim("two_am_comp.toml", tmp_path, "--step-timeout", "2", "--peer-timeout", "30", "--duration", "6")
+    procs = [companion(4, sim.bind), companion(5, sim.bind)]
+
+    def restart():
+        procs.append(companion(5, sim.bind, "two_am_comp.toml", "--outcome", str(tmp_path / "am5.json")))
+        return procs[-1]
+
+    try:
+        _wait_for(sim.proc.stdout, '"progress"')
+        procs[1].kill()
+        t_kill = time.monotonic()
+        _wait_for(sim.proc.stderr, "failsafe")
+        yield sim, time.monotonic() - t_kill, restart
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+        sim.kill()
+
+
 def test_companion_restarted_seconds_later_takes_its_vehicle_back_from_where_it_is(tmp_path):
     """Restarted while its vehicle has been held by the failsafe for seconds and the mission
     has moved on: it starts from the vehicle's state (companion.pilot, amcore.mission.JoinBlend)
     and takes over for good. Before, its first ~2500 setpoints exceeded the simulator's
     plausibility bounds and were rejected, and the vehicle ended the run in failsafe."""
-    sim = Sim("two_am_comp.toml", tmp_path, "--step-timeout", "2", "--peer-timeout", "30", "--duration", "6")
-    c4, c5 = companion(4, sim.bind), companion(5, sim.bind)
-    c5b = None
-    try:
-        _wait_for(sim.proc.stdout, '"progress"')
-        c5.kill()
-        _wait_for(sim.proc.stderr, "failsafe")
+    with _two_am_run_that_loses_companion_5(tmp_path) as (sim, _, restart):
         time.sleep(3.0)  # the run goes on without it
-        c5b = companion(5, sim.bind, "two_am_comp.toml", "--outcome", str(tmp_path / "am5.json"))
+        c5b = restart()
         code, err = sim.wait(timeout_s=180)
         assert code == 0, err
         o = json.loads((tmp_path / "outcome.json").read_text())
@@ -153,24 +173,12 @@ def test_companion_restarted_seconds_later_takes_its_vehicle_back_from_where_it_
         assert c5b.returncode == 0
         am5 = json.loads((tmp_path / "am5.json").read_text())
         assert am5["at"]["end"]["r_c_err"] < 0.01
-    finally:
-        for p in (c4, c5, c5b):
-            if p is not None and p.poll() is None:
-                p.kill()
-        sim.kill()
 
 
 def test_sigkilled_companion_is_detected_and_a_restarted_one_rejoins(tmp_path):
-    sim = Sim("two_am_comp.toml", tmp_path, "--step-timeout", "2", "--peer-timeout", "30", "--duration", "6")
-    c4, c5 = companion(4, sim.bind), companion(5, sim.bind)
-    c5b = None
-    try:
-        _wait_for(sim.proc.stdout, '"progress"')
-        c5.kill()
-        t_kill = time.monotonic()
-        _wait_for(sim.proc.stderr, "failsafe")
-        assert time.monotonic() - t_kill < 10  # detected within the step timeout (+ load)
-        c5b = companion(5, sim.bind, "two_am_comp.toml", "--outcome", str(tmp_path / "am5.json"))
+    with _two_am_run_that_loses_companion_5(tmp_path) as (sim, detected_after_s, restart):
+        assert detected_after_s < 10  # detected within the step timeout (+ load)
+        c5b = restart()
         line = _wait_for(sim.proc.stderr, "companion back")
         assert "sysid 5" in line
         code, err = sim.wait(timeout_s=180)
@@ -182,11 +190,6 @@ def test_sigkilled_companion_is_detected_and_a_restarted_one_rejoins(tmp_path):
         assert c5b.returncode == 0
         am5 = json.loads((tmp_path / "am5.json").read_text())
         assert am5["at"]["end"]["r_c_err"] < 0.05  # flying its reference again
-    finally:
-        for p in (c4, c5, c5b):
-            if p is not None and p.poll() is None:
-                p.kill()
-        sim.kill()
 
 
 def test_companion_with_the_wrong_signing_key_is_not_served(tmp_path):
