@@ -126,7 +126,17 @@ class ObjectSpec:
     size_m: tuple[float, float, float] = (0.2, 0.2, 0.2)  # box edge lengths
     radius_m: float = 0.0  # cylinder
     height_m: float = 0.0  # cylinder
-    lateral_friction: float = 1.0
+    lateral_friction: float = 1.0  # the object's own coefficient (Bullet multiplies a pair's two)
+    # Coulomb coefficient of the pad-object pair itself. Bullet combines two bodies'
+    # coefficients by multiplication, so the simulator sets the pad's own coefficient to
+    # pad_friction / lateral_friction. 0: unset, the pad takes lateral_friction (the pair
+    # then has lateral_friction ** 2).
+    pad_friction: float = 0.0
+
+    @property
+    def pad_object_friction(self) -> float:
+        """Coulomb coefficient of the pad-object contact as the simulator sets it."""
+        return self.pad_friction if self.pad_friction > 0.0 else self.lateral_friction ** 2
 
     @property
     def half_height_m(self) -> float:
@@ -183,11 +193,77 @@ class LinkSpec:
 
 @dataclass(frozen=True)
 class AmSpec:
+    """One [[am]] entry.
+
+    - azimuth_deg: direction from the object centre to the AM, about world z.
+    - misalignment_deg: the AM's error in the object's face direction: it approaches, faces
+      and squeezes along azimuth_deg + 180 + misalignment_deg about the object centre, so
+      its flat pad meets the face at that angle. Part of its mission, unknown to the law.
+    - start_offset_m, start_heading_deg: the vehicle starts this far from where its mission
+      starts (world axes) and turned by this much about z; its references do not move.
+    """
+
     sysid: int
-    azimuth_deg: float  # direction from the object centre to the AM, about world z
+    azimuth_deg: float
     signing_key_hex: str = ""  # 64 hex digits; empty: see LinkSpec
+    misalignment_deg: float = 0.0
+    start_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    start_heading_deg: float = 0.0
     # this AM's link impairment: [link] with this [[am]]'s `link = {loss = ..., ...}` on top
     link: LinkSpec | None = None
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    """[sensors] table: how the flight controller's sensor frames differ from the truth.
+
+    All zero (the default, and the paper's scenarios): exact frames. Noise entries are the
+    standard deviation of white Gaussian noise on every frame, per axis; bias entries the
+    standard deviation of a constant offset per axis, drawn once per AM from the scenario's
+    seed. Odometry: position p_WB [m], attitude (a rotation vector applied to R_WB) [rad],
+    linear velocity v_B [m/s], angular velocity w_B [rad/s]; wrist F/T: force [N], torque
+    [N m] in the sensor's frame E. latency_s: every frame's measured values are this old
+    (rounded to whole physics steps). Defaults with their sources: configs/randomize/default.toml.
+    """
+
+    position_noise_m: float = 0.0
+    position_bias_m: float = 0.0
+    attitude_noise_rad: float = 0.0
+    attitude_bias_rad: float = 0.0
+    velocity_noise_mps: float = 0.0
+    velocity_bias_mps: float = 0.0
+    angular_velocity_noise_radps: float = 0.0
+    angular_velocity_bias_radps: float = 0.0
+    force_noise_n: float = 0.0
+    force_bias_n: float = 0.0
+    torque_noise_nm: float = 0.0
+    torque_bias_nm: float = 0.0
+    latency_s: float = 0.0
+
+    @property
+    def exact(self) -> bool:
+        return all(getattr(self, f.name) == 0.0 for f in dataclasses.fields(self))
+
+
+@dataclass(frozen=True)
+class SuccessCriteria:
+    """[success] table: what a successful mission is, judged from the simulator's ground
+    truth (`simulator.verdict`). The mission fails on the first criterion it misses:
+
+    - a base (multirotor body) touches anything, or a base leaves the arena (farther than
+      max_distance_m from the object's rest position) or the state turns non-finite;
+    - the object is not at least min_lift_m above its rest height throughout the hover
+      window, or it touches the table or ground there;
+    - any pad slips more than max_slip_m relative to the object (end of grasp on);
+    - a vehicle is in failsafe at the end;
+    - the simulator rejected any setpoint as implausible;
+    - an AM's actuators saturate on more than max_saturated_fraction of the run's steps.
+    """
+
+    min_lift_m: float = 0.2
+    max_slip_m: float = 0.002
+    max_saturated_fraction: float = 0.05
+    max_distance_m: float = 3.0
 
 
 @dataclass(frozen=True)
@@ -201,6 +277,8 @@ class ScenarioSpec:
     rate_hz: float = 1000.0
     seed: int = 0
     link: LinkSpec = LinkSpec()
+    sensors: SensorSpec = SensorSpec()
+    success: SuccessCriteria = SuccessCriteria()
     path: Path | None = None
 
     @property
@@ -353,9 +431,18 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
     force compensation off) and safety settings with [safety].
     """
     path = Path(path).resolve()
-    data = _read_toml(path)
+    return scenario_from_dict(_read_toml(path), path)
+
+
+SCENARIO_TABLES = ("scenario", "object", "mission", "am", "options", "safety", "link", "sensors", "success",
+                   "randomize")
+
+
+def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
+    """`load_scenario` on TOML data already read; relative paths in it are taken from
+    `path`'s folder and errors name `path`. A [randomize] table is left to `trials`."""
     where = str(path)
-    extra = set(data) - {"scenario", "object", "mission", "am", "options", "safety", "link"}
+    extra = set(data) - set(SCENARIO_TABLES)
     if extra:
         raise ConfigError(f"{where}: unknown table [{sorted(extra)[0]}]")
     if "scenario" not in data:
@@ -371,13 +458,17 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
             merged.update(data[tbl])
             vdata[tbl] = merged
     vehicle = vehicle_from_dict(vdata, vpath)
-    kw = _build(ScenarioSpec, sc, f"{where}: [scenario]", skip=("vehicle", "object", "mission", "ams", "path", "link"))
+    kw = _build(ScenarioSpec, sc, f"{where}: [scenario]",
+                skip=("vehicle", "object", "mission", "ams", "path", "link", "sensors", "success"))
     if "object" not in data:
         raise ConfigError(f"{where}: missing table [object]")
     obj = ObjectSpec(**_build(ObjectSpec, data["object"], f"{where}: [object]"))
     if obj.shape not in ("box", "cylinder"):
         raise ConfigError(f"{where}: [object].shape: expected 'box' or 'cylinder', got '{obj.shape}'")
     _positive(f"{where}: [object].mass_kg", obj.mass_kg)
+    _positive(f"{where}: [object].lateral_friction", obj.lateral_friction)
+    if obj.pad_friction < 0.0:
+        raise ConfigError(f"{where}: [object].pad_friction: must be >= 0 (0: unset), got {obj.pad_friction!r}")
     if obj.shape == "cylinder":
         _positive(f"{where}: [object].radius_m", obj.radius_m)
         _positive(f"{where}: [object].height_m", obj.height_m)
@@ -423,10 +514,29 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
     key_path = link.key_path(path)
     if key_path is not None and not key_path.is_file():
         raise ConfigError(f"{where}: [link].key_file: file not found: {key_path}")
-    spec = ScenarioSpec(vehicle=vehicle, object=obj, mission=mission, ams=ams, path=path, link=link, **kw)
+    for i, a in enumerate(ams):
+        if not abs(a.misalignment_deg) < 45.0:
+            raise ConfigError(f"{where}: [[am]] #{i + 1}.misalignment_deg: must be within +/-45, got {a.misalignment_deg}")
+    sensors = SensorSpec(**_build(SensorSpec, _table(data, "sensors", where), f"{where}: [sensors]"))
+    for f in dataclasses.fields(SensorSpec):
+        if getattr(sensors, f.name) < 0.0:
+            raise ConfigError(f"{where}: [sensors].{f.name}: must be >= 0, got {getattr(sensors, f.name)!r}")
+    success = SuccessCriteria(**_build(SuccessCriteria, _table(data, "success", where), f"{where}: [success]"))
+    for f in dataclasses.fields(SuccessCriteria):
+        if f.name != "min_lift_m" and not getattr(success, f.name) >= 0.0:
+            raise ConfigError(f"{where}: [success].{f.name}: must be >= 0, got {getattr(success, f.name)!r}")
+    spec = ScenarioSpec(vehicle=vehicle, object=obj, mission=mission, ams=ams, path=path, link=link,
+                        sensors=sensors, success=success, **kw)
     _positive(f"{where}: [scenario].rate_hz", spec.rate_hz)
     _positive(f"{where}: [scenario].duration_s", spec.duration_s)
     return spec
+
+
+def _table(data: dict, name: str, where: str) -> dict:
+    t = data.get(name, {})
+    if not isinstance(t, dict):
+        raise ConfigError(f"{where}: [{name}] must be a table")
+    return t
 
 
 def _link_spec(table: dict, where: str) -> LinkSpec:

@@ -107,7 +107,9 @@ def am_mission(spec: ScenarioSpec, am: AmSpec, model: AmModel) -> AmMission:
                          f"vehicle has {spec.vehicle.task.components}")
     ms = spec.mission
     az = np.deg2rad(am.azimuth_deg)
-    psi = az + np.pi  # face the object
+    # face the object; a misaligned AM approaches and faces along a direction turned by its
+    # misalignment about the object centre, believing the face is where it would be
+    psi = az + np.pi + np.deg2rad(am.misalignment_deg)
     frame = TaskFrame(R_WT=Rz(psi), p_WT=np.array(spec.object.position_m, dtype=float))
     geo = nominal_geometry(model)
     d = geo.p_BE - geo.r_BC  # end-effector relative to CoM, level, in {b} = {t} orientation

@@ -21,17 +21,30 @@ from collections.abc import Callable, Collection, Iterator, Mapping
 
 import numpy as np
 
-from amcore.config import ScenarioSpec
+from amcore.config import AmSpec, ScenarioSpec
 from amcore.mission import am_mission
-from amcore.model import build_model
+from amcore.model import AmState, build_model
+from amcore.so3 import Rz
 from amlink.impair import ImpairedLink, LinkImpairment
 from amlink.types import SensorFrame, TorqueSetpoint, sensor_frame_from_wire
 
 from .failsafe import Failsafe
 from .outcome import RunOutcome
+from .sensors import SensorModel
+from .verdict import judge
 from .world import World
 
 TRUTH_EVERY = 10  # ground-truth sample period for the outcome and telemetry [steps]: 100 Hz at 1 kHz
+
+
+def initial_state(spec: ScenarioSpec, am: AmSpec, model) -> AmState:
+    """Where a vehicle starts: its mission's start (at rest, level, nominal arm pose), moved by
+    its [[am]] start_offset_m and turned by start_heading_deg about z (references unchanged)."""
+    x = am_mission(spec, am, model).initial_state()
+    if am.start_offset_m == (0.0, 0.0, 0.0) and am.start_heading_deg == 0.0:
+        return x
+    return dataclasses.replace(x, p_WB=x.p_WB + np.array(am.start_offset_m),
+                               R_WB=Rz(np.deg2rad(am.start_heading_deg)) @ x.R_WB)
 
 
 class SitlCore:
@@ -40,14 +53,18 @@ class SitlCore:
         self.spec, self.log, self.on_truth = spec, log, on_truth
         self.model = build_model(spec.vehicle)
         self.sysids = [am.sysid for am in spec.ams]
-        self.world = World(spec, {am.sysid: am_mission(spec, am, self.model).initial_state() for am in spec.ams})
+        self.world = World(spec, {am.sysid: initial_state(spec, am, self.model) for am in spec.ams})
         ms = spec.mission
         self.outcome = RunOutcome(self.sysids, (ms.grasp_end_s + ms.lift_move_s + 1.0, ms.hover_end_s),
                                   slip_from_s=ms.grasp_end_s)
         self.fc_links = {am.sysid: ImpairedLink(LinkImpairment.for_scenario(
             dataclasses.replace(spec, link=am.link or spec.link)), stream=am.sysid) for am in spec.ams}
+        self.sensors = {} if spec.sensors.exact else {
+            am.sysid: SensorModel(spec.sensors, self.model.n, spec.dt_s, spec.seed, am.sysid) for am in spec.ams}
         self.failsafes: dict[int, Failsafe] = {}
         self.events: list[dict] = []
+        self.rejected: list[tuple[float, int, str]] = []  # (t, sysid, why) of setpoints refused as implausible
+        self.controller_errors: list[tuple[float, int, str]] = []  # (t, sysid, what): controllers that raised
         self.digest = hashlib.sha256()
         self._unobserved: tuple | None = None  # (k, values, frames) of `frames` awaiting `observe`
         self._k, self._actuated = -1, set()  # step of the last frames; AMs actuated on arrival
@@ -77,7 +94,8 @@ class SitlCore:
         self._k, self._actuated = k, set()
         for s in self.sysids:
             values[s] = v = w.sensor_values(s)
-            out[s] = f = sensor_frame_from_wire(k, t, v, n, 0)
+            sensor = self.sensors.get(s)  # none: exact frames
+            out[s] = f = sensor_frame_from_wire(k, t, v if sensor is None else sensor(v), n, 0)
             yield s, f
         self._unobserved = (k, values, out)
 
@@ -141,6 +159,17 @@ class SitlCore:
                          f"{np.round(sp.tau_B_nm, 3)}, tau_q {np.round(sp.tau_q_nm, 3)}); counted in outcome.json, "
                          f"further ones not printed")
 
+    def note_rejected(self, sysid: int, why: str) -> None:
+        """A setpoint of `sysid` answering the current step was refused as implausible."""
+        if len(self.rejected) < 1000:
+            self.rejected.append((self.time_s, sysid, why))
+        else:  # keep the count, not every reason
+            self.rejected.append(self.rejected[-1])
+
+    def note_controller_error(self, sysid: int, what: str) -> None:
+        """The controller of `sysid` raised instead of answering (in-process runs)."""
+        self.controller_errors.append((self.time_s, sysid, what))
+
     def step(self) -> None:
         self.world.step()
 
@@ -149,7 +178,9 @@ class SitlCore:
         self.observe()
         w = self.world
         self.outcome.add(w.ground_truth(), {s: w.wrench_ee(s) for s in self.sysids})
-        return {"state_digest": self.digest.hexdigest(), "events": self.events,
+        v = judge(self.outcome, self.spec.success, w.step_index, self.failsafes, self.rejected, self.controller_errors)
+        return {"state_digest": self.digest.hexdigest(), "verdict": v.to_dict(), "events": self.events,
+                "rejected_setpoints": len(self.rejected),
                 "failsafe_at_end": sorted(self.failsafes),
                 "fc_link": {str(s): {**vars(link.channel.stats), "stale": link.hold.stale}
                             for s, link in self.fc_links.items()},

@@ -7,6 +7,8 @@ wire rounds them (ODOMETRY carries the base state as float32, time in microsecon
 everything else is float64), so with an ideal link both produce the same `state_digest`.
 
     python -m simulator.inprocess configs/scenarios/two_am_comp.toml [--duration S]
+
+Exit codes: 0 mission success, 4 mission failed (the verdict on stderr), 2 bad configuration.
 """
 from __future__ import annotations
 
@@ -19,10 +21,12 @@ from collections.abc import Callable
 import numpy as np
 
 from amcore.config import ConfigError, ScenarioSpec, load_scenario
+from amlink.limits import SetpointLimits
 from amlink.types import SensorFrame
 from companion.pilot import Pilot
 
 from .core import SitlCore
+from .verdict import MISSION_FAILED
 
 
 def as_on_the_wire(f: SensorFrame) -> SensorFrame:
@@ -34,20 +38,47 @@ def as_on_the_wire(f: SensorFrame) -> SensorFrame:
 
 
 def run(spec: ScenarioSpec, duration_s: float | None = None,
-        lost: Callable[[float], set[int]] = lambda _t: set()) -> dict:  # fmt: skip
-    """Run a scenario in-process; `lost(t)` -> sysids whose companion is silent at t (tests)."""
+        lost: Callable[[float], set[int]] = lambda _t: set(),
+        progress: Callable[[float], None] | None = None) -> dict:  # fmt: skip
+    """Run a scenario in-process; `lost(t)` -> sysids whose companion is silent at t (tests).
+
+    As the UDP simulator does, a setpoint outside the plausibility bounds (`amlink.limits`)
+    is refused (its flight controller holds the last command) and counted; a controller
+    that raises is treated as a companion that died (failsafe) and reported. The result's
+    "verdict" judges the mission (`simulator.verdict`). `progress(t)`, if given, is called
+    about every simulated second."""
     core = SitlCore(spec)
     pilots = {s: Pilot(spec, s, model=core.model) for s in core.sysids}
+    v = spec.vehicle
+    limits = SetpointLimits.for_vehicle(v.rotors.count * v.rotors.thrust_max_n, max(v.joint_torque_max_nm), v.n_joints)
     n = int(round((spec.duration_s if duration_s is None else duration_s) * spec.rate_hz))
+    every = max(1, int(round(spec.rate_hz)))
+    crashed: set[int] = set()
     core.connect()
     t0 = time.perf_counter()
     try:
         for k in range(n):
             frames = core.frames(k)
-            gone = lost(core.time_s)
-            setpoints = {s: pilots[s].step(as_on_the_wire(f))[0] for s, f in frames.items() if s not in gone}
-            core.actuate(k, setpoints, gone)
+            gone = lost(core.time_s) | crashed
+            setpoints = {}
+            for s, f in frames.items():
+                if s in gone:
+                    continue
+                try:
+                    sp = pilots[s].step(as_on_the_wire(f))[0]
+                    why = limits.violation(sp)
+                except (ArithmeticError, ValueError) as exc:  # LinAlgError, non-finite setpoints
+                    core.note_controller_error(s, f"{type(exc).__name__}: {exc}")
+                    crashed.add(s)
+                    continue
+                if why is None:
+                    setpoints[s] = sp
+                else:
+                    core.note_rejected(s, why)
+            core.actuate(k, setpoints, gone | crashed)
             core.step()
+            if progress is not None and k % every == 0:
+                progress(core.time_s)
         result = core.finish()
     finally:
         core.close()
@@ -67,8 +98,10 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    print(json.dumps(run(spec, a.duration), indent=1, default=str))
-    return 0
+    result = run(spec, a.duration)
+    print(json.dumps(result, indent=1, default=str))
+    print(result["verdict"]["text"], file=sys.stderr)
+    return MISSION_FAILED if result["verdict"]["status"] == "failed" else 0
 
 
 if __name__ == "__main__":

@@ -5,7 +5,8 @@ MAVLink/UDP on loopback, with a progress bar and a run folder holding the outcom
 
 The run folder gets outcome.json (simulator ground truth), am<sysid>.json (each
 companion's controller errors per phase) and every process's log. Exit code: 0 when every
-process ended cleanly, 2 bad configuration, 1 otherwise.
+process ended cleanly and the mission succeeded (simulator.verdict), 4 when the mission
+failed, 2 bad configuration, 1 when a process failed.
 """
 from __future__ import annotations
 
@@ -22,6 +23,8 @@ import time
 from pathlib import Path
 
 from amcore.config import DEFAULT_SCENARIO, ConfigError, load_scenario
+
+from .verdict import MISSION_FAILED
 
 
 def _command(name: str) -> list[str]:
@@ -122,8 +125,9 @@ def main(argv: list[str] | None = None) -> int:
         _stop_all(procs)
         for f in logs:
             f.close()
+    mission_failed = "simulator" in procs and procs["simulator"].returncode == MISSION_FAILED
     for name, p in procs.items():
-        if p.returncode != 0 and name not in failed:
+        if p.returncode != 0 and name not in failed and not (name == "simulator" and mission_failed):
             failed.append(name)
     _print_summary(run_dir, spec, procs)
     if not a.no_telemetry and mcap.is_file():
@@ -134,6 +138,9 @@ def main(argv: list[str] | None = None) -> int:
     if failed:
         print(f"am-run: FAILED: {', '.join(failed)} (logs in {run_dir})", file=sys.stderr)
         return 1
+    if mission_failed:
+        print(f"am-run: the mission FAILED (verdict in {run_dir / 'outcome.json'})", file=sys.stderr)
+        return MISSION_FAILED
     return 0
 
 
@@ -236,6 +243,8 @@ def _print_summary(run_dir: Path, spec, procs) -> None:
     obj = o["object"]
     rtf = o.get("real_time_factor") or 0.0
     print(f"\n{spec.name}: {o['status']}; {o['sim_time_s']:.2f} s simulated, {rtf:.2f}x real time", file=sys.stderr)
+    if "verdict" in o:
+        print(f"verdict: {o['verdict']['text']}", file=sys.stderr)
     hl = obj.get("hover_min_lift_m")
     print(f"object: final lift {obj['final_lift_m'] * 100:.1f} cm"
           + (f", hover-window min {hl * 100:.1f} cm" if hl is not None else "")

@@ -8,8 +8,10 @@ companion its sensor frame (ODOMETRY, AM_JOINT_STATE, AM_WRENCH, AM_SIM_STEP), w
 all N setpoints answering step k (the N exchanges run concurrently), applies them through
 the rotor mixer and joint limits (saturation is counted and logged) and steps physics.
 The run folder gets outcome.json (the physical outcome from ground truth, see
-simulator.outcome). Exit codes: 0 run complete, 2 bad configuration, 1 link failure
-(a missing or silent companion, named), 130 interrupted.
+simulator.outcome, and the mission verdict, simulator.verdict). Exit codes: 0 run
+complete and its mission a success (or not failed so far, when --duration cut the mission
+short), 4 the mission failed (the verdict names the criterion and when), 2 bad
+configuration, 1 link failure (a missing or silent companion, named), 130 interrupted.
 """
 from __future__ import annotations
 
@@ -33,6 +35,7 @@ from telemetry.session import TelemetryConfigError, add_zenoh_arguments, options
 from telemetry.wiring import SimulatorTelemetry
 
 from .core import SitlCore
+from .verdict import MISSION_FAILED
 
 
 
@@ -157,20 +160,28 @@ def main(argv: list[str] | None = None) -> int:
                   f"publishing anyway", file=sys.stderr, flush=True)
         progress.t_wall0 = time.perf_counter()
         sim_tele.start(core.time_s)
+        rejected = server.stats.rejected_setpoints
         for k in range(n_steps):
             # each frame leaves as soon as it is read; each setpoint is applied as it arrives
             setpoints = server.exchange(core.iter_frames(k), partial=True, while_waiting=core.observe,
                                         on_setpoint=core.on_setpoint)
+            if server.stats.rejected_setpoints != rejected:  # the verdict names the first and counts them
+                for _ in range(server.stats.rejected_setpoints - rejected):
+                    core.note_rejected(*server.last_rejection)
+                rejected = server.stats.rejected_setpoints
             core.actuate(k, setpoints, server.lost_peers)
             core.step()
             progress.update(core.time_s)
         progress.update(core.time_s, force=True)
         k = n_steps
         result = core.finish()
-        if core.failsafes:
-            lost = ", ".join(map(str, sorted(core.failsafes)))
-            status, code = f"run complete; in failsafe at the end: sysid {lost}", 1
-            told, completed = f"run complete; failsafe: sysid {lost}", True
+        verdict = result["verdict"]
+        completed = True
+        if not verdict["success"]:
+            status = f"run complete; {verdict['text']}"
+        if verdict["status"] == "failed":
+            code = MISSION_FAILED
+            told = f"mission failed: {verdict['failure_class']}"
     except _Stop as stop:
         status, code = f"interrupted by {stop}", 130
         told = status

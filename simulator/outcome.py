@@ -28,6 +28,8 @@ class _AmAcc:
         self.saturated_steps = 0
         self.first_saturation_s: float | None = None
         self.lowest_base_z = np.inf
+        self.first_base_contact: tuple[float, tuple[str, ...]] | None = None  # (t, what it touched)
+        self.slip_series: list[float] = []  # slip at every sample from slip_from_s on [m]
 
 
 class RunOutcome:
@@ -42,6 +44,14 @@ class RunOutcome:
         self.lift_min = np.inf
         self.object_touching_in_hover: set[str] = set()
         self.t_last = 0.0
+        # per sample, for the verdict (simulator.verdict): time, object lift, whether the object
+        # touches the table or ground, the farthest base from the object's rest position
+        self.t_series: list[float] = []
+        self.lift_series: list[float] = []
+        self.on_support_series: list[bool] = []
+        self.base_distance_series: list[float] = []
+        self.slip_t_series: list[float] = []
+        self.p_rest: np.ndarray | None = None
 
     def saturation(self, sysid: int, t: float) -> bool:
         """Count one saturated step; True the first time (so the caller logs it once)."""
@@ -59,10 +69,19 @@ class RunOutcome:
         obj = gt.object
         if self.z_rest is None:
             self.z_rest = float(obj.p_WO[2])
+            self.p_rest = np.array(obj.p_WO, dtype=float)
         lift = float(obj.p_WO[2]) - self.z_rest
         self.final_lift = lift
         in_hover = self.hover_window[0] <= t <= self.hover_window[1]
         R_WO = quat_wxyz_to_R(obj.quat_WO_wxyz)
+        self.t_series.append(t)
+        self.lift_series.append(lift)
+        self.on_support_series.append(any(n in ("table", "ground") for n in obj.touching))
+        dist = max((float(np.linalg.norm(am.p_WB - self.p_rest)) for am in gt.ams.values()), default=0.0)
+        finite = all(np.isfinite(am.p_WB).all() for am in gt.ams.values())
+        self.base_distance_series.append(dist if finite and np.isfinite(obj.p_WO).all() else np.inf)
+        if t >= self.slip_from_s:
+            self.slip_t_series.append(t)
         if in_hover:
             self._lift_n += 1
             self._lift_sum += lift
@@ -71,12 +90,16 @@ class RunOutcome:
         for s, am in gt.ams.items():
             a = self.ams[s]
             a.base_contacts.update(am.base_contacts)
+            if am.base_contacts and a.first_base_contact is None:
+                a.first_base_contact = (t, tuple(am.base_contacts))
             a.lowest_base_z = min(a.lowest_base_z, float(am.p_WB[2]))
             if t >= self.slip_from_s:
                 p_O = R_WO.T @ (am.p_WE - obj.p_WO)
                 if a.anchor_O is None:
                     a.anchor_O = p_O
-                a.slip_max = max(a.slip_max, float(np.linalg.norm(p_O - a.anchor_O)))
+                slip = float(np.linalg.norm(p_O - a.anchor_O))
+                a.slip_max = max(a.slip_max, slip)
+                a.slip_series.append(slip)
             if not in_hover:
                 continue
             a.n += 1
@@ -99,6 +122,7 @@ class RunOutcome:
                 "lowest_base_z_m": a.lowest_base_z,
                 "saturated_steps": a.saturated_steps,
                 "first_saturation_s": a.first_saturation_s,
+                "first_base_contact_s": a.first_base_contact[0] if a.first_base_contact else None,
             }
         return {
             "t_last_s": self.t_last,
@@ -110,6 +134,7 @@ class RunOutcome:
                 "hover_min_lift_m": self.lift_min if self._lift_n else None,
                 "hover_mean_lift_m": self._lift_sum / self._lift_n if self._lift_n else None,
                 "touching_in_hover": sorted(self.object_touching_in_hover),
+                "max_lift_m": max(self.lift_series, default=0.0),
             },
             "ams": ams,
         }

@@ -9,7 +9,10 @@ AM links are in AM_GROUP and collide with the environment only, so AMs pass thro
 other and an AM's own base and pad never touch. Only the AM base and pad have shapes.
 
 Friction: Bullet combines two surfaces' coefficients by multiplication, so the pad-object
-pair sees mu = pad friction * object friction (both `ObjectSpec.lateral_friction`).
+pair sees mu = pad coefficient * object coefficient. The object takes
+`ObjectSpec.lateral_friction`; the pad takes `pad_lateral_friction`, which makes the pair's
+product `ObjectSpec.pad_friction` when that is set (else the pad takes the object's
+coefficient too, and the pair has its square).
 """
 from __future__ import annotations
 
@@ -146,6 +149,12 @@ class AmBody:
     tool_link_masses_kg: tuple[float, ...]
     tool_mass_kg: float
     total_mass_kg: float
+
+
+def pad_lateral_friction(obj: ObjectSpec) -> float:
+    """The pad's own Bullet coefficient that gives the pad-object pair `obj.pad_object_friction`
+    (Bullet multiplies the two bodies' coefficients)."""
+    return obj.pad_friction / obj.lateral_friction if obj.pad_friction > 0.0 else obj.lateral_friction
 
 
 def load_am(client: int, vehicle: VehicleParams, friction: float) -> AmBody:

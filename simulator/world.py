@@ -168,7 +168,7 @@ class World:
         self._names[self._object_id] = "object"
         n = self.spec.vehicle.n_joints
         for a in self.spec.ams:
-            am = scene.load_am(c, self.spec.vehicle, friction=self.spec.object.lateral_friction)
+            am = scene.load_am(c, self.spec.vehicle, friction=scene.pad_lateral_friction(self.spec.object))
             scene.reset_am(c, am, self._initial[a.sysid])
             self._ams[a.sysid] = am
             self._names[am.body_id] = f"am{a.sysid}"

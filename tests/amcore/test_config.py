@@ -39,6 +39,13 @@ BASE = (ROOT / "configs" / "scenarios" / "two_am_comp.toml").read_text()
     ("[object]", "[objekt]", "unknown table [objekt]"),
     ("approach_end_s = 5.0", "approach_end_s = 15.0", "approach_end_s < grasp_end_s"),
     ("squeeze_m = 0.03", "squeeze_m = 0.03\njoin_blend_s = 0.0", "[mission].join_blend_s must be > 0"),
+    ("mass_kg = 1.0", "mass_kg = 1.0\npad_friction = -0.5", "[object].pad_friction: must be >= 0"),
+    ("[mission]", "[success]\nmin_slip = 1.0\n[mission]", "[success]: unknown key 'min_slip'"),
+    ("[mission]", "[success]\nmax_slip_m = -1.0\n[mission]", "[success].max_slip_m: must be >= 0"),
+    ("[mission]", "[sensors]\nforce_noise_n = -1.0\n[mission]", "[sensors].force_noise_n: must be >= 0"),
+    ("[mission]", "[sensors]\ngps_noise_m = 1.0\n[mission]", "[sensors]: unknown key 'gps_noise_m'"),
+    ("sysid = 4\n", "sysid = 4\nmisalignment_deg = 50.0\n", "misalignment_deg: must be within +/-45"),
+    ("sysid = 4\n", "sysid = 4\nstart_offset_m = [0.1]\n", "start_offset_m: expected 3 entries"),
 ])
 def test_malformed_scenario_names_file_and_key(tmp_path, old, new, key):
     assert old in BASE

@@ -36,3 +36,37 @@ def test_impaired_link_is_deterministic_across_runs_and_transports(tmp_path):
         assert r.code == 0, r.stderr
         digests.append(r.outcome["state_digest"])
     assert digests[0] == digests[1] == ours["state_digest"]
+
+
+def test_a_drawn_trial_is_bit_identical_in_process_and_through_the_processes(tmp_path):
+    """A trial of the default randomization (sensor noise, bias and latency, setpoint loss,
+    misalignment, start offsets, another object) written as a scenario file: `am-run` and the
+    in-process runner agree bit for bit, so a campaign's rows replay through the processes."""
+    from amcore.config import _read_toml
+    from trials.cli import DEFAULT_RANDOMIZE, build_tasks
+    from trials.randomize import load_randomize
+
+    base = SCENARIOS / "two_am_comp.toml"
+    task = build_tasks(_read_toml(base), base, load_randomize(DEFAULT_RANDOMIZE), 11, 1, tmp_path, None)[0]
+    spec = load_scenario(task.path)
+    assert spec.sensors.force_noise_n > 0 and spec.link.loss > 0 and spec.am(4).misalignment_deg != 0
+    ours = run(spec, duration_s=0.4)
+    sitl = am_run(task.path, tmp_path / "r", "--duration", "0.4", "--no-telemetry", timeout_s=300)
+    assert sitl.code == (4 if ours["verdict"]["status"] == "failed" else 0), sitl.stderr
+    assert ours["state_digest"] == sitl.outcome["state_digest"]
+    assert ours["verdict"] == sitl.outcome["verdict"]
+
+
+def test_a_failed_mission_makes_am_run_say_so_and_exit_4(tmp_path):
+    """A vehicle started turned 20 deg away from its heading saturates its rotors fighting
+    back: the verdict names it and am-run exits 4."""
+    text = (SCENARIOS / "two_am_short.toml").read_text().replace(
+        'vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{SCENARIOS.parent / "vehicles" / "am3dof.toml"}"')
+    text = text.replace("sysid = 4\n", "sysid = 4\nstart_heading_deg = 20.0\n")
+    path = tmp_path / "turned.toml"
+    path.write_text(text)
+    r = am_run(str(path), tmp_path / "r", "--duration", "1.0", "--no-telemetry", timeout_s=300)
+    assert r.code == 4, r.stderr
+    assert "verdict: mission FAILED: am4's actuators saturated on" in r.stderr
+    assert r.outcome["verdict"]["failure_class"] == "saturated" and r.outcome["exit_code"] == 4
+    assert run(load_scenario(path), duration_s=1.0)["verdict"] == r.outcome["verdict"]

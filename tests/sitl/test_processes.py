@@ -113,8 +113,8 @@ def test_sigterm_stops_a_companion_cleanly_and_its_vehicle_goes_to_failsafe(tmp_
         line = _wait_for(sim.proc.stderr, "failsafe")
         assert "sysid 5" in line
         code, err = sim.wait(timeout_s=120)
-        assert code == 1  # a vehicle ended the run in failsafe
-        assert "in failsafe at the end: sysid 5" in err
+        assert code == 4  # a vehicle ended the run in failsafe: the mission failed
+        assert "mission FAILED: sysid 5 in failsafe at the end" in err
         c4.communicate(timeout=30)
         assert c4.returncode == 0  # the other companion flew on, undisturbed, to the end
         o = json.loads((tmp_path / "outcome.json").read_text())

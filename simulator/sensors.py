@@ -1,0 +1,71 @@
+"""Sensor realism of the emulated flight controller (pure: numpy only).
+
+`SensorModel(spec, ...)` turns one AM's exact sensor values (the order of
+`World.sensor_values`: p_WB, quat_WB (w, x, y, z), v_B, w_B, q, qdot, wrench_E) into what its
+sensors report, as `[sensors]` (`amcore.config.SensorSpec`) describes:
+
+- latency: the values handed out at step k are those of step k - L, L = round(latency_s / dt)
+  (before step L, the first values);
+- bias: a constant offset per axis, drawn once from the AM's own random stream;
+- noise: white Gaussian noise per axis, drawn every frame from the same stream.
+
+Attitude errors are rotation vectors d applied on the body side, R = R_true exp(hat(d)).
+Joint encoders stay exact. Each AM's stream is seeded by (scenario seed, sysid), so a run
+is reproducible and the multi-process and in-process SITL see the same frames.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+from amcore.config import SensorSpec
+
+_STREAM = 0x5E45  # distinguishes the sensor stream from other seeded streams of an AM
+
+
+class SensorModel:
+    def __init__(self, spec: SensorSpec, n_joints: int, dt_s: float, seed: int, sysid: int) -> None:
+        self.spec, self.n = spec, n_joints
+        self.rng = np.random.default_rng([seed, sysid, _STREAM])
+        s = spec
+        bias_std = np.repeat([s.position_bias_m, s.attitude_bias_rad, s.velocity_bias_mps,
+                              s.angular_velocity_bias_radps, s.force_bias_n, s.torque_bias_nm], 3)
+        self.bias = bias_std * self.rng.standard_normal(18)  # p, attitude, v, w, f, tau
+        self.noise_std = np.repeat([s.position_noise_m, s.attitude_noise_rad, s.velocity_noise_mps,
+                                    s.angular_velocity_noise_radps, s.force_noise_n, s.torque_noise_nm], 3)
+        self.delay_steps = int(round(s.latency_s / dt_s))
+        self._past: deque[list[float]] = deque(maxlen=self.delay_steps + 1)
+
+    def __call__(self, values: list[float]) -> list[float]:
+        """What the sensors report this step, given this step's exact values."""
+        self._past.append(values)
+        v = self._past[0]  # the oldest kept: delay_steps old once the buffer is full
+        e = (self.bias + self.noise_std * self.rng.standard_normal(18)).tolist()
+        n = self.n
+        p = [v[0] + e[0], v[1] + e[1], v[2] + e[2]]
+        quat = _rotate_body(v[3:7], e[3:6])
+        vel = [v[7] + e[6], v[8] + e[7], v[9] + e[8]]
+        w = [v[10] + e[9], v[11] + e[10], v[12] + e[11]]
+        joints = v[13:13 + 2 * n]
+        f = v[13 + 2 * n:19 + 2 * n]
+        wrench = [f[0] + e[12], f[1] + e[13], f[2] + e[14], f[3] + e[15], f[4] + e[16], f[5] + e[17]]
+        return [*p, *quat, *vel, *w, *joints, *wrench]
+
+
+def _rotate_body(q_wxyz, d) -> list[float]:
+    """q * exp(d / 2) as a unit quaternion (w, x, y, z) with w >= 0; d a rotation vector [rad]."""
+    a = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    if a == 0.0:
+        return list(q_wxyz)
+    k = math.sin(0.5 * a) / a
+    bw, bx, by, bz = math.cos(0.5 * a), k * d[0], k * d[1], k * d[2]
+    aw, ax, ay, az = q_wxyz
+    w = aw * bw - ax * bx - ay * by - az * bz
+    x = aw * bx + ax * bw + ay * bz - az * by
+    y = aw * by - ax * bz + ay * bw + az * bx
+    z = aw * bz + ax * by - ay * bx + az * bw
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    sgn = 1.0 if w >= 0.0 else -1.0
+    return [sgn * w / n, sgn * x / n, sgn * y / n, sgn * z / n]

@@ -1,0 +1,63 @@
+"""What a trial varies reaches the physics as the config says: the pad-object friction pair,
+an AM's misalignment (its whole mission turned about the object), start offsets (the vehicle
+moved, its references not)."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pybullet as pb
+import pytest
+
+from amcore.config import load_scenario
+from amcore.mission import am_mission
+from amcore.model import build_model
+from amcore.so3 import Rz
+from simulator.core import SitlCore, initial_state
+
+from ..conftest import SCENARIO
+
+
+@pytest.mark.parametrize("lateral,pad,pair", [(1.0, 0.0, 1.0), (0.8, 0.0, 0.64), (0.8, 0.5, 0.5), (1.0, 1.2, 1.2)])
+def test_the_pad_object_pair_gets_the_named_coefficient(lateral, pad, pair):
+    spec = load_scenario(SCENARIO)
+    spec = dataclasses.replace(spec, object=dataclasses.replace(spec.object, lateral_friction=lateral,
+                                                                pad_friction=pad))
+    assert spec.object.pad_object_friction == pytest.approx(pair)
+    core = SitlCore(spec)
+    core.connect()
+    try:
+        w = core.world
+        am = w._am(4)
+        mu_pad = pb.getDynamicsInfo(am.body_id, am.pad_link_id, physicsClientId=w._c())[1]
+        mu_obj = pb.getDynamicsInfo(w._object_id, -1, physicsClientId=w._c())[1]
+        assert mu_pad * mu_obj == pytest.approx(pair) and mu_obj == pytest.approx(lateral)
+    finally:
+        core.close()
+
+
+def test_misalignment_turns_the_mission_about_the_object_centre():
+    spec = load_scenario(SCENARIO)
+    model = build_model(spec.vehicle)
+    am = spec.am(4)
+    straight = am_mission(spec, am, model)
+    turned = am_mission(spec, dataclasses.replace(am, misalignment_deg=5.0), model)
+    assert turned.psi - straight.psi == pytest.approx(np.deg2rad(5.0))
+    R = Rz(np.deg2rad(5.0))
+    c = np.array(spec.object.position_m)
+    for t in (0.0, 7.0, 15.0):
+        a, b = straight.reference(t), turned.reference(t)
+        assert b.r_c == pytest.approx(c + R @ (a.r_c - c))
+        assert b.y == pytest.approx(a.y)  # the same task in its own (turned) frame
+
+
+def test_start_offsets_move_the_vehicle_not_its_references():
+    spec = load_scenario(SCENARIO)
+    model = build_model(spec.vehicle)
+    am = spec.am(5)
+    moved = dataclasses.replace(am, start_offset_m=(0.03, -0.02, 0.01), start_heading_deg=4.0)
+    x0, x1 = initial_state(spec, am, model), initial_state(spec, moved, model)
+    assert x1.p_WB - x0.p_WB == pytest.approx([0.03, -0.02, 0.01])
+    assert x1.R_WB == pytest.approx(Rz(np.deg2rad(4.0)) @ x0.R_WB)
+    assert am_mission(spec, moved, model).reference(0.0).r_c == pytest.approx(
+        am_mission(spec, am, model).reference(0.0).r_c)

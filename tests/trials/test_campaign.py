@@ -1,0 +1,113 @@
+"""A short campaign end to end (am-trials on two_am_short): its table, summary, plots and
+replayable scenario files agree with each other; a local process pool and a Dask cluster
+give the same trials, bit for bit."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+from amcore.config import _read_toml, load_scenario
+from simulator.inprocess import run
+from simulator.verdict import FAILURE_CLASSES
+from trials import cli
+from trials.report import read_csv, wilson_interval
+from trials.runner import run_all
+from trials.randomize import load_randomize
+
+ROOT = Path(__file__).resolve().parents[2]
+SHORT = ROOT / "configs" / "scenarios" / "two_am_short.toml"
+SEED = 7
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory):
+    out = tmp_path_factory.mktemp("campaign")
+    code = cli.main([str(SHORT), "--trials", "4", "--seed", str(SEED), "--out", str(out), "--workers", "2",
+                     "--no-progress"])
+    assert code == 0
+    return out
+
+
+def test_the_table_holds_every_trial_with_its_draws_and_verdict(campaign):
+    rows = read_csv(campaign / "trials.csv")
+    assert [r["trial"] for r in rows] == [0, 1, 2, 3]
+    for r in rows:
+        assert 0.5 <= r["object_mass_kg"] <= 2.0 and 0.5 <= r["pad_friction"] <= 1.2
+        assert r["verdict"] in ("success", "failed")
+        assert (r["failure_class"] == "") == (r["verdict"] == "success")
+        assert r["failure_class"] in ("", *FAILURE_CLASSES)
+        assert len(r["state_digest"]) == 64 and math.isfinite(r["max_slip_m"])
+        assert r["reason"].startswith("mission success" if r["verdict"] == "success" else "mission FAILED: ")
+
+
+def test_the_summary_counts_the_table(campaign):
+    rows = read_csv(campaign / "trials.csv")
+    s = json.loads((campaign / "summary.json").read_text())
+    ok = sum(r["verdict"] == "success" for r in rows)
+    assert s["trials"] == 4 and s["successes"] == ok and s["success_rate"] == ok / 4
+    assert s["wilson95"] == pytest.approx(list(wilson_interval(ok, 4)))
+    assert sum(s["failure_classes"].values()) == 4 - ok - s["incomplete"]
+    for c in FAILURE_CLASSES:
+        assert s["failure_classes"][c] == sum(r["failure_class"] == c for r in rows)
+    assert s["trials_per_minute"] > 0
+
+
+def test_plots_show_success_against_each_drawn_parameter(campaign):
+    names = {p.name for p in (campaign / "plots").glob("*.png")}
+    for param in ("object_mass_kg", "pad_friction", "setpoint_loss", "am4_misalignment_deg",
+                  "max_abs_misalignment_deg"):
+        assert f"success_vs_{param}.png" in names
+
+
+def test_a_trial_replays_from_its_scenario_file(campaign):
+    row = read_csv(campaign / "trials.csv")[1]
+    spec = load_scenario(row["scenario_file"])
+    assert spec.object.mass_kg == row["object_mass_kg"] and spec.seed == row["seed"]
+    assert dict((a.sysid, a.misalignment_deg) for a in spec.ams)[5] == row["am5_misalignment_deg"]
+    again = run(spec)
+    assert again["state_digest"] == row["state_digest"]
+    assert again["verdict"]["status"] == row["verdict"]
+
+
+def test_a_dask_cluster_runs_the_same_trials_as_the_local_pool(campaign, tmp_path):
+    from dask.distributed import LocalCluster
+
+    rows = read_csv(campaign / "trials.csv")
+    tasks = cli.build_tasks(_read_toml(SHORT), SHORT, load_randomize(cli.DEFAULT_RANDOMIZE), SEED, 4, tmp_path, None)
+    tasks = [t for t in tasks if t.index in (0, 3)]
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        with cli.executor(2, cluster.scheduler_address) as ex:
+            dask_rows = run_all(tasks, ex)
+    for d in dask_rows:
+        pool = rows[d["trial"]]
+        for key in ("state_digest", "verdict", "failure_class", "object_mass_kg", "max_slip_m", "hover_min_lift_m"):
+            assert d[key] == pool[key], key
+
+
+@pytest.mark.parametrize("args,words", [
+    (["--trials", "0"], "--trials: must be >= 1"),
+    (["--seed", "-1"], "--seed: must be in 0..2**32-1"),
+    (["--workers", "x"], "--workers: expected a whole number"),
+])
+def test_bad_arguments_exit_2_naming_the_flag(tmp_path, capsys, args, words):
+    base = {"--trials": "2", "--seed": "1", "--out": str(tmp_path / "o")}
+    for k, v in zip(args[::2], args[1::2]):
+        base[k] = v
+    with pytest.raises(SystemExit) as e:
+        cli.main([str(SHORT), *[x for kv in base.items() for x in kv]] + args[len(args):])
+    assert e.value.code == 2 and words in capsys.readouterr().err
+
+
+def test_a_bad_randomize_file_or_output_folder_exits_2(tmp_path, capsys):
+    bad = tmp_path / "r.toml"
+    bad.write_text("[randomize]\nobject_mass = [1.0, 2.0]\n")
+    assert cli.main([str(SHORT), "--trials", "1", "--seed", "1", "--out", str(tmp_path / "o"),
+                     "--randomize", str(bad)]) == 2
+    assert "unknown key 'object_mass'" in capsys.readouterr().err
+    file = tmp_path / "f"
+    file.write_text("")
+    assert cli.main([str(SHORT), "--trials", "1", "--seed", "1", "--out", str(file)]) == 2
+    assert "not a folder" in capsys.readouterr().err

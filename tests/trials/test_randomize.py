@@ -1,0 +1,89 @@
+"""Drawing trials (trials.randomize) and writing them as scenarios (trials.toml_write):
+reproducible per trial, inside the stated ranges, valid scenarios, replayable bit for bit."""
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from amcore.config import ConfigError, _read_toml, scenario_from_dict
+from trials.randomize import draw_trial, load_randomize, randomize_from_table, relocate
+from trials.toml_write import dumps
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENARIO = ROOT / "configs" / "scenarios" / "two_am_comp.toml"
+TEN = ROOT / "configs" / "scenarios" / "ten_am.toml"
+DEFAULT = load_randomize(ROOT / "configs" / "randomize" / "default.toml")
+
+
+def test_a_trial_is_a_function_of_seed_and_index_alone():
+    base = _read_toml(SCENARIO)
+    a = [draw_trial(base, DEFAULT, 5, i) for i in range(6)]
+    b = [draw_trial(base, DEFAULT, 5, i) for i in (5, 3, 1, 0, 2, 4)]
+    assert a[3] == b[1] and a[0] == b[3] and a[5] == b[0]
+    assert draw_trial(base, DEFAULT, 6, 0) != a[0]
+    assert len({p["seed"] for _, p in a}) == 6  # each trial its own sensor and link noise
+
+
+def test_draws_stay_in_the_default_ranges_and_make_valid_scenarios():
+    base = _read_toml(SCENARIO)
+    for i in range(40):
+        data, p = draw_trial(base, DEFAULT, 1, i)
+        spec = scenario_from_dict(data, SCENARIO)
+        assert 0.5 <= spec.object.mass_kg <= 2.0 and 0.5 <= spec.object.pad_object_friction <= 1.2
+        assert spec.object.size_m[0] == pytest.approx(0.2 * p["object_size_scale"]) and 0.16 <= spec.object.size_m[0] <= 0.24
+        assert 0.0 <= spec.link.loss <= 0.1 and 0.0 <= spec.sensors.latency_s <= 0.002
+        assert spec.sensors.force_noise_n == DEFAULT.sensors["force_noise_n"]
+        for am in spec.ams:
+            assert abs(am.misalignment_deg) <= 5.0 and abs(am.start_heading_deg) <= 5.0
+            assert max(map(abs, am.start_offset_m)) <= 0.05
+        assert spec.seed == p["seed"] and spec.name == f"two_am_comp-{i:04d}"
+
+
+def test_a_cylinder_scales_radius_and_height():
+    data, p = draw_trial(_read_toml(TEN), DEFAULT, 2, 0)
+    spec = scenario_from_dict(data, TEN)
+    assert spec.object.radius_m == pytest.approx(0.6 * p["object_size_scale"])
+    assert spec.object.height_m == pytest.approx(0.3 * p["object_size_scale"])
+    assert len([k for k in p if k.endswith("_misalignment_deg")]) == 10
+
+
+def test_a_written_trial_reads_back_as_the_same_scenario(tmp_path):
+    data, _ = draw_trial(_read_toml(SCENARIO), DEFAULT, 3, 17)
+    out = tmp_path / "deep" / "t.toml"
+    out.parent.mkdir(parents=True)
+    moved = relocate(data, SCENARIO, out.parent)
+    out.write_text(dumps(moved))
+    assert tomllib.loads(out.read_text()) == moved
+    a, b = scenario_from_dict(data, SCENARIO), scenario_from_dict(tomllib.loads(out.read_text()), out)
+    assert a.vehicle == b.vehicle and a.object == b.object and a.ams == b.ams and a.sensors == b.sensors
+    assert a.link == b.link and a.seed == b.seed
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.recursive(
+    st.one_of(st.integers(-2**62, 2**62), st.floats(allow_nan=False), st.booleans(), st.text(max_size=8)),
+    lambda inner: st.lists(inner, max_size=3), max_leaves=6))
+def test_toml_writer_round_trips_values(value):
+    doc = {"t": {"v": value}}
+    assert tomllib.loads(dumps(doc)) == doc
+
+
+@pytest.mark.parametrize("table,words", [
+    ({"object_mass_kg": [2.0, 1.0]}, "object_mass_kg: expected [low, high] with low <= high"),
+    ({"object_mass_kg": [0.0, 1.0]}, "object_mass_kg: [0.0, 1.0] is out of range (values > 0)"),
+    ({"setpoint_loss": [0.0, 1.5]}, "setpoint_loss: [0.0, 1.5] is out of range"),
+    ({"misalignment_deg": -1.0}, "misalignment_deg: must be >= 0"),
+    ({"misalignment_deg": 50.0}, "misalignment_deg: must be < 45"),
+    ({"object_colour": [1.0, 2.0]}, "unknown key 'object_colour'"),
+    ({"sensors": {"gps_noise_m": 1.0}}, "[randomize.sensors]: unknown key 'gps_noise_m'"),
+    ({"sensors": {"force_noise_n": -1.0}}, "force_noise_n: must be >= 0"),
+    ({"pad_friction": "high"}, "pad_friction: expected a list"),
+])
+def test_a_bad_randomize_table_names_the_key(table, words):
+    with pytest.raises(ConfigError) as e:
+        randomize_from_table(table, "r.toml")
+    assert "r.toml" in str(e.value) and words in str(e.value)

@@ -1,0 +1,188 @@
+"""am-trials: a trial campaign of randomized variations of one scenario, each judged by its
+mission verdict, on a local process pool or a Dask distributed cluster.
+
+    am-trials SCENARIO --trials N --seed S --out DIR [--workers K] [--scheduler ADDRESS]
+              [--randomize FILE] [--controller NAME ...]
+
+What varies: --randomize FILE's [randomize] table, else the scenario's own, else
+configs/randomize/default.toml (see trials/randomize.py). Trial i of seed S is the same
+trial on any executor and in any campaign size. DIR gets trials.csv (a row per trial: every
+drawn value, the verdict, its failure class and reason, the key figures, the state digest),
+summary.json (success rate, Wilson 95 % interval, counts per failure class), plots/ and
+scenarios/trial-NNNN.toml: each trial as a scenario file that `am-run` replays through the
+real processes, with its MCAP log. Several --controller options run the same trials with
+each law (DIR/<controller>/...) and write DIR/comparison.md.
+Exit codes: 0 the campaign ran (whatever its success rate), 2 bad arguments or
+configuration, 1 a trial raised (a bug: failed missions are verdicts, not errors).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+from amcore.config import ConfigError, _read_toml, load_scenario, scenario_from_dict
+
+from . import report
+from .randomize import RandomizeSpec, draw_trial, load_randomize, randomize_from_table, relocate
+from .runner import TrialTask, executor, run_all
+from .toml_write import dumps
+
+DEFAULT_RANDOMIZE = Path(__file__).resolve().parents[1] / "configs" / "randomize" / "default.toml"
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
+    return v
+
+
+def _seed(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if not 0 <= v < 2**32:
+        raise argparse.ArgumentTypeError(f"must be in 0..2**32-1, got {v}")
+    return v
+
+
+def parse_args(argv):
+    ap = argparse.ArgumentParser(prog="am-trials", description=" ".join(__doc__.split("\n\n")[0].split()),
+                                 epilog="Exit codes: 0 the campaign ran, 2 bad arguments or configuration, "
+                                        "1 a trial raised.")
+    ap.add_argument("scenario", type=Path, help="base scenario TOML")
+    ap.add_argument("--trials", type=_positive_int, required=True, help="number of trials")
+    ap.add_argument("--seed", type=_seed, required=True, help="campaign seed (0..2**32-1)")
+    ap.add_argument("--out", type=Path, required=True, help="output folder (created; must not hold trials.csv)")
+    ap.add_argument("--workers", type=_positive_int, default=None,
+                    help="local worker processes (default: the machine's cores)")
+    ap.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://HOST:8786): run there")
+    ap.add_argument("--randomize", type=Path, default=None, help="TOML file with a [randomize] table")
+    ap.add_argument("--controller", action="append", default=None,
+                    help="control law for every trial ([options].controller); repeat to compare laws")
+    ap.add_argument("--no-progress", action="store_true", help="no progress bar")
+    ap.add_argument("--no-plots", action="store_true", help="no plots")
+    return ap.parse_args(argv)
+
+
+def _randomization(a, base: dict, scenario: Path) -> tuple[RandomizeSpec, str]:
+    if a.randomize is not None:
+        return load_randomize(a.randomize), str(a.randomize)
+    if "randomize" in base:
+        return randomize_from_table(base["randomize"], str(scenario)), f"{scenario} [randomize]"
+    return load_randomize(DEFAULT_RANDOMIZE), str(DEFAULT_RANDOMIZE)
+
+
+def build_tasks(base: dict, scenario: Path, rand: RandomizeSpec, seed: int, n: int, out: Path,
+                controller: str | None) -> list[TrialTask]:
+    """Draw every trial, write it as out/scenarios/trial-NNNN.toml and check that it loads."""
+    folder = out / "scenarios"
+    folder.mkdir(parents=True, exist_ok=True)
+    tasks = []
+    for i in range(n):
+        data, params = draw_trial(base, rand, seed, i)
+        if controller is not None:
+            data["options"] = {**data.get("options", {}), "controller": controller}
+        path = (folder / f"trial-{i:04d}.toml").resolve()
+        data = relocate(data, scenario, folder)
+        path.write_text(f"# trial {i} of am-trials {scenario.name} --seed {seed}\n" + dumps(data))
+        scenario_from_dict(data, path)  # a draw that makes an invalid scenario stops here, named
+        tasks.append(TrialTask(i, data, str(path), params))
+    return tasks
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = parse_args(argv)
+    scenario = a.scenario.resolve()
+    try:
+        load_scenario(scenario)
+        base = _read_toml(scenario)
+        rand, rand_source = _randomization(a, base, scenario)
+    except ConfigError as exc:
+        print(f"am-trials: error: {exc}", file=sys.stderr)
+        return 2
+    controllers = a.controller or [None]
+    if len(set(controllers)) != len(controllers):
+        print("am-trials: error: --controller: each law once", file=sys.stderr)
+        return 2
+    if a.out.exists() and not a.out.is_dir():
+        print(f"am-trials: error: --out {a.out}: exists and is not a folder", file=sys.stderr)
+        return 2
+    workers = a.workers or os.cpu_count() or 1
+    summaries = []
+    try:
+        for controller in controllers:
+            out = a.out / controller if len(controllers) > 1 else a.out
+            if (out / "trials.csv").exists():
+                print(f"am-trials: error: {out / 'trials.csv'} exists: choose another --out", file=sys.stderr)
+                return 2
+            try:
+                tasks = build_tasks(base, scenario, rand, a.seed, a.trials, out, controller)
+            except ConfigError as exc:
+                print(f"am-trials: error: a drawn trial is not a valid scenario: {exc}", file=sys.stderr)
+                return 2
+            except OSError as exc:
+                print(f"am-trials: error: --out {a.out}: {exc}", file=sys.stderr)
+                return 2
+            summaries.append(_campaign(a, tasks, out, controller, workers, rand_source))
+    except KeyboardInterrupt:
+        print("\nam-trials: interrupted", file=sys.stderr)
+        return 130
+    except RuntimeError as exc:
+        print(f"am-trials: error: {exc}", file=sys.stderr)
+        return 1
+    if len(summaries) > 1:
+        table = report.comparison_table(summaries)
+        (a.out / "comparison.md").write_text(table)
+        print(table, file=sys.stderr)
+    return 0
+
+
+def _campaign(a, tasks: list[TrialTask], out: Path, controller: str | None, workers: int, rand_source: str) -> dict:
+    from tqdm import tqdm
+
+    where = f"Dask at {a.scheduler}" if a.scheduler else f"{workers} local worker(s)"
+    name = controller or "the scenario's controller"
+    print(f"am-trials: {len(tasks)} trials of {a.scenario.name} ({name}), seed {a.seed}, on {where}; "
+          f"variation from {rand_source}", file=sys.stderr)
+    bar = tqdm(total=len(tasks), unit="trial", disable=a.no_progress, file=sys.stderr, dynamic_ncols=True)
+    counts = {"ok": 0}
+
+    def on_result(row):
+        counts["ok"] += row["verdict"] == "success"
+        bar.update(1)
+        bar.set_postfix_str(f"{counts['ok']}/{bar.n} succeeded")
+
+    t0 = time.perf_counter()
+    with executor(workers, a.scheduler) as ex:
+        rows = run_all(tasks, ex, on_result)
+    wall = time.perf_counter() - t0
+    bar.close()
+    report.add_derived(rows)
+    report.write_csv(rows, out / "trials.csv")
+    params = [k for k in rows[0] if k in tasks[0].params and k != "seed"]
+    params += [k for k in ("max_abs_misalignment_deg", "max_start_offset_m") if k in rows[0]]
+    summary = report.summarize(rows, scenario=str(a.scenario), controller=rows[0]["controller"], seed=a.seed,
+                               randomize=rand_source, executor=where, wall_s=wall,
+                               trials_per_minute=60.0 * len(rows) / wall)
+    report.write_summary(summary, out / "summary.json")
+    if not a.no_plots:
+        report.plot_parameters(rows, params, out / "plots", f"{a.scenario.stem}, {summary['controller']}, "
+                                                             f"seed {a.seed}, {len(rows)} trials")
+    lo, hi = summary["wilson95"]
+    failed = ", ".join(f"{c} {n}" for c, n in summary["failure_classes"].items() if n)
+    print(f"am-trials: {summary['successes']}/{summary['trials']} succeeded ({100 * summary['success_rate']:.0f} %, "
+          f"Wilson 95 % {100 * lo:.0f}-{100 * hi:.0f} %)" + (f"; failures: {failed}" if failed else "")
+          + f"; {summary['trials_per_minute']:.1f} trials/min; in {out}", file=sys.stderr)
+    return summary
+
+
+if __name__ == "__main__":
+    sys.exit(main())

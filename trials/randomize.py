@@ -1,0 +1,163 @@
+"""What varies from trial to trial, and how each trial's variation is drawn (pure: numpy).
+
+A `[randomize]` table (in a scenario, or alone in a TOML file such as
+configs/randomize/default.toml) names ranges; `draw_trial` turns the base scenario's TOML
+data and a trial index into that trial's scenario data, so that a trial *is* a scenario:
+it loads through `amcore.config.scenario_from_dict`, and written out (`trials.toml_write`)
+it replays with `am-run`. Ranges are uniform:
+
+    object_mass_kg = [lo, hi]     the object's mass [kg]
+    object_size_scale = [lo, hi]  every edge of a box, or radius and height of a cylinder, times s
+    pad_friction = [lo, hi]       the pad-object Coulomb coefficient ([object].pad_friction)
+    setpoint_loss = [lo, hi]      [link].loss: companion -> flight controller setpoints lost
+    sensor_latency_s = [lo, hi]   [sensors].latency_s
+    misalignment_deg = a          per AM, uniform in [-a, a] ([[am]].misalignment_deg)
+    start_offset_m = d            per AM, each world axis uniform in [-d, d] ([[am]].start_offset_m)
+    start_heading_deg = h         per AM, uniform in [-h, h] ([[am]].start_heading_deg)
+    [randomize.sensors]           the [sensors] levels every trial gets (noise and bias standard
+                                  deviations; each trial's noise and biases follow its own seed)
+
+Each trial draws from its own generator, seeded by (campaign seed, trial index), in a fixed
+order, so a trial's variation does not depend on how many trials run or where.
+"""
+from __future__ import annotations
+
+import copy
+import dataclasses
+import typing
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from amcore.config import ConfigError, SensorSpec, _build, _read_toml
+
+Range = tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class RandomizeSpec:
+    object_mass_kg: Range = ()
+    object_size_scale: Range = ()
+    pad_friction: Range = ()
+    setpoint_loss: Range = ()
+    sensor_latency_s: Range = ()
+    misalignment_deg: float = 0.0
+    start_offset_m: float = 0.0
+    start_heading_deg: float = 0.0
+    sensors: dict = dataclasses.field(default_factory=dict)  # a [sensors] table
+
+    def ranges(self) -> dict[str, Range]:
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                if typing.get_type_hints(RandomizeSpec)[f.name] == Range and getattr(self, f.name)}
+
+
+# per range: (lowest allowed low, low must be > it rather than >=, highest allowed high)
+_LIMITS = {"object_mass_kg": (0.0, True, None), "object_size_scale": (0.0, True, None),
+           "pad_friction": (0.0, True, None), "setpoint_loss": (0.0, False, 1.0),
+           "sensor_latency_s": (0.0, False, 1.0)}
+
+
+def randomize_from_table(table: dict, where: str) -> RandomizeSpec:
+    """A [randomize] table as a RandomizeSpec; errors name `where` and the key."""
+    if not isinstance(table, dict):
+        raise ConfigError(f"{where}: [randomize] must be a table")
+    sensors = table.get("sensors", {})
+    kw = _build(RandomizeSpec, {k: v for k, v in table.items() if k != "sensors"}, f"{where}: [randomize]",
+                skip=("sensors",))
+    if not isinstance(sensors, dict):
+        raise ConfigError(f"{where}: [randomize.sensors] must be a table")
+    levels = SensorSpec(**_build(SensorSpec, sensors, f"{where}: [randomize.sensors]"))
+    for f in dataclasses.fields(SensorSpec):
+        if getattr(levels, f.name) < 0.0:
+            raise ConfigError(f"{where}: [randomize.sensors].{f.name}: must be >= 0")
+    spec = RandomizeSpec(**kw, sensors=dict(sensors))
+    for name, rng in spec.ranges().items():
+        lowest, strict, highest = _LIMITS[name]
+        if len(rng) != 2 or not rng[0] <= rng[1]:
+            raise ConfigError(f"{where}: [randomize].{name}: expected [low, high] with low <= high, got {list(rng)}")
+        if rng[0] < lowest or (strict and rng[0] == lowest) or (highest is not None and rng[1] > highest):
+            bound = f"{'>' if strict else '>='} {lowest:g}" + (f" and <= {highest:g}" if highest is not None else "")
+            raise ConfigError(f"{where}: [randomize].{name}: {list(rng)} is out of range (values {bound})")
+    for name in ("misalignment_deg", "start_offset_m", "start_heading_deg"):
+        if getattr(spec, name) < 0.0:
+            raise ConfigError(f"{where}: [randomize].{name}: must be >= 0 (a half-width)")
+    if spec.misalignment_deg >= 45.0:
+        raise ConfigError(f"{where}: [randomize].misalignment_deg: must be < 45")
+    return spec
+
+
+def load_randomize(path: str | Path) -> RandomizeSpec:
+    """The [randomize] table of a TOML file (a scenario, or a file holding only that table)."""
+    path = Path(path).resolve()
+    data = _read_toml(path)
+    if "randomize" not in data:
+        raise ConfigError(f"{path}: no [randomize] table")
+    return randomize_from_table(data["randomize"], str(path))
+
+
+def _uniform(rng: np.random.Generator, r: Range) -> float:
+    return float(rng.uniform(r[0], r[1]))
+
+
+def draw_trial(base: dict, rand: RandomizeSpec, campaign_seed: int, index: int) -> tuple[dict, dict]:
+    """(scenario data, drawn parameters) of trial `index`: the base scenario's TOML data
+    with this trial's variation, and the drawn values flat, for the trial's table row."""
+    rng = np.random.default_rng([campaign_seed, index])
+    data = copy.deepcopy(base)
+    data.pop("randomize", None)
+    p: dict[str, float | int] = {}
+    obj = data.setdefault("object", {})
+    if rand.object_mass_kg:
+        obj["mass_kg"] = p["object_mass_kg"] = _uniform(rng, rand.object_mass_kg)
+    if rand.object_size_scale:
+        s = p["object_size_scale"] = _uniform(rng, rand.object_size_scale)
+        if obj.get("shape", "box") == "box":
+            obj["size_m"] = [s * x for x in obj.get("size_m", [0.2, 0.2, 0.2])]
+        else:
+            obj["radius_m"], obj["height_m"] = s * obj["radius_m"], s * obj["height_m"]
+    if rand.pad_friction:
+        obj["pad_friction"] = p["pad_friction"] = _uniform(rng, rand.pad_friction)
+    if rand.setpoint_loss:
+        data.setdefault("link", {})["loss"] = p["setpoint_loss"] = _uniform(rng, rand.setpoint_loss)
+    if rand.sensors or rand.sensor_latency_s:
+        sensors = data.setdefault("sensors", {})
+        sensors.update(rand.sensors)
+        if rand.sensor_latency_s:
+            sensors["latency_s"] = p["sensor_latency_s"] = _uniform(rng, rand.sensor_latency_s)
+    for am in data.get("am", []):
+        s = am["sysid"]
+        if rand.misalignment_deg:
+            am["misalignment_deg"] = p[f"am{s}_misalignment_deg"] = _uniform(rng, (-rand.misalignment_deg,
+                                                                                   rand.misalignment_deg))
+        if rand.start_offset_m:
+            d = rand.start_offset_m
+            off = [float(x) for x in rng.uniform(-d, d, 3)]
+            am["start_offset_m"] = off
+            p[f"am{s}_start_offset_x_m"], p[f"am{s}_start_offset_y_m"], p[f"am{s}_start_offset_z_m"] = off
+        if rand.start_heading_deg:
+            h = rand.start_heading_deg
+            am["start_heading_deg"] = p[f"am{s}_start_heading_deg"] = _uniform(rng, (-h, h))
+    sc = data.setdefault("scenario", {})
+    sc["seed"] = p["seed"] = int(rng.integers(0, 2**31 - 1))
+    sc["name"] = f"{str(sc.get('name', 'trial'))[:26]}-{index:04d}"
+    return data, p
+
+
+def relocate(data: dict, src: Path, dst_dir: Path) -> dict:
+    """Scenario data read next to `src`, with its relative paths (the vehicle file, a link
+    key file) rewritten for a file written in `dst_dir`."""
+    out = copy.deepcopy(data)
+    base = src.parent
+
+    def moved(rel: str) -> str:
+        import os
+        return os.path.relpath((base / rel).resolve(), dst_dir.resolve())
+
+    sc = out.get("scenario", {})
+    if "vehicle" in sc:
+        sc["vehicle"] = moved(sc["vehicle"])
+    link = out.get("link", {})
+    if link.get("key_file"):
+        link["key_file"] = moved(link["key_file"])
+    return out
