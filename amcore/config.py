@@ -93,6 +93,29 @@ class ControllerOptions:
     # closes a one-step loop sensor -> Omega_d -> body torque -> tool acceleration -> sensor
     # that PyBullet shows diverging at 2 steps per period. Off treats F_e as slowly varying.
     force_rate_feedforward: bool = False
+    # Beyond the paper (amcore.adapt): the heading follows the misalignment the wrist sensor
+    # measures on a crowned pad, with this natural frequency [Hz]; 0: off (the paper's fixed heading).
+    heading_admittance_hz: float = 0.0
+    heading_admittance_zeta: float = 1.0
+
+
+@dataclass(frozen=True)
+class PadSpec:
+    """[pad] table: the contact face of the end-effector's pad, as the simulator builds it
+    (the controller never uses it).
+
+    - shape "flat": the URDF's collision box, rigid; any angle between pad and face puts
+      the contact on the pad's edge. "crowned": the face is a vertical cylinder of radius
+      crown_radius_m through the face centre (rounded about the pad's z axis, straight along
+      it), so a pad that meets the face at an angle rolls on it instead of standing on an edge.
+    - contact_stiffness_n_per_m, contact_damping_n_s_per_m: a compliant facing (Bullet's
+      soft contact on the pad); both 0: rigid.
+    """
+
+    shape: str = "flat"
+    crown_radius_m: float = 0.1
+    contact_stiffness_n_per_m: float = 0.0
+    contact_damping_n_s_per_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -110,6 +133,7 @@ class VehicleParams:
     gains: Gains
     safety: Safety = Safety()
     options: ControllerOptions = ControllerOptions()
+    pad: PadSpec = PadSpec()
     gravity_mps2: float = 9.81
 
     @property
@@ -161,8 +185,18 @@ class MissionSpec:
     start_height_m: float = 0.2  # start: end-effector this far above grasp height
     pre_gap_m: float = 0.02  # end of approach: pad this far from the surface
     squeeze_m: float = 0.04  # grasp: y_x,d this deep inside the object
+    # Squeeze sizing (off: the fixed squeeze_m). On, each AM squeezes with the normal force
+    # that holds its share of the planned object ([object].mass_kg) at the friction the
+    # mission assumes, times a margin, within what its rotors can push (amcore.mission.squeeze_force):
+    #     N = friction_margin * m_obj g / (n_AM * friction_assumed),  never below K_y,x squeeze_m
+    squeeze_sizing: bool = False
+    friction_assumed: float = 0.5  # the lowest pad-object friction coefficient planned for
+    friction_margin: float = 1.5
+    thrust_fraction_max: float = 0.8  # of the rotors' total maximum, for weight, load share and squeeze
     lift_m: float = 0.3
     join_blend_s: float = 3.0  # a companion started mid-run (a restart) blends into the references over this
+    # a companion started mid-run whose wrist sensor reads a push resumes it (amcore.mission.join_blend)
+    resume_contact_force: bool = False
 
 
 @dataclass(frozen=True)
@@ -380,13 +414,13 @@ def _is_key_hex(text: str) -> bool:
 def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     where = str(path)
     kw = _build(VehicleParams, data.get("vehicle", {}), f"{where}: [vehicle]",
-                skip=("rotors", "task", "gains", "safety", "options"))
-    extra = set(data) - {"vehicle", "rotors", "task", "gains", "safety", "options"}
+                skip=("rotors", "task", "gains", "safety", "options", "pad"))
+    extra = set(data) - {"vehicle", "rotors", "task", "gains", "safety", "options", "pad"}
     if extra:
         raise ConfigError(f"{where}: unknown table [{sorted(extra)[0]}]")
     sub = {}
     for name, cls in (("rotors", RotorParams), ("task", TaskSpec), ("gains", Gains),
-                      ("safety", Safety), ("options", ControllerOptions)):
+                      ("safety", Safety), ("options", ControllerOptions), ("pad", PadSpec)):
         if name in data:
             sub[name] = cls(**_build(cls, data[name], f"{where}: [{name}]"))
         elif name in ("rotors", "task", "gains"):
@@ -416,6 +450,21 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     _positive(f"{where}: [rotors].arm_length_m", v.rotors.arm_length_m)
     _positive(f"{where}: [vehicle].joint_torque_max_nm", v.joint_torque_max_nm)
     _positive(f"{where}: [options].force_filter_hz", v.options.force_filter_hz)
+    if v.options.heading_admittance_hz < 0.0 or not v.options.heading_admittance_zeta > 0.0:
+        raise ConfigError(f"{where}: [options].heading_admittance_hz must be >= 0 (0: off) and "
+                          f"heading_admittance_zeta > 0")
+    if v.options.heading_admittance_hz > 0.0 and v.pad.shape != "crowned":
+        raise ConfigError(f"{where}: [options].heading_admittance_hz needs [pad].shape = 'crowned' (it reads the "
+                          f"misalignment off the crown)")
+    if v.pad.shape not in ("flat", "crowned"):
+        raise ConfigError(f"{where}: [pad].shape: expected 'flat' or 'crowned', got '{v.pad.shape}'")
+    _positive(f"{where}: [pad].crown_radius_m", v.pad.crown_radius_m)
+    for key in ("contact_stiffness_n_per_m", "contact_damping_n_s_per_m"):
+        if getattr(v.pad, key) < 0.0:
+            raise ConfigError(f"{where}: [pad].{key}: must be >= 0 (0: rigid), got {getattr(v.pad, key)!r}")
+    if (v.pad.contact_stiffness_n_per_m > 0.0) != (v.pad.contact_damping_n_s_per_m > 0.0):
+        raise ConfigError(f"{where}: [pad]: contact_stiffness_n_per_m and contact_damping_n_s_per_m go together "
+                          f"(both 0: rigid)")
     return v
 
 
@@ -428,14 +477,14 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
     """Load a scenario TOML; its [scenario].vehicle names a vehicle TOML relative to it.
 
     A scenario may override controller options with an [options] table (e.g. to turn
-    force compensation off) and safety settings with [safety].
+    force compensation off), safety settings with [safety] and the pad with [pad].
     """
     path = Path(path).resolve()
     return scenario_from_dict(_read_toml(path), path)
 
 
-SCENARIO_TABLES = ("scenario", "object", "mission", "am", "options", "safety", "link", "sensors", "success",
-                   "randomize")
+SCENARIO_TABLES = ("scenario", "object", "mission", "am", "options", "safety", "pad", "link", "sensors",
+                   "success", "randomize")
 
 
 def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
@@ -452,7 +501,7 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
         raise ConfigError(f"{where}: [scenario]: missing key 'vehicle'")
     vpath = (path.parent / sc.pop("vehicle")).resolve()
     vdata = _read_toml(vpath)
-    for tbl in ("options", "safety"):
+    for tbl in ("options", "safety", "pad"):
         if tbl in data:
             merged = dict(vdata.get(tbl, {}))
             merged.update(data[tbl])
@@ -477,6 +526,10 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     mission = MissionSpec(**_build(MissionSpec, data.get("mission", {}), f"{where}: [mission]"))
     if not (0 < mission.approach_end_s < mission.grasp_end_s < mission.hover_end_s):
         raise ConfigError(f"{where}: [mission]: need 0 < approach_end_s < grasp_end_s < hover_end_s")
+    for key in ("friction_assumed", "friction_margin", "thrust_fraction_max"):
+        _positive(f"{where}: [mission].{key}", getattr(mission, key))
+    if mission.thrust_fraction_max > 1.0:
+        raise ConfigError(f"{where}: [mission].thrust_fraction_max: must be <= 1, got {mission.thrust_fraction_max}")
     if not mission.join_blend_s > 0:
         raise ConfigError(f"{where}: [mission].join_blend_s must be > 0 s, got {mission.join_blend_s}")
     am_tables = data.get("am", [])

@@ -215,11 +215,13 @@ def _feedforward_pd(m: float, a, K, x, D, xd, f) -> v3.Vec:
 
 
 def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmState,
-         ref: Reference, wrench_E: np.ndarray, memory: ControllerMemory, t_s: float) -> StepResult:
+         ref: Reference, wrench_E: np.ndarray, memory: ControllerMemory, t_s: float,
+         task_frame: TaskFrame | None = None) -> StepResult:
     """One evaluation of eqs. Com_controller, Rd, ori_controller and u3 at time t_s [s].
 
     wrench_E: the wrench [f_e; tau_e] the environment applies on the end-effector,
-    expressed in {e} (an F/T sensor's reading) [N, N m].
+    expressed in {e} (an F/T sensor's reading) [N, N m]. task_frame: this step's task frame
+    if it moves (amcore.adapt turns it with the heading), else params.task_frame.
 
     The 3-vector chains (wrench filter, CoM law, eq. Rd, orientation law) run on Python
     floats (amcore.vec3); the matrix work of eq. u3 on numpy.
@@ -229,7 +231,8 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     m, g, n = model.mass_kg, model.gravity_mps2, model.n
     need_full = p.compensate_Lambda_y_dot
     tm = decoupled_terms(model, data, state, full=need_full)
-    tk = task_terms(model, data, tm, p.task_frame, p.components, full=need_full)
+    tk = task_terms(model, data, tm, p.task_frame if task_frame is None else task_frame, p.components,
+                    full=need_full)
     R = state.R_WB
     comp = p.force_compensation
     s = 1.0 if comp else 0.0

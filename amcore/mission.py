@@ -61,6 +61,37 @@ def surface_distance(obj: ObjectSpec, azimuth_rad: float) -> float:
 
 
 @dataclass(frozen=True)
+class SqueezePlan:
+    """The grasp's normal force per pad [N] and the task depth that makes it through the
+    x task spring K_y,x (eq. desired_task_behavior at rest: K_y,x y~_x = -F_y,x).
+
+    required_n: friction_margin * m_obj g / (n_AM mu); feasible_n: the most the AM can push
+    while its thrust also carries its weight and its share, within thrust_fraction_max of
+    the maximum: sqrt((k T_max)^2 - (m_AM g + m_obj g / n_AM)^2)."""
+
+    force_n: float
+    depth_m: float
+    required_n: float
+    feasible_n: float
+
+
+def squeeze_plan(spec: ScenarioSpec, model: AmModel) -> SqueezePlan:
+    ms, v = spec.mission, spec.vehicle
+    k_x = v.gains.K_y[v.task.components.index("x")]
+    fixed = k_x * ms.squeeze_m
+    g, n = v.gravity_mps2, len(spec.ams)
+    share = spec.object.mass_kg * g / n
+    required = ms.friction_margin * share / ms.friction_assumed
+    weight = model.mass_kg * g + share
+    thrust = ms.thrust_fraction_max * v.rotors.count * v.rotors.thrust_max_n
+    feasible = math.sqrt(max(thrust * thrust - weight * weight, 0.0))
+    if not ms.squeeze_sizing:
+        return SqueezePlan(fixed, ms.squeeze_m, required, feasible)
+    force = max(fixed, min(required, feasible))
+    return SqueezePlan(force, force / k_x, required, feasible)
+
+
+@dataclass(frozen=True)
 class AmMission:
     """References of one AM: CoM and task paths in {t}, heading, and the task frame."""
 
@@ -72,6 +103,7 @@ class AmMission:
     nominal: NominalGeometry
     q_nominal: tuple[float, ...]
     phase_ends_s: tuple[float, float, float]
+    contact_point_W: np.ndarray  # where the pad plans to touch the face, in {w} [m]
 
     def reference(self, t: float) -> Reference:
         # the CoM path taken to {w} once (_com_path_w), both paths on floats, and one array
@@ -117,7 +149,7 @@ def am_mission(spec: ScenarioSpec, am: AmSpec, model: AmModel) -> AmMission:
     pitch = geo.pitch_rad  # hold the nominal pose's pad orientation
     y0 = np.array([-(half + ms.standoff_m), ms.start_height_m, pitch])
     y_app = np.array([-(half + ms.pre_gap_m), 0.0, pitch])
-    y_grasp = np.array([-(half - ms.squeeze_m), 0.0, pitch])
+    y_grasp = np.array([-(half - squeeze_plan(spec, model).depth_m), 0.0, pitch])
     y_lift = y_grasp + np.array([0.0, ms.lift_m, 0.0])
     t_a, t_g = ms.approach_end_s, ms.grasp_end_s
     if ms.approach_move_s > t_a or t_a + ms.grasp_move_s > t_g or t_g + ms.lift_move_s > ms.hover_end_s:
@@ -136,7 +168,8 @@ def am_mission(spec: ScenarioSpec, am: AmSpec, model: AmModel) -> AmMission:
     ])
     mission = AmMission(sysid=am.sysid, frame=frame, psi=psi, com_path_t=com_path, y_path=y_path,
                         nominal=geo, q_nominal=tuple(spec.vehicle.q_nominal_rad),
-                        phase_ends_s=(t_a, t_g, ms.hover_end_s))
+                        phase_ends_s=(t_a, t_g, ms.hover_end_s),
+                        contact_point_W=frame.p_WT + frame.R_WT @ np.array([-half, 0.0, 0.0]))
     return mission
 
 
@@ -176,11 +209,22 @@ class JoinBlend:
 
 
 def join_blend(model: AmModel, mission: AmMission, components: tuple[str, ...], state: AmState, t0: float,
-               duration_s: float) -> JoinBlend:
-    """The JoinBlend from `state` at t0 into `mission` (CoM and task values from the model)."""
+               duration_s: float, wrench_E=None, K_y=None) -> JoinBlend:
+    """The JoinBlend from `state` at t0 into `mission` (CoM and task values from the model).
+
+    With the wrist sensor's reading `wrench_E` (on {e}, [N, N m]) and the task stiffness
+    K_y (diagonal entries), a pad that is pushing on something resumes that push: the x task
+    reference starts N / K_y,x deeper than the pad, N the measured normal force along the
+    task x axis, so that the spring of eq. desired_task_behavior (K_y y~ = F_y at rest) holds
+    the force it found instead of starting from zero squeeze and letting go."""
     if not duration_s > 0.0:
         raise ValueError(f"join blend duration must be > 0, got {duration_s}")
     data = create_data(model)
     tm = decoupled_terms(model, data, state)
     tk = task_terms(model, data, tm, mission.frame, components)
-    return JoinBlend(t0=t0, duration_s=duration_s, r_c0=tuple(tm.r_c.tolist()), y0=tuple(tk.y.tolist()))
+    y0 = tk.y.copy()
+    if wrench_E is not None and K_y is not None and "x" in components:
+        f_T = mission.frame.R_WT.T @ (tk.H_WE[0:3, 0:3] @ np.asarray(wrench_E, dtype=float)[0:3])
+        i = components.index("x")
+        y0[i] += max(0.0, -f_T[0]) / K_y[i]
+    return JoinBlend(t0=t0, duration_s=duration_s, r_c0=tuple(tm.r_c.tolist()), y0=tuple(y0.tolist()))

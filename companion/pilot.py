@@ -12,6 +12,9 @@ it directly.
 """
 from __future__ import annotations
 
+import math
+
+from amcore.adapt import HeadingAdmittance, HeadingState, heading_update, turn_frame, turn_reference
 from amcore.config import ScenarioSpec
 from amcore.control import ControllerMemory, ControllerParams, StepResult, step
 from amcore.mission import JoinBlend, am_mission, join_blend
@@ -39,6 +42,12 @@ class Pilot:
                               ("settle_check", spec.duration_s - 2.0)], key=lambda x: x[1])
         self.last: tuple[float, object] | None = None
         self.steps = 0
+        o = spec.vehicle.options
+        self.heading = (HeadingAdmittance(2.0 * math.pi * o.heading_admittance_hz, o.heading_admittance_zeta,
+                                          spec.vehicle.pad.crown_radius_m) if o.heading_admittance_hz > 0.0 else None)
+        self.heading_state = HeadingState()
+        self._wrench_E_f = None  # the controller's filtered wrench of the last step (heading admittance)
+        self._t_last: float | None = None
         self._started = False
         self._blend: JoinBlend | None = None  # set when the first frame comes after t = 0 (a rejoin)
 
@@ -56,13 +65,25 @@ class Pilot:
         if not self._started:
             self._started = True
             if t > 0.0:  # joining a run in progress (a restart): from where the vehicle is
+                resume = self.spec.mission.resume_contact_force
                 self._blend = join_blend(self.model, self.mission, self.params.components, state, t,
-                                         self.spec.mission.join_blend_s)
+                                         self.spec.mission.join_blend_s,
+                                         frame.wrench_E if resume else None,
+                                         self.spec.vehicle.gains.K_y if resume else None)
         ref = self.mission.reference(t)
         if self._blend is not None:
             ref = self._blend.apply(ref, t)
-        res = step(self.model, self.data, self.params, state, ref, frame.wrench_E, self.memory, t)
+        task_frame = None
+        if self.heading is not None:
+            if self._wrench_E_f is not None:
+                self.heading_state = heading_update(self.heading, self.heading_state, self._wrench_E_f,
+                                                    t - self._t_last)
+            pivot = self.mission.contact_point_W
+            ref = turn_reference(ref, self.heading_state, pivot)
+            task_frame = turn_frame(self.mission.frame, self.heading_state, pivot)
+        res = step(self.model, self.data, self.params, state, ref, frame.wrench_E, self.memory, t, task_frame)
         self.memory = res.memory
+        self._wrench_E_f, self._t_last = res.diagnostics.wrench_E_filtered, t
         sp, att = setpoint_from_result(frame.step, res, self.thrust_max_n)
         return sp, att, res
 

@@ -154,7 +154,7 @@ class SitlCore:
         rep = self.world.apply(s, sp.thrust_n, sp.tau_B_nm, sp.tau_q_nm)
         if rep.saturated:
             t = self.world.time_s
-            if self.outcome.saturation(s, t):
+            if self.outcome.saturation(s, t, rep.mix.saturated, rep.joints.saturated):
                 self.log(f"t={t:.3f} s sysid {s}: command saturated (thrust {sp.thrust_n:.2f} N, tau_B "
                          f"{np.round(sp.tau_B_nm, 3)}, tau_q {np.round(sp.tau_q_nm, 3)}); counted in outcome.json, "
                          f"further ones not printed")

@@ -26,6 +26,8 @@ class _AmAcc:
         self.slip_max = 0.0
         self.base_contacts: set[str] = set()
         self.saturated_steps = 0
+        self.rotor_saturated_steps = 0
+        self.joint_saturated_steps = 0
         self.first_saturation_s: float | None = None
         self.lowest_base_z = np.inf
         self.first_base_contact: tuple[float, tuple[str, ...]] | None = None  # (t, what it touched)
@@ -53,10 +55,13 @@ class RunOutcome:
         self.slip_t_series: list[float] = []
         self.p_rest: np.ndarray | None = None
 
-    def saturation(self, sysid: int, t: float) -> bool:
-        """Count one saturated step; True the first time (so the caller logs it once)."""
+    def saturation(self, sysid: int, t: float, rotors: bool = True, joints: bool = False) -> bool:
+        """Count one saturated step (the rotors', the joints' or both); True the first time
+        (so the caller logs it once)."""
         a = self.ams[sysid]
         a.saturated_steps += 1
+        a.rotor_saturated_steps += rotors
+        a.joint_saturated_steps += joints
         if a.first_saturation_s is None:
             a.first_saturation_s = t
             return True
@@ -121,6 +126,8 @@ class RunOutcome:
                 "base_contacts": sorted(a.base_contacts),
                 "lowest_base_z_m": a.lowest_base_z,
                 "saturated_steps": a.saturated_steps,
+                "rotor_saturated_steps": a.rotor_saturated_steps,
+                "joint_saturated_steps": a.joint_saturated_steps,
                 "first_saturation_s": a.first_saturation_s,
                 "first_base_contact_s": a.first_base_contact[0] if a.first_base_contact else None,
             }

@@ -16,7 +16,10 @@ coefficient too, and the pair has its square).
 """
 from __future__ import annotations
 
+import tempfile
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pybullet as pb
@@ -157,10 +160,52 @@ def pad_lateral_friction(obj: ObjectSpec) -> float:
     return obj.pad_friction / obj.lateral_friction if obj.pad_friction > 0.0 else obj.lateral_friction
 
 
+def crowned_pad_urdf(vehicle: VehicleParams) -> str:
+    """The vehicle's URDF text with the pad's collision box replaced by its crowned face
+    (`PadSpec`): a cylinder along the pad's z axis, as tall as the box, whose front line is
+    the box's front face centre. Everything else, inertias included, is unchanged."""
+    tree = ET.parse(vehicle.urdf)
+    root = tree.getroot()
+    joint = next((j for j in root.iter("joint") if j.get("name") == vehicle.ft_frame), None)
+    if joint is None or joint.find("child") is None:
+        raise ValueError(f"{vehicle.urdf}: no joint '{vehicle.ft_frame}' with a child link for the pad")
+    pad_name = joint.find("child").get("link")
+    link = next(l for l in root.iter("link") if l.get("name") == pad_name)
+    col = link.find("collision")
+    box = col.find("geometry/box") if col is not None else None
+    if box is None:
+        raise ValueError(f"{vehicle.urdf}: the pad link '{pad_name}' needs a box collision to crown")
+    sx, sy, sz = (float(v) for v in box.get("size").split())
+    origin = col.find("origin")
+    ox, oy, oz = (float(v) for v in (origin.get("xyz") if origin is not None else "0 0 0").split())
+    r = vehicle.pad.crown_radius_m
+    geometry = col.find("geometry")
+    geometry.remove(box)
+    ET.SubElement(geometry, "cylinder", radius=repr(r), length=repr(sz))
+    if origin is None:
+        origin = ET.SubElement(col, "origin")
+    origin.set("xyz", f"{ox + 0.5 * sx - r!r} {oy!r} {oz!r}")
+    origin.set("rpy", "0 0 0")
+    return ET.tostring(root, encoding="unicode")
+
+
+def _load_urdf(client: int, vehicle: VehicleParams) -> int:
+    flags = pb.URDF_USE_INERTIA_FROM_FILE
+    if vehicle.pad.shape == "flat":
+        return pb.loadURDF(str(vehicle.urdf), flags=flags, physicsClientId=client)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / vehicle.urdf.name
+        path.write_text(crowned_pad_urdf(vehicle))
+        # an exact cylinder: without this flag PyBullet loads a faceted convex hull, whose flat
+        # facets bring back the edges the crown is there to remove
+        return pb.loadURDF(str(path), flags=flags | pb.URDF_USE_IMPLICIT_CYLINDER, physicsClientId=client)
+
+
 def load_am(client: int, vehicle: VehicleParams, friction: float) -> AmBody:
-    """Load the vehicle URDF (inertias from the file), strip PyBullet's default damping and
-    velocity motors so the joints are purely torque controlled, enable the wrist sensor."""
-    body = pb.loadURDF(str(vehicle.urdf), flags=pb.URDF_USE_INERTIA_FROM_FILE, physicsClientId=client)
+    """Load the vehicle URDF (inertias from the file; the pad's face as [pad] says), strip
+    PyBullet's default damping and velocity motors so the joints are purely torque
+    controlled, enable the wrist sensor."""
+    body = _load_urdf(client, vehicle)
     n = pb.getNumJoints(body, physicsClientId=client)
     info = [pb.getJointInfo(body, j, physicsClientId=client) for j in range(n)]
     joint_id = {i[1].decode(): i[0] for i in info}
@@ -199,6 +244,9 @@ def load_am(client: int, vehicle: VehicleParams, friction: float) -> AmBody:
                           physicsClientId=client)
         pb.setCollisionFilterGroupMask(body, link, AM_GROUP, AM_MASK, physicsClientId=client)
     pb.changeDynamics(body, pad, lateralFriction=friction, physicsClientId=client)
+    if vehicle.pad.contact_stiffness_n_per_m > 0.0:
+        pb.changeDynamics(body, pad, contactStiffness=vehicle.pad.contact_stiffness_n_per_m,
+                          contactDamping=vehicle.pad.contact_damping_n_s_per_m, physicsClientId=client)
     pb.setJointMotorControlArray(body, list(arm), pb.VELOCITY_CONTROL, forces=[0.0] * len(arm),
                                  physicsClientId=client)
     pb.enableJointForceTorqueSensor(body, ft, True, physicsClientId=client)

@@ -207,5 +207,7 @@ def summary_figures(result: Mapping, share_n: float) -> dict:
         "final_lift_m": obj["final_lift_m"],
         "max_slip_m": max(a["slip_max_m"] for a in ams.values()),
         "saturated_steps": sum(a["saturated_steps"] for a in ams.values()),
+        "rotor_saturated_steps": sum(a.get("rotor_saturated_steps", 0) for a in ams.values()),
+        "joint_saturated_steps": sum(a.get("joint_saturated_steps", 0) for a in ams.values()),
         "force_share_error": max(abs(u - share_n) / share_n for u in up) if share_n > 0 else None,
     }

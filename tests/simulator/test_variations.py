@@ -61,3 +61,27 @@ def test_start_offsets_move_the_vehicle_not_its_references():
     assert x1.R_WB == pytest.approx(Rz(np.deg2rad(4.0)) @ x0.R_WB)
     assert am_mission(spec, moved, model).reference(0.0).r_c == pytest.approx(
         am_mission(spec, am, model).reference(0.0).r_c)
+
+
+def test_a_crowned_pad_touches_with_its_front_line_and_a_rubber_facing_is_soft():
+    """[pad] shape = "crowned": PyBullet's pad collision is a vertical cylinder whose front
+    line is the flat face's centre line; contact stiffness and damping reach the pad."""
+    spec = load_scenario(SCENARIO)
+    v = spec.vehicle
+    pad = dataclasses.replace(v.pad, shape="crowned", crown_radius_m=0.05, contact_stiffness_n_per_m=3e4,
+                              contact_damping_n_s_per_m=150.0)
+    spec = dataclasses.replace(spec, vehicle=dataclasses.replace(v, pad=pad))
+    core = SitlCore(spec)
+    core.connect()
+    try:
+        w = core.world
+        am = w._am(4)
+        (shape,) = pb.getCollisionShapeData(am.body_id, am.pad_link_id, physicsClientId=w._c())
+        assert shape[2] == pb.GEOM_CYLINDER and shape[3][:2] == pytest.approx((0.08, 0.05))  # length, radius
+        # the shape's position is given in the pad's inertial frame, 0.01 m ahead of the link frame:
+        # front line at the face, x = 0.02 in the link frame
+        assert 0.01 + shape[5][0] + 0.05 == pytest.approx(0.02)
+        info = pb.getDynamicsInfo(am.body_id, am.pad_link_id, physicsClientId=w._c())
+        assert info[9] == pytest.approx(3e4) and info[8] == pytest.approx(150.0)  # stiffness, damping
+    finally:
+        core.close()

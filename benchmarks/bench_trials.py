@@ -1,0 +1,50 @@
+"""Trial campaign throughput: trials per minute of `am-trials` on this machine, for a local
+pool of 1 and of 2 worker processes, on the same trials (default randomization).
+
+    python benchmarks/bench_trials.py [--scenario configs/scenarios/two_am_comp.toml] [--trials 4]
+
+Each row runs the same `--trials` trials (seed 1) through `trials.runner` and prints wall
+time, trials per minute, and simulated seconds per wall second per worker. Worker start-up
+(spawning, importing pinocchio and PyBullet) is inside the wall time, as in a campaign.
+"""
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+from amcore.config import _read_toml, load_scenario
+from trials.cli import DEFAULT_RANDOMIZE, build_tasks
+from trials.randomize import load_randomize
+from trials.runner import executor, run_all
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scenario", type=Path, default=ROOT / "configs" / "scenarios" / "two_am_comp.toml")
+    ap.add_argument("--trials", type=int, default=4)
+    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    a = ap.parse_args()
+    spec = load_scenario(a.scenario)
+    rand = load_randomize(DEFAULT_RANDOMIZE)
+    print(f"{a.trials} trials of {a.scenario.name} ({spec.duration_s:g} s simulated each), default randomization")
+    print(f"{'workers':>8} {'wall [s]':>9} {'trials/min':>11} {'sim s per wall s per worker':>28}")
+    digests = None
+    for w in a.workers:
+        with tempfile.TemporaryDirectory() as tmp:
+            tasks = build_tasks(_read_toml(a.scenario), a.scenario.resolve(), rand, 1, a.trials, Path(tmp), None)
+            t0 = time.perf_counter()
+            with executor(w) as ex:
+                rows = run_all(tasks, ex)
+            wall = time.perf_counter() - t0
+        d = [r["state_digest"] for r in rows]
+        assert digests is None or d == digests, "the same trials gave other digests"
+        digests = d
+        print(f"{w:>8} {wall:9.1f} {60.0 * len(rows) / wall:11.2f} {a.trials * spec.duration_s / wall / w:28.2f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,93 @@
+"""Heading admittance (amcore.adapt) and squeeze sizing (amcore.mission.squeeze_plan)."""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from amcore.adapt import HeadingAdmittance, HeadingState, heading_update, misalignment, turn_frame, turn_reference
+from amcore.config import load_scenario
+from amcore.control import Reference
+from amcore.mission import am_mission, squeeze_plan
+from amcore.model import build_model
+from amcore.so3 import Rz
+from amcore.task import TaskFrame
+
+from ..conftest import SCENARIO
+
+ADM = HeadingAdmittance(omega_rad_s=2.0 * math.pi * 0.3, zeta=1.0, crown_radius_m=0.05)
+
+
+def _crown_wrench(delta, normal=9.0, friction_y=0.0):
+    """The wrench a flat face exerts on a crowned pad turned by delta, on {e}."""
+    R = ADM.crown_radius_m
+    y_c, x_c = R * math.sin(delta), -R * (1.0 - math.cos(delta))
+    f = np.array([-normal, friction_y, 2.0])
+    m = np.cross([x_c, y_c, 0.0], f)
+    return np.concatenate([f, m])
+
+
+@pytest.mark.parametrize("delta_deg", [-5.0, -0.1, 0.0, 2.0, 5.0])
+def test_the_crown_shows_the_misalignment(delta_deg):
+    d = math.radians(delta_deg)
+    assert misalignment(ADM, _crown_wrench(d)) == pytest.approx(d, abs=1e-12)
+    # lateral friction moves the estimate by R (1 - cos delta) f_y / N only
+    assert misalignment(ADM, _crown_wrench(d, friction_y=2.0)) == pytest.approx(d, abs=1e-3)  # 0.06 deg
+
+
+def test_out_of_contact_nothing_is_measured_and_the_heading_only_settles():
+    assert misalignment(ADM, _crown_wrench(0.05, normal=1.0)) is None
+    s = heading_update(ADM, HeadingState(0.1, 0.2), np.zeros(6), 0.001)
+    assert s.dpsi_d2 == pytest.approx(-2.0 * ADM.omega_rad_s * 0.2)
+
+
+def test_in_closed_loop_the_heading_settles_on_the_face_critically_damped():
+    delta, dt = math.radians(4.0), 0.001
+    s, trace = HeadingState(), []
+    for _ in range(int(6.0 / dt)):
+        s = heading_update(ADM, s, _crown_wrench(delta - s.dpsi), dt)  # turning reduces what the crown shows
+        trace.append(s.dpsi)
+    assert s.dpsi == pytest.approx(delta, rel=1e-3)
+    assert max(trace) <= delta * (1 + 1e-6)  # critically damped: no overshoot
+
+
+def test_turning_keeps_the_contact_point_and_turns_frame_and_heading_together():
+    pivot = np.array([-0.1, 0.02, 0.6])
+    frame = TaskFrame(R_WT=Rz(0.3), p_WT=np.array([0.0, 0.0, 0.6]))
+    s = HeadingState(dpsi=0.05, dpsi_d1=0.01, dpsi_d2=-0.02)
+    turned = turn_frame(frame, s, pivot)
+    assert turned.R_WT == pytest.approx(Rz(0.35))
+    # the pivot has the same coordinates in both frames' horizontal plane
+    in_old = frame.R_WT.T @ (pivot - frame.p_WT)
+    in_new = turned.R_WT.T @ (pivot - turned.p_WT)
+    assert in_new == pytest.approx(in_old)
+    z = np.zeros(3)
+    ref = Reference(np.array([-0.4, 0.0, 0.7]), np.array([0.1, 0, 0]), z, z, z, 0.3, 0.0, 0.0, z, z, z)
+    r = turn_reference(ref, s, pivot)
+    assert r.psi == pytest.approx(0.35) and r.psi_d1 == 0.01 and r.psi_d2 == -0.02
+    assert np.linalg.norm(r.r_c - pivot) == pytest.approx(np.linalg.norm(ref.r_c - pivot))
+    assert r.r_c_d1 == pytest.approx(Rz(0.05) @ ref.r_c_d1)
+
+
+def test_squeeze_sizing_holds_the_share_with_the_margin_within_the_thrust():
+    spec = load_scenario(SCENARIO)
+    model = build_model(spec.vehicle)
+    k_x = spec.vehicle.gains.K_y[0]
+    off = squeeze_plan(spec, model)
+    assert off.force_n == pytest.approx(k_x * spec.mission.squeeze_m) and off.depth_m == spec.mission.squeeze_m
+    on = dataclasses.replace(spec, mission=dataclasses.replace(spec.mission, squeeze_sizing=True))
+    g = spec.vehicle.gravity_mps2
+    p = squeeze_plan(on, model)
+    assert p.required_n == pytest.approx(1.5 * 1.0 * g / 2 / 0.5)
+    assert p.force_n == pytest.approx(p.required_n) and p.depth_m == pytest.approx(p.required_n / k_x)
+    heavy = dataclasses.replace(on, object=dataclasses.replace(on.object, mass_kg=2.0))
+    h = squeeze_plan(heavy, model)
+    thrust = 0.8 * 4 * spec.vehicle.rotors.thrust_max_n
+    assert h.force_n == pytest.approx(h.feasible_n) and h.feasible_n < h.required_n
+    assert math.hypot(h.force_n, model.mass_kg * g + 2.0 * g / 2) == pytest.approx(thrust)
+    light = dataclasses.replace(on, object=dataclasses.replace(on.object, mass_kg=0.3))
+    assert squeeze_plan(light, model).force_n == pytest.approx(k_x * spec.mission.squeeze_m)  # never below fixed
+    mission = am_mission(on, on.am(4), model)
+    assert mission.reference(on.mission.grasp_end_s).y[0] == pytest.approx(-(0.1 - p.depth_m))

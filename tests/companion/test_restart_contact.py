@@ -1,0 +1,51 @@
+"""A companion restarted while its pad holds the object ([mission].resume_contact_force):
+it resumes the push its wrist sensor reads, and the object stays up; starting from zero
+squeeze, it lets the object fall (in-process, two_am_short: companion 5 silent from 6.0 to
+6.5 s, in the hover, then a fresh Pilot)."""
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import pytest
+
+from amcore.config import _read_toml, scenario_from_dict
+from companion.pilot import Pilot
+from simulator.core import SitlCore
+from simulator.inprocess import as_on_the_wire
+
+SHORT = Path(__file__).resolve().parents[2] / "configs" / "scenarios" / "two_am_short.toml"
+
+
+def _restart_run(resume: bool) -> dict:
+    data = copy.deepcopy(_read_toml(SHORT))
+    data["mission"]["resume_contact_force"] = resume
+    spec = scenario_from_dict(data, SHORT)
+    core = SitlCore(spec)
+    pilots = {s: Pilot(spec, s, model=core.model) for s in core.sysids}
+    core.connect()
+    try:
+        for k in range(int(spec.duration_s * spec.rate_hz)):
+            t = core.time_s
+            frames = core.frames(k)
+            if 6.0 <= t < 6.5:
+                lost = {5}
+            else:
+                lost = set()
+                if t >= 6.5 and pilots[5].steps and pilots[5].last[0] < 6.0:  # the restarted process
+                    pilots[5] = Pilot(spec, 5, model=core.model)
+            sps = {s: pilots[s].step(as_on_the_wire(f))[0] for s, f in frames.items() if s not in lost}
+            core.actuate(k, sps, lost)
+            core.step()
+        return core.finish()
+    finally:
+        core.close()
+
+
+@pytest.mark.parametrize("resume,expect", [(True, "success"), (False, "failed")])
+def test_a_restart_in_contact_resumes_the_measured_push(resume, expect):
+    out = _restart_run(resume)
+    assert [e["event"] for e in out["events"]] == ["lost", "rejoined"]
+    assert out["verdict"]["status"] == expect, out["verdict"]["text"]
+    if not resume:
+        assert out["verdict"]["failure_class"] in ("dropped", "slipped")
