@@ -84,6 +84,8 @@ class AmTruth:
     pad_other_contacts: tuple[str, ...]
     base_contacts: tuple[str, ...]
     p_W_joints: tuple[np.ndarray, ...] = ()  # arm joint origins, base to wrist [m] (to draw the arm)
+    rotor_saturated_steps: int = 0  # commands so far whose rotor mix saturated (cumulative)
+    joint_saturated_steps: int = 0  # commands so far with a joint torque clipped (cumulative)
 
 
 @dataclass(frozen=True)
@@ -142,6 +144,7 @@ class World:
         self._client: int | None = None
         self._ams: dict[int, scene.AmBody] = {}
         self._commands: dict[int, tuple[float, list[float], list[float]]] = {}  # applied T, tau_B, tau_q
+        self._saturated = {a.sysid: [0, 0] for a in spec.ams}  # saturated commands so far: rotors, joints
         self._names: dict[int, str] = {}
         self._object_id = -1
         self._step_index = 0
@@ -235,6 +238,10 @@ class World:
         self._am(sysid)
         mix = self._mixer.mix(float(thrust_n), tau_B_nm)
         joints = limit_joint_torques(tau_q_nm, self._tau_q_max)
+        if mix.saturated or joints.saturated:
+            sat = self._saturated[sysid]
+            sat[0] += mix.saturated
+            sat[1] += joints.saturated
         self._commands[sysid] = (mix.applied_thrust_n, mix.applied_tau_B_nm.tolist(), joints.applied_nm.tolist())
         return ApplyReport(mix=mix, joints=joints)
 
@@ -325,7 +332,7 @@ class World:
 
     def ground_truth(self) -> GroundTruth:
         c = self._c()
-        ams = {sysid: self._am_truth(am) for sysid, am in self._ams.items()}
+        ams = {sysid: self._am_truth(am, self._saturated[sysid]) for sysid, am in self._ams.items()}
         p, quat = pb.getBasePositionAndOrientation(self._object_id, physicsClientId=c)
         v, w = pb.getBaseVelocity(self._object_id, physicsClientId=c)
         x, y, z, qw = quat
@@ -334,7 +341,7 @@ class World:
                           touching=self._names_of(pt[2] for pt in touching))
         return GroundTruth(time_s=self.time_s, step_index=self.step_index, ams=ams, object=obj)
 
-    def _am_truth(self, am: scene.AmBody) -> AmTruth:
+    def _am_truth(self, am: scene.AmBody, saturated=(0, 0)) -> AmTruth:
         c = self._c()
         p, quat = pb.getBasePositionAndOrientation(am.body_id, physicsClientId=c)
         ee = pb.getLinkState(am.body_id, am.ee_link_id, computeForwardKinematics=1, physicsClientId=c)
@@ -347,7 +354,8 @@ class World:
                        pad_object_contact=_sum_contact(on_object),
                        pad_other_contacts=self._names_of(pt[2] for pt in pad_points if pt[2] != self._object_id),
                        base_contacts=self._names_of(pt[2] for pt in base_points),
-                       p_W_joints=tuple(np.array(j[4]) for j in joints))
+                       p_W_joints=tuple(np.array(j[4]) for j in joints),
+                       rotor_saturated_steps=saturated[0], joint_saturated_steps=saturated[1])
 
     def _names_of(self, body_ids) -> tuple[str, ...]:
         return tuple(sorted({self._names.get(b, f"body{b}") for b in body_ids}))

@@ -183,7 +183,11 @@ AM_TRUTH_SCHEMA = _object("amstack.AmTruth", "Ground-truth base and end-effector
     "q_WE": _vec(4, "end-effector attitude (w, x, y, z); x = pad outward normal"),
     "p_W_joints": {"type": "array", "items": _vec(3, "joint origin [m]"),
                    "description": "arm joint origins from the base to the wrist [m] (optional)"},
-}, optional=("p_W_joints",))
+    "rotor_saturated_steps": {"type": "integer", "minimum": 0,
+                              "description": "commands so far whose rotor mix saturated (cumulative; optional)"},
+    "joint_saturated_steps": {"type": "integer", "minimum": 0,
+                              "description": "commands so far with a joint torque clipped (cumulative; optional)"},
+}, optional=("p_W_joints", "rotor_saturated_steps", "joint_saturated_steps"))
 
 CONTACT_SCHEMA = _object("amstack.PadContact", "Force the object applies on one AM's pad, ground truth", {
     "sysid": {"type": "integer"},
@@ -282,6 +286,9 @@ def am_truth_sample(t_s: float, sysid: int, am, seq: int = 0) -> dict:
     joints = getattr(am, "p_W_joints", ())
     if len(joints):
         out["p_W_joints"] = [_l(p) for p in joints]
+    for key in ("rotor_saturated_steps", "joint_saturated_steps"):
+        if hasattr(am, key):
+            out[key] = int(getattr(am, key))
     return out
 
 

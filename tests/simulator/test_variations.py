@@ -85,3 +85,28 @@ def test_a_crowned_pad_touches_with_its_front_line_and_a_rubber_facing_is_soft()
         assert info[9] == pytest.approx(3e4) and info[8] == pytest.approx(150.0)  # stiffness, damping
     finally:
         core.close()
+
+
+def test_saturation_reaches_the_ground_truth_telemetry_per_am():
+    """Each AM's truth sample counts its saturated commands so far (rotors, joints), and the
+    sample holds to the telemetry schema."""
+    from telemetry import schema
+    from telemetry.validate import errors
+
+    spec = load_scenario(SCENARIO)
+    core = SitlCore(spec)
+    core.connect()
+    try:
+        w = core.world
+        w.apply(4, 200.0, np.zeros(3), np.zeros(3))  # beyond the rotors' total: clamped
+        w.apply(4, 10.0, np.zeros(3), np.array([50.0, 0.0, 0.0]))  # beyond joint 1's limit
+        w.apply(5, 10.0, np.zeros(3), np.zeros(3))
+        gt = w.ground_truth()
+        a4, a5 = gt.ams[4], gt.ams[5]
+        assert (a4.rotor_saturated_steps, a4.joint_saturated_steps) == (1, 1)
+        assert (a5.rotor_saturated_steps, a5.joint_saturated_steps) == (0, 0)
+        sample = schema.am_truth_sample(gt.time_s, 4, a4)
+        assert sample["rotor_saturated_steps"] == 1 and sample["joint_saturated_steps"] == 1
+        assert errors(sample, schema.AM_TRUTH_SCHEMA) == []
+    finally:
+        core.close()
