@@ -195,8 +195,9 @@ class MissionSpec:
     thrust_fraction_max: float = 0.8  # of the rotors' total maximum, for weight, load share and squeeze
     lift_m: float = 0.3
     join_blend_s: float = 3.0  # a companion started mid-run (a restart) blends into the references over this
-    # a companion started mid-run whose wrist sensor reads a push resumes it (amcore.mission.join_blend)
-    resume_contact_force: bool = False
+    # a companion started mid-run whose wrist sensor reads a push resumes it (amcore.mission.join_blend);
+    # false: it starts from zero squeeze and, restarted in the hover, lets the object fall
+    resume_contact_force: bool = True
 
 
 @dataclass(frozen=True)
