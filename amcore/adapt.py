@@ -14,7 +14,10 @@ The heading reference follows it through a critically damped second-order admitt
     dpsi'' = omega^2 delta_hat - 2 zeta omega dpsi',
 
 which, as the AM turns (delta_hat -> delta - dpsi), settles on dpsi = delta with natural
-frequency omega; outside contact (N below min_normal_n) only the damping acts. dpsi and its
+frequency omega; outside contact (N below min_normal_n) only the damping acts. The
+companion (`companion.pilot`) feeds it the wrench in the grasp phase only, while the object
+stands on the table: once it hangs between the pads, two crowned pads leave it free to
+turn about the vertical, and its turning would drive the heading. dpsi and its
 two derivatives enter eq. Rd as the heading's (psi_d1, psi_d2); the AM's task frame and
 CoM path turn with it about the vertical through the pad's contact point on the face
 (`turn_reference`), so that the pad stays where it touches. The CoM path's own

@@ -116,6 +116,9 @@ class PadSpec:
     crown_radius_m: float = 0.1
     contact_stiffness_n_per_m: float = 0.0
     contact_damping_n_s_per_m: float = 0.0
+    # rolling resistance of the facing [m]: the moment resisting rolling (the object turning
+    # between crowned pads) is at most this times the normal force (Bullet's rollingFriction)
+    rolling_friction_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -460,7 +463,7 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     if v.pad.shape not in ("flat", "crowned"):
         raise ConfigError(f"{where}: [pad].shape: expected 'flat' or 'crowned', got '{v.pad.shape}'")
     _positive(f"{where}: [pad].crown_radius_m", v.pad.crown_radius_m)
-    for key in ("contact_stiffness_n_per_m", "contact_damping_n_s_per_m"):
+    for key in ("contact_stiffness_n_per_m", "contact_damping_n_s_per_m", "rolling_friction_m"):
         if getattr(v.pad, key) < 0.0:
             raise ConfigError(f"{where}: [pad].{key}: must be >= 0 (0: rigid), got {getattr(v.pad, key)!r}")
     if (v.pad.contact_stiffness_n_per_m > 0.0) != (v.pad.contact_damping_n_s_per_m > 0.0):

@@ -24,6 +24,8 @@ from amlink.types import AttitudeTarget, SensorFrame, TorqueSetpoint
 from .adapter import setpoint_from_result, state_from_frame
 from .outcome import Outcome
 
+_NO_WRENCH = (0.0,) * 6
+
 
 class Pilot:
     def __init__(self, spec: ScenarioSpec, sysid: int, model=None) -> None:
@@ -76,8 +78,11 @@ class Pilot:
         task_frame = None
         if self.heading is not None:
             if self._wrench_E_f is not None:
-                self.heading_state = heading_update(self.heading, self.heading_state, self._wrench_E_f,
-                                                    t - self._t_last)
+                # the heading follows the face while the pads squeeze the object on the table;
+                # from the lift on it settles (damping only): the object then hangs between
+                # the pads and its own turning would drive the heading
+                w = self._wrench_E_f if self.mission.phase(t) == "grasp" else _NO_WRENCH
+                self.heading_state = heading_update(self.heading, self.heading_state, w, t - self._t_last)
             pivot = self.mission.contact_point_W
             ref = turn_reference(ref, self.heading_state, pivot)
             task_frame = turn_frame(self.mission.frame, self.heading_state, pivot)

@@ -244,6 +244,8 @@ def load_am(client: int, vehicle: VehicleParams, friction: float) -> AmBody:
                           physicsClientId=client)
         pb.setCollisionFilterGroupMask(body, link, AM_GROUP, AM_MASK, physicsClientId=client)
     pb.changeDynamics(body, pad, lateralFriction=friction, physicsClientId=client)
+    if vehicle.pad.rolling_friction_m > 0.0:
+        pb.changeDynamics(body, pad, rollingFriction=vehicle.pad.rolling_friction_m, physicsClientId=client)
     if vehicle.pad.contact_stiffness_n_per_m > 0.0:
         pb.changeDynamics(body, pad, contactStiffness=vehicle.pad.contact_stiffness_n_per_m,
                           contactDamping=vehicle.pad.contact_damping_n_s_per_m, physicsClientId=client)
