@@ -78,6 +78,14 @@ def test_scenario_id_ignores_formatting_and_location_but_not_content(tmp_path):
     assert scenario_id(load_scenario(ROOT / "configs" / "scenarios" / "two_am_nocomp.toml")) != a
 
 
+def test_controller_option_selects_the_law_and_defaults_to_the_papers():
+    base = load_scenario(ROOT / "configs" / "scenarios" / "two_am_baseline.toml")
+    assert base.vehicle.options.controller == "baseline"
+    assert len(base.vehicle.baseline.K_q) == base.vehicle.n_joints
+    assert load_scenario(ROOT / "configs" / "scenarios" / "two_am_comp.toml").vehicle.options.controller == "passivity"
+    assert scenario_id(base) != scenario_id(load_scenario(ROOT / "configs" / "scenarios" / "two_am_comp.toml"))
+
+
 def test_unknown_controller_is_rejected_naming_the_key(tmp_path):
     p = _write(tmp_path, BASE + '\n[options]\ncontroller = "pid"\n')
     with pytest.raises(ConfigError, match=r"\[options\]\.controller: unknown controller 'pid' \(known: passivity, baseline\)"):
