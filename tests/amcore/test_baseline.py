@@ -15,8 +15,8 @@ from amcore.attitude import desired_attitude
 from amcore.control import Reference
 from amcore.ideal import run_closed_loop
 from amcore.model import AmState, create_data, decoupled_terms
-from amcore.so3 import Rz, exp_so3, hat
-from amcore.task import TaskFrame, task_terms
+from amcore.so3 import exp_so3
+from amcore.task import task_terms
 
 from .conftest import states
 

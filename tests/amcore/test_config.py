@@ -88,15 +88,17 @@ def test_controller_option_selects_the_law_and_defaults_to_the_papers():
 
 def test_unknown_controller_is_rejected_naming_the_key(tmp_path):
     p = _write(tmp_path, BASE + '\n[options]\ncontroller = "pid"\n')
-    with pytest.raises(ConfigError, match=r"\[options\]\.controller: unknown controller 'pid' \(known: passivity, baseline\)"):
+    with pytest.raises(ConfigError) as e:
         load_scenario(p)
+    assert "[options].controller: unknown controller 'pid' (known: passivity, baseline)" in str(e.value)
 
 
 def _vehicle_variant(tmp_path, old: str, new: str, options: str = "") -> Path:
     text = VEHICLE.read_text()
     assert old in text
     v = tmp_path / "v.toml"
-    v.write_text(text.replace(old, new, 1).replace('urdf = "am3dof.urdf"', f'urdf = "{VEHICLE.parent / "am3dof.urdf"}"'))
+    urdf = VEHICLE.parent / "am3dof.urdf"
+    v.write_text(text.replace(old, new, 1).replace('urdf = "am3dof.urdf"', f'urdf = "{urdf}"'))
     p = tmp_path / "s.toml"
     p.write_text(BASE.replace('vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{v}"') + options)
     return p
