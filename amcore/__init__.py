@@ -7,4 +7,6 @@ tested) without pymavlink, zenoh or pybullet installed.
 The method is Jeong & Kim, "Passivity-based Decentralized Control for Collaborative
 Grasping of Under-Actuated Aerial Manipulators", ICRA 2023. Equation names in the
 docstrings (eq. new_coord, eq. Com_controller, ...) are the labels of that paper.
+`amcore.baseline` is the conventional controller it is compared with (Lee et al.'s geometric
+tracking of the base, joint-space PD on the arm), behind the same step interface.
 """

@@ -81,8 +81,39 @@ class Safety:
     damping_max: float = 0.05
 
 
+CONTROLLERS = ("passivity", "baseline")  # amcore.control (the paper's law), amcore.baseline
+
+
+@dataclass(frozen=True)
+class BaselineGains:
+    """[baseline] table: gains of the baseline controller (`amcore.baseline`), diagonal entries.
+
+    Base, geometric SE(3) tracking (Lee, Leok and McClamroch, CDC 2010) with an integral term:
+    k_x [N/m], k_v [N s/m], k_i [N/(m s)] on the base position error in {w}; the integral's
+    force k_i * int(e_x) is clamped per axis at integral_limit_n [N] (anti-windup). Attitude:
+    k_R [N m/rad], k_w [N m s/rad] per body axis. Arm, joint-space PD with gravity
+    compensation: K_q [N m/rad], D_q [N m s/rad] per joint. The inverse kinematics behind
+    q_d runs up to ik_iterations damped Newton steps per control step, damping ik_damping
+    [rad-equivalent, squared into the normal equations].
+    """
+
+    k_x: tuple[float, float, float]
+    k_v: tuple[float, float, float]
+    k_i: tuple[float, float, float]
+    integral_limit_n: tuple[float, float, float]
+    k_R: tuple[float, float, float]
+    k_w: tuple[float, float, float]
+    k_iR: tuple[float, float, float]
+    attitude_integral_limit_nm: tuple[float, float, float]
+    K_q: tuple[float, ...]
+    D_q: tuple[float, ...]
+    ik_iterations: int
+    ik_damping: float
+
+
 @dataclass(frozen=True)
 class ControllerOptions:
+    controller: str = "passivity"  # which law flies the AM: one of CONTROLLERS
     force_compensation: bool = True
     compensate_Lambda_y_dot: bool = False
     force_filter_hz: float = 3.0  # cutoff of the 2nd-order low-pass on the measured wrench (why: am3dof.toml)
@@ -137,6 +168,7 @@ class VehicleParams:
     safety: Safety = Safety()
     options: ControllerOptions = ControllerOptions()
     pad: PadSpec = PadSpec()
+    baseline: BaselineGains | None = None  # needed when options.controller = "baseline"
     gravity_mps2: float = 9.81
 
     @property
@@ -418,13 +450,14 @@ def _is_key_hex(text: str) -> bool:
 def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     where = str(path)
     kw = _build(VehicleParams, data.get("vehicle", {}), f"{where}: [vehicle]",
-                skip=("rotors", "task", "gains", "safety", "options", "pad"))
-    extra = set(data) - {"vehicle", "rotors", "task", "gains", "safety", "options", "pad"}
+                skip=("rotors", "task", "gains", "safety", "options", "pad", "baseline"))
+    extra = set(data) - {"vehicle", "rotors", "task", "gains", "safety", "options", "pad", "baseline"}
     if extra:
         raise ConfigError(f"{where}: unknown table [{sorted(extra)[0]}]")
     sub = {}
     for name, cls in (("rotors", RotorParams), ("task", TaskSpec), ("gains", Gains),
-                      ("safety", Safety), ("options", ControllerOptions), ("pad", PadSpec)):
+                      ("safety", Safety), ("options", ControllerOptions), ("pad", PadSpec),
+                      ("baseline", BaselineGains)):
         if name in data:
             sub[name] = cls(**_build(cls, data[name], f"{where}: [{name}]"))
         elif name in ("rotors", "task", "gains"):
@@ -469,7 +502,30 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     if (v.pad.contact_stiffness_n_per_m > 0.0) != (v.pad.contact_damping_n_s_per_m > 0.0):
         raise ConfigError(f"{where}: [pad]: contact_stiffness_n_per_m and contact_damping_n_s_per_m go together "
                           f"(both 0: rigid)")
+    if v.options.controller not in CONTROLLERS:
+        raise ConfigError(f"{where}: [options].controller: unknown controller '{v.options.controller}' "
+                          f"(known: {', '.join(CONTROLLERS)})")
+    if v.options.controller == "baseline" and v.baseline is None:
+        raise ConfigError(f"{where}: [options].controller = 'baseline' needs a [baseline] table")
+    if v.baseline is not None:
+        _check_baseline(v.baseline, n, f"{where}: [baseline]")
     return v
+
+
+def _check_baseline(b: BaselineGains, n: int, where: str) -> None:
+    for key in ("K_q", "D_q"):
+        if len(getattr(b, key)) != n:
+            raise ConfigError(f"{where}.{key}: expected {n} entries (one per arm joint), got {len(getattr(b, key))}")
+    for key in ("k_x", "k_v", "k_R", "k_w", "K_q", "D_q", "integral_limit_n", "attitude_integral_limit_nm"):
+        _positive(f"{where}.{key}", getattr(b, key))
+    for key in ("k_i", "k_iR"):
+        for i, v in enumerate(getattr(b, key)):
+            if v < 0.0:
+                raise ConfigError(f"{where}.{key}: must be >= 0 (0: no integral), got {v!r} (entry {i})")
+    if b.ik_iterations < 1:
+        raise ConfigError(f"{where}.ik_iterations: must be >= 1, got {b.ik_iterations}")
+    if b.ik_damping < 0.0:
+        raise ConfigError(f"{where}.ik_damping: must be >= 0, got {b.ik_damping!r}")
 
 
 def load_vehicle(path: str | Path) -> VehicleParams:

@@ -48,12 +48,15 @@ class Sample:
 def run_closed_loop(model: AmModel, params: ControllerParams, reference: Callable[[float], Reference],
                     x0: AmState, t_end: float, dt: float = 1e-3, wrench: WrenchFn | None = None,
                     sense_wrench: bool = True, every: int = 1,
-                    on_step: Callable[[Sample], None] | None = None) -> list[Sample]:
-    """Simulate t in [0, t_end); returns every `every`-th sample (controller output included)."""
+                    on_step: Callable[[Sample], None] | None = None, law=step, memory=None) -> list[Sample]:
+    """Simulate t in [0, t_end); returns every `every`-th sample (controller output included).
+
+    `law` and `memory`: another controller with the same step signature and its initial memory
+    (`amcore.baseline.step`, `BaselineMemory()`); by default the paper's law."""
     pm = model.pin_model
     cdata, pdata = create_data(model), create_data(model)
     q, v = x0.pin_q(), x0.pin_v()
-    mem = ControllerMemory()
+    mem = ControllerMemory() if memory is None else memory
     out: list[Sample] = []
     steps = int(round(t_end / dt))
     zero = np.zeros(6)
@@ -61,7 +64,7 @@ def run_closed_loop(model: AmModel, params: ControllerParams, reference: Callabl
         t = k * dt
         st = AmState.from_pin(q, v)
         F = wrench(t, st) if wrench is not None else zero
-        res = step(model, cdata, params, st, reference(t), F if sense_wrench else zero, mem, t)
+        res = law(model, cdata, params, st, reference(t), F if sense_wrench else zero, mem, t)
         mem = res.memory
         tau = full_tau(res.command, model.n)
         smp = Sample(t, st, res, F)

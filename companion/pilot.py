@@ -1,7 +1,9 @@
 """One AM's decentralized controller, fed sensor frames, answering setpoints (no I/O).
 
 `Pilot(spec, sysid)` builds the AM's model, its own mission references from its [[am]]
-entry, and the paper's controller; `pilot.step(frame)` returns the torque setpoint and
+entry, and the controller that [options].controller names: the paper's law
+(`amcore.control`) or the baseline (`amcore.baseline`), which take and give the same
+shapes. `pilot.step(frame)` returns the torque setpoint and
 attitude target for that frame, and keeps the per-phase error summary
 (`companion.outcome`); `command` and `record` are its two halves, for a caller that sends
 the setpoint before the bookkeeping. A pilot whose first frame comes after t = 0 (a
@@ -14,9 +16,10 @@ from __future__ import annotations
 
 import math
 
+from amcore import baseline, control
 from amcore.adapt import HeadingAdmittance, HeadingState, heading_update, turn_frame, turn_reference
 from amcore.config import ScenarioSpec
-from amcore.control import ControllerMemory, ControllerParams, StepResult, step
+from amcore.control import StepResult
 from amcore.mission import JoinBlend, am_mission, join_blend
 from amcore.model import build_model, create_data
 from amlink.types import AttitudeTarget, SensorFrame, TorqueSetpoint
@@ -34,8 +37,14 @@ class Pilot:
         self.model = model if model is not None else build_model(spec.vehicle)
         self.data = create_data(self.model)
         self.mission = am_mission(spec, self.am, self.model)
-        self.params = ControllerParams.from_vehicle(spec.vehicle, self.mission.frame)
-        self.memory = ControllerMemory()
+        if spec.vehicle.options.controller == "baseline":
+            self.law = baseline.step
+            self.params = baseline.BaselineParams.from_vehicle(spec.vehicle, self.model, self.mission.frame)
+            self.memory = baseline.BaselineMemory()
+        else:
+            self.law = control.step
+            self.params = control.ControllerParams.from_vehicle(spec.vehicle, self.mission.frame)
+            self.memory = control.ControllerMemory()
         self.thrust_max_n = spec.vehicle.rotors.thrust_max_n * spec.vehicle.rotors.count
         ms = spec.mission
         self.outcome = Outcome(sysid, ("approach", "grasp", "hover"), (ms.grasp_end_s + ms.lift_move_s + 1.0,
@@ -86,7 +95,8 @@ class Pilot:
             pivot = self.mission.contact_point_W
             ref = turn_reference(ref, self.heading_state, pivot)
             task_frame = turn_frame(self.mission.frame, self.heading_state, pivot)
-        res = step(self.model, self.data, self.params, state, ref, frame.wrench_E, self.memory, t, task_frame)
+        args = (self.model, self.data, self.params, state, ref, frame.wrench_E, self.memory, t)
+        res = self.law(*args) if task_frame is None else self.law(*args, task_frame)
         self.memory = res.memory
         self._wrench_E_f, self._t_last = res.diagnostics.wrench_E_filtered, t
         sp, att = setpoint_from_result(frame.step, res, self.thrust_max_n)

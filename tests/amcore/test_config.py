@@ -83,3 +83,54 @@ def test_scenario_id_ignores_formatting_and_location_but_not_content(tmp_path):
     heavier = _write(tmp_path, BASE.replace("mass_kg = 1.0", "mass_kg = 1.01"))
     assert scenario_id(load_scenario(heavier)) != a
     assert scenario_id(load_scenario(ROOT / "configs" / "scenarios" / "two_am_nocomp.toml")) != a
+
+
+def test_controller_option_selects_the_law_and_defaults_to_the_papers():
+    base = load_scenario(ROOT / "configs" / "scenarios" / "two_am_baseline.toml")
+    assert base.vehicle.options.controller == "baseline"
+    assert len(base.vehicle.baseline.K_q) == base.vehicle.n_joints
+    assert load_scenario(ROOT / "configs" / "scenarios" / "two_am_comp.toml").vehicle.options.controller == "passivity"
+    assert scenario_id(base) != scenario_id(load_scenario(ROOT / "configs" / "scenarios" / "two_am_comp.toml"))
+
+
+def test_unknown_controller_is_rejected_naming_the_key(tmp_path):
+    p = _write(tmp_path, BASE + '\n[options]\ncontroller = "pid"\n')
+    with pytest.raises(ConfigError) as e:
+        load_scenario(p)
+    assert "[options].controller: unknown controller 'pid' (known: passivity, baseline)" in str(e.value)
+
+
+def _vehicle_variant(tmp_path, old: str, new: str, options: str = "") -> Path:
+    text = VEHICLE.read_text()
+    assert old in text
+    v = tmp_path / "v.toml"
+    urdf = VEHICLE.parent / "am3dof.urdf"
+    v.write_text(text.replace(old, new, 1).replace('urdf = "am3dof.urdf"', f'urdf = "{urdf}"'))
+    p = tmp_path / "s.toml"
+    p.write_text(BASE.replace('vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{v}"') + options)
+    return p
+
+
+@pytest.mark.parametrize("old,new,key", [
+    ("ik_damping = 0.01", "ik_damping = 0.01\nk_d = 1.0", "[baseline]: unknown key 'k_d'"),
+    ("K_q = [20.0, 5.0, 6.0]", "K_q = [20.0, 5.0]", "[baseline].K_q: expected 3 entries"),
+    ("k_x = [86.4, 86.4, 86.4]", "k_x = [86.4, 0.0, 86.4]", "[baseline].k_x: must be > 0"),
+    ("k_i = [40.0, 40.0, 40.0]", "k_i = [40.0, -1.0, 40.0]", "[baseline].k_i: must be >= 0"),
+    ("ik_iterations = 3", "ik_iterations = 0", "[baseline].ik_iterations: must be >= 1"),
+])
+def test_malformed_baseline_table_names_file_and_key(tmp_path, old, new, key):
+    p = _vehicle_variant(tmp_path, old, new)
+    with pytest.raises(ConfigError) as e:
+        load_scenario(p)
+    assert str(tmp_path / "v.toml") in str(e.value) and key in str(e.value)
+
+
+def test_baseline_controller_needs_its_gains(tmp_path):
+    text = VEHICLE.read_text()
+    cut = text.index("\n[baseline]")
+    end = text.index("ik_damping = 0.01") + len("ik_damping = 0.01")
+    p = _vehicle_variant(tmp_path, text[cut:end], "", options='\n[options]\ncontroller = "baseline"\n')
+    with pytest.raises(ConfigError, match=r"controller = 'baseline' needs a \[baseline\] table"):
+        load_scenario(p)
+    p.write_text(p.read_text().replace('controller = "baseline"', 'controller = "passivity"'))
+    assert load_scenario(p).vehicle.baseline is None  # the paper's law does not need it

@@ -84,3 +84,33 @@ def test_join_blend_duration_comes_from_the_scenario(spec):
     assert np.linalg.norm(inside.r_c - p.mission.reference(3.4).r_c) > 1e-3  # still blending at 0.4 s
     after = p.mission.reference(3.5)
     assert p._blend.apply(after, 3.5) is after  # done at 0.5 s, where the default (3 s) would not be
+
+
+def test_pilot_flies_the_law_its_scenario_names(spec):
+    """[options].controller picks the law; both answer the same frame with setpoints of the same
+    shapes, and the baseline's diagnostics carry what the outcome summary and telemetry read."""
+    from amcore import baseline, control
+    from amcore.config import load_scenario
+    from companion.outcome import Outcome
+    from telemetry.schema import controller_sample
+
+    from ..conftest import ROOT
+
+    paper = Pilot(spec, 4)
+    base = Pilot(load_scenario(ROOT / "configs" / "scenarios" / "two_am_baseline.toml"), 4, model=paper.model)
+    assert paper.law is control.step and isinstance(paper.params, control.ControllerParams)
+    assert base.law is baseline.step and isinstance(base.params, baseline.BaselineParams)
+    x0 = paper.mission.initial_state()
+    frame = _frame(0, 0.0, x0, paper.mission.psi)
+    (sp_p, att_p, res_p), (sp_b, att_b, res_b) = paper.command(frame), base.command(frame)
+    m_g = paper.model.mass_kg * paper.model.gravity_mps2
+    for sp, att in ((sp_p, att_p), (sp_b, att_b)):
+        assert sp.thrust_n == pytest.approx(m_g, rel=1e-3)  # both hold the vehicle at rest on the reference
+        np.testing.assert_allclose(att.quat_wxyz, att_p.quat_wxyz, atol=1e-6)
+        assert sp.tau_q_nm.shape == sp_p.tau_q_nm.shape
+    np.testing.assert_allclose(sp_b.tau_q_nm, sp_p.tau_q_nm, atol=1e-6)  # gravity compensation, both
+    base.record(0.0, res_b)
+    assert base.summary()["phases"]["approach"]["steps"] == 1
+    Outcome(4, ("approach",), (0.0, 1.0)).add(0.0, "approach", res_b.diagnostics)
+    sample = controller_sample(0.0, "approach", res_b.diagnostics, res_b.command)
+    assert sample.keys() == controller_sample(0.0, "approach", res_p.diagnostics, res_p.command).keys()

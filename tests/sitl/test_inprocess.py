@@ -70,3 +70,19 @@ def test_a_failed_mission_makes_am_run_say_so_and_exit_4(tmp_path):
     assert "verdict: mission FAILED: am4's actuators saturated on" in r.stderr
     assert r.outcome["verdict"]["failure_class"] == "saturated" and r.outcome["exit_code"] == 4
     assert run(load_scenario(path), duration_s=1.0)["verdict"] == r.outcome["verdict"]
+
+
+def test_baseline_flies_the_approach_through_the_same_runner():
+    """two_am_baseline ([options] controller = "baseline") in the in-process SITL: through the
+    approach (free flight in PyBullet, the CoM reference moves ~0.3 m) each AM's CoM tracks the
+    mission's reference within 5 mm throughout and ends on it with the pad on y_d, with no
+    actuator saturation."""
+    spec = load_scenario(SCENARIOS / "two_am_baseline.toml")
+    out = run(spec, duration_s=spec.mission.approach_end_s + 0.01)
+    for sysid, c in out["companions"].items():
+        a = c["at"]["approach_end"]
+        assert c["phases"]["approach"]["max"]["r_c_err"] < 5e-3
+        assert a["r_c_err"] < 1e-3 and a["e_R"] < 0.01
+        assert max(abs(e) for e in a["y_err"]) < 5e-3
+        assert out["ams"][str(sysid)]["saturated_steps"] == 0
+        assert out["ams"][str(sysid)]["base_contacts"] == []
