@@ -18,8 +18,11 @@ configuration, 1 a trial raised (a bug: failed missions are verdicts, not errors
 from __future__ import annotations
 
 import argparse
+import copy
 import os
+import shutil
 import sys
+import json
 import time
 from pathlib import Path
 
@@ -80,11 +83,33 @@ def _randomization(a, base: dict, scenario: Path) -> tuple[RandomizeSpec, str]:
     return load_randomize(DEFAULT_RANDOMIZE), str(DEFAULT_RANDOMIZE)
 
 
+def snapshot_vehicle(base: dict, scenario: Path, folder: Path) -> dict:
+    """The base scenario data with its vehicle (TOML and URDF) copied into `folder`/vehicle/:
+    a campaign's trials then read their own copy, so that editing the project's vehicle
+    files during a campaign, or long after it, changes none of its trials or replays."""
+    data = copy.deepcopy(base)
+    sc = data.get("scenario", {})
+    if "vehicle" not in sc:
+        return data
+    vpath = (scenario.parent / sc["vehicle"]).resolve()
+    vdata = _read_toml(vpath)
+    urdf = (vpath.parent / vdata.get("vehicle", {}).get("urdf", "")).resolve()
+    dst = folder / "vehicle"
+    dst.mkdir(parents=True, exist_ok=True)
+    shutil.copy2(vpath, dst / vpath.name)
+    if urdf.is_file():
+        shutil.copy2(urdf, dst / urdf.name)
+    sc["vehicle"] = str((dst / vpath.name).resolve())
+    return data
+
+
 def build_tasks(base: dict, scenario: Path, rand: RandomizeSpec, seed: int, n: int, out: Path,
                 controller: str | None) -> list[TrialTask]:
-    """Draw every trial, write it as out/scenarios/trial-NNNN.toml and check that it loads."""
+    """Draw every trial, write it as out/scenarios/trial-NNNN.toml (with the vehicle files
+    copied beside, `snapshot_vehicle`) and check that it loads."""
     folder = out / "scenarios"
     folder.mkdir(parents=True, exist_ok=True)
+    base = snapshot_vehicle(base, scenario, folder)
     tasks = []
     for i in range(n):
         data, params = draw_trial(base, rand, seed, i)
@@ -161,10 +186,21 @@ def _campaign(a, tasks: list[TrialTask], out: Path, controller: str | None, work
         bar.set_postfix_str(f"{counts['ok']}/{bar.n} succeeded")
 
     t0 = time.perf_counter()
-    with executor(workers, a.scheduler) as ex:
-        rows = run_all(tasks, ex, on_result)
+    with open(out / "trials.partial.jsonl", "w") as partial:  # every row as it comes: nothing lost
+        def keep(row):
+            partial.write(json.dumps(row) + "\n")
+            partial.flush()
+            on_result(row)
+
+        with executor(workers, a.scheduler) as ex:
+            rows = run_all(tasks, ex, keep)
     wall = time.perf_counter() - t0
     bar.close()
+    errors = [r for r in rows if r["verdict"] == "error"]
+    if errors:
+        raise RuntimeError(f"{len(errors)} trial(s) raised (rows so far in {out / 'trials.partial.jsonl'}); first: "
+                           f"trial {errors[0]['trial']}: {errors[0]['reason']}")
+    (out / "trials.partial.jsonl").unlink()
     report.add_derived(rows)
     report.write_csv(rows, out / "trials.csv")
     params = [k for k in rows[0] if k in tasks[0].params and k != "seed"]

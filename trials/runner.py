@@ -84,19 +84,18 @@ def executor(workers: int, scheduler: str | None = None) -> Iterator[cf.Executor
 
 def run_all(tasks: list[TrialTask], ex: cf.Executor,
             on_result: Callable[[dict], None] = lambda _row: None) -> list[dict]:  # fmt: skip
-    """Every task on `ex`; rows in trial order. `on_result(row)` as each finishes (progress).
-    A trial that raises (a bug, not a failed mission: failed missions are verdicts) fails
-    the campaign with that trial named."""
+    """Every task on `ex`; rows in trial order. `on_result(row)` as each finishes (progress,
+    saving). A trial that raises (a bug, not a failed mission: failed missions are verdicts)
+    gets a row with verdict "error" and the exception; the others run on."""
     futures = {ex.submit(run_trial, t): t for t in tasks}
     rows = []
     for f in cf.as_completed(futures):
         t = futures[f]
         try:
             row = f.result()
-        except Exception as exc:
-            for other in futures:
-                other.cancel()
-            raise RuntimeError(f"trial {t.index} ({t.path}) raised {type(exc).__name__}: {exc}") from exc
+        except Exception as exc:  # noqa: BLE001 - recorded, and the campaign goes on
+            row = {"trial": t.index, "scenario_file": t.path, **t.params, "verdict": "error",
+                   "failure_class": "", "reason": f"{type(exc).__name__}: {exc}"}
         rows.append(row)
         on_result(row)
     return sorted(rows, key=lambda r: r["trial"])

@@ -111,3 +111,23 @@ def test_a_bad_randomize_file_or_output_folder_exits_2(tmp_path, capsys):
     file.write_text("")
     assert cli.main([str(SHORT), "--trials", "1", "--seed", "1", "--out", str(file)]) == 2
     assert "not a folder" in capsys.readouterr().err
+
+
+def test_trials_read_the_campaigns_own_copy_of_the_vehicle(campaign):
+    """Editing the project's vehicle files during or after a campaign changes none of its trials."""
+    spec = load_scenario(read_csv(campaign / "trials.csv")[0]["scenario_file"])
+    assert spec.vehicle.urdf.parent == (campaign / "scenarios" / "vehicle").resolve()
+    assert spec.vehicle.urdf.read_bytes() == (ROOT / "configs" / "vehicles" / "am3dof.urdf").read_bytes()
+
+
+def test_a_trial_that_raises_is_an_error_row_and_the_others_run_on():
+    from concurrent.futures import ThreadPoolExecutor
+
+    from trials.runner import TrialTask
+
+    bad = [TrialTask(i, {"scenario": {"name": "x"}, "colour": {}}, str(SHORT), {"p": float(i)}) for i in range(3)]
+    seen = []
+    with ThreadPoolExecutor(2) as ex:
+        rows = run_all(bad, ex, seen.append)
+    assert [r["trial"] for r in rows] == [0, 1, 2] and len(seen) == 3
+    assert all(r["verdict"] == "error" and "unknown table [colour]" in r["reason"] for r in rows)
