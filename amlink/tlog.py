@@ -44,6 +44,16 @@ class TlogWriter:
                 self._file.write(frame)
             self.records += len(frames)
 
+    def write_frame(self, frame: bytes, t_s: float | None = None) -> None:
+        """One record holding ``frame`` as it is (a MAVLink 1 frame, say)."""
+        if self._file is None:
+            return
+        stamp = _STAMP.pack(int((time.time() if t_s is None else t_s) * 1e6))
+        with self._lock:
+            self._file.write(stamp)
+            self._file.write(frame)
+            self.records += 1
+
     def flush(self) -> None:
         with self._lock:
             if self._file is not None:

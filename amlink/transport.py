@@ -12,7 +12,7 @@ an object with
   no connection to ``addr``, the data is dropped and counted (``send_drops``);
 * ``peer`` -- where a client sends: the udpout destination, a stream's far end once
   connected, ``None`` while unknown (udpin until the far end speaks; tcp before it
-  connects);
+  connects); ``peers()``: every far end connected now (a listening TCP endpoint's all);
 * ``stream``; ``fds()``, ``wfds()`` and ``poll(readable, writable)`` for :class:`Mux`;
   ``close()``.
 
@@ -160,6 +160,9 @@ class TcpServer(_Waiting):
     def peer(self) -> StreamPeer | None:
         return next(reversed(self._conns), None) if self._conns else None
 
+    def peers(self) -> list[StreamPeer]:
+        return list(self._conns)
+
     def fds(self) -> list[int]:
         return [self._listener.fileno(), *(c.fd for c in self._conns.values())]
 
@@ -224,6 +227,9 @@ class TcpClient(_Waiting):
     @property
     def peer(self) -> StreamPeer | None:
         return self._conn.peer if self._conn is not None else None
+
+    def peers(self) -> list[StreamPeer]:
+        return [self._conn.peer] if self._conn is not None else []
 
     def _attempt(self) -> None:
         if self._conn is not None or self._connecting is not None or time.monotonic() < (self.wakeup_s or 0.0):
@@ -308,6 +314,9 @@ class SerialPort(_Waiting):
     @property
     def peer(self) -> StreamPeer:
         return self._peer
+
+    def peers(self) -> list[StreamPeer]:
+        return [self._peer] if self._conn is not None else []
 
     def open(self) -> None:
         """Open and configure the device; OSError if it cannot be."""

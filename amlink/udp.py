@@ -88,6 +88,10 @@ class Udp:
     def local_address(self) -> tuple:
         return self.sock.getsockname()
 
+    def peers(self) -> list:
+        """The far ends known to this transport (the udpout destination)."""
+        return [self.peer] if self.peer is not None else []
+
     def send(self, addr: tuple, data: bytes) -> None:
         try:
             if self.shim is None:
