@@ -24,6 +24,9 @@ import re
 from dataclasses import dataclass
 
 UDP_IN, UDP_OUT, TCP_IN, TCP_OUT, SERIAL = "udpin", "udpout", "tcpin", "tcp", "serial"
+SIM_BIND = "udpin:127.0.0.1:14550"  # the simulator's default --bind
+COMPANION_SIM = "udpout:127.0.0.1:14550"  # the companion's default --sim
+DEFAULT_GCS = "udpout:127.0.0.1:14551"  # the simulator's default --gcs: not the companions' 14550
 DEFAULT_BAUD = 115200
 # the termios rates Linux offers; a serial endpoint with another rate is refused when parsed
 BAUD_RATES = (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800, 500000, 576000, 921600,
