@@ -40,7 +40,8 @@ class GcsSession:
         self.link.open(self._last)
 
     def tick(self, k: int) -> None:
-        """After step ``k``: an update every ``every`` steps."""
+        """At step ``k`` (its frames read and sent, its setpoints not yet applied): an update
+        every ``every`` steps.  Commands then act from step ``k`` on."""
         if k % self.every == 0:
             self.update()
 

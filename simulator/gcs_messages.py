@@ -61,10 +61,15 @@ def heartbeat(v: VehicleSnapshot):
                                          system_status=system_status(v), mavlink_version=3)
 
 
+# health: 1 = no error. GEOFENCE: there is no fence, so no breach (GCSes such as MAVProxy read a
+# cleared GEOFENCE health bit as "fence breach" whether or not a fence is present)
+HEALTHY = SENSORS | mav.MAV_SYS_STATUS_GEOFENCE
+
+
 def sys_status(v: VehicleSnapshot):
     return mav.MAVLink_sys_status_message(
         onboard_control_sensors_present=SENSORS, onboard_control_sensors_enabled=SENSORS,
-        onboard_control_sensors_health=SENSORS, load=0, voltage_battery=0xFFFF, current_battery=-1,
+        onboard_control_sensors_health=HEALTHY, load=0, voltage_battery=0xFFFF, current_battery=-1,
         battery_remaining=-1, drop_rate_comm=0, errors_comm=0, errors_count1=0, errors_count2=0, errors_count3=0,
         errors_count4=0)  # battery: unknown (the simulation has none)
 
@@ -123,8 +128,9 @@ def status_changes(before: FleetSnapshot | None, now: FleetSnapshot) -> list[tup
     STATUSTEXT: a flight-controller mode (failsafe, landing, the companion back), arming,
     and the mission phase (said by every vehicle)."""
     out = []
+    was = {v.sysid: v for v in before.vehicles} if before is not None else {}
     for v in now.vehicles:
-        old = before.vehicle(v.sysid) if before is not None else None
+        old = was.get(v.sysid)
         if old is not None and old.mode != v.mode:
             if v.mode == FcMode.LAND:
                 out.append((v.sysid, mav.MAV_SEVERITY_CRITICAL if v.failsafe else mav.MAV_SEVERITY_NOTICE,

@@ -192,13 +192,16 @@ def main(argv: list[str] | None = None) -> int:
                   f"publishing anyway", file=sys.stderr, flush=True)
         progress.t_wall0 = time.perf_counter()
         sim_tele.start(core.time_s)
+        def bookkeeping() -> None:  # while the companions compute step k
+            core.observe()
+            gcs.tick(k)  # every few steps: the GCS link's snapshot, STATUSTEXTs, GCS commands
+
         for k in range(n_steps):
             # each frame leaves as soon as it is read; each setpoint is applied as it arrives
-            setpoints = server.exchange(core.iter_frames(k), partial=True, while_waiting=core.observe,
+            setpoints = server.exchange(core.iter_frames(k), partial=True, while_waiting=bookkeeping,
                                         on_setpoint=core.on_setpoint)
             core.actuate(k, setpoints, server.lost_peers)
             core.step()
-            gcs.tick(k)
             progress.update(core.time_s)
         progress.update(core.time_s, force=True)
         k = n_steps

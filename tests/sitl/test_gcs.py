@@ -93,7 +93,7 @@ def watched(tmp_path_factory):
               intruder=[(4, mav.MAV_CMD_COMPONENT_ARM_DISARM, _p(0.0, 21196.0)), (5, mav.MAV_CMD_NAV_LAND, _p())])
     gcs.start()
     try:
-        r = am_run("two_am_comp.toml", run_dir, "--duration", "0.4", "--no-telemetry", "--gcs",
+        r = am_run("two_am_comp.toml", run_dir, "--duration", "0.4", "--no-telemetry", "--tlog-companions", "--gcs",
                    f"udpout:127.0.0.1:{gcs.port}", timeout_s=300)
         time.sleep(0.3)
     finally:
@@ -139,6 +139,16 @@ def test_the_run_writes_a_gcs_tlog_that_stock_pymavlink_reads(watched):
                        capture_output=True, text=True, timeout=60)
     assert p.returncode == 0, p.stderr
     assert p.stdout.count("ATTITUDE {") == seen[(4, 1, "ATTITUDE")] + seen[(5, 1, "ATTITUDE")]
+
+
+def test_with_a_flag_each_companion_link_goes_to_a_tlog_too(watched):
+    r, _ = watched
+    log = mavutil.mavlink_connection(str(r.run_dir / "companion-5.tlog"), dialect="amstack")
+    seen = Counter()
+    while (m := log.recv_match()) is not None:
+        seen[(m.get_srcSystem(), m.get_type())] += 1
+    assert seen[(1, "AM_SIM_STEP")] >= 400 and seen[(1, "ODOMETRY")] >= 400  # every step, and the shutdown
+    assert seen[(5, "AM_TORQUE_SETPOINT")] >= 400 and seen[(5, "HEARTBEAT")] >= 1 and seen[(1, "AM_SCENARIO")] >= 1
 
 
 def test_no_gcs_a_reading_gcs_and_one_that_never_reads_leave_the_run_bit_identical(watched, tmp_path):
