@@ -26,6 +26,7 @@ The link writes everything it sends and every whole frame it receives to a .tlog
 """
 from __future__ import annotations
 
+import sys
 import threading
 import time
 from collections import deque
@@ -96,6 +97,7 @@ class GcsLink:
         self.accept_unsigned = accept_unsigned
         self.stats = GcsStats()
         self.link_stats = LinkStats()
+        self.error = ""  # why the link's thread stopped early, if it did
         self._tlog = TlogWriter(tlog) if tlog is not None else None
         self._transport = None
         self._thread: threading.Thread | None = None
@@ -182,6 +184,13 @@ class GcsLink:
 
     # -- the thread --------------------------------------------------------------
     def _run(self) -> None:
+        try:
+            self._loop()
+        except Exception as exc:  # the run goes on without its GCS link; say why once
+            self.error = f"{type(exc).__name__}: {exc}"
+            print(f"simulator: warning: the GCS link stopped: {self.error}", file=sys.stderr, flush=True)
+
+    def _loop(self) -> None:
         next_beat = next_telemetry = 0.0
         sent: FleetSnapshot | None = None
         while True:

@@ -1,5 +1,5 @@
 """SITL simulator process: the PyBullet world of a scenario and every AM's flight-controller
-emulation, stepped in lockstep with one companion process per AM over MAVLink/UDP.
+emulation, stepped in lockstep with one companion process per AM over MAVLink (UDP, TCP or serial).
 
     simulator [--config configs/scenarios/two_am_comp.toml] [--bind udpin:127.0.0.1:14550]
               [--gcs udpout:127.0.0.1:14551]
@@ -238,7 +238,7 @@ def main(argv: list[str] | None = None) -> int:
               "steps": k, "sim_time_s": sim_time, "wall_s": wall,
               "real_time_factor": (sim_time / wall) if wall > 0 else None, "link": vars(server.stats),
               "gcs": {"endpoint": str(gcs_endpoint) if gcs_endpoint else None, **vars(gcs_link.stats),
-                      "link": vars(gcs_link.link_stats)}, **result}
+                      "error": gcs_link.error, "link": vars(gcs_link.link_stats)}, **result}
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "outcome.json").write_text(json.dumps(result, indent=1))
     progress.event(event="done", status=status, exit_code=code, outcome=str(run_dir / "outcome.json"))
