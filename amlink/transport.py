@@ -235,8 +235,7 @@ class TcpClient(_Waiting):
         if self._conn is not None or self._connecting is not None or time.monotonic() < (self.wakeup_s or 0.0):
             return
         try:
-            family, kind, proto, _, addr = socket.getaddrinfo(self.endpoint.host, self.endpoint.port,
-                                                              type=socket.SOCK_STREAM)[0]
+            family, kind, proto, _, addr = resolve(self.endpoint.host, self.endpoint.port, socket.SOCK_STREAM)
             sock = socket.socket(family, kind, proto)
         except OSError as exc:
             self._failed(None, exc)
@@ -387,9 +386,16 @@ def _configure_raw(fd: int, baud: int) -> None:
     termios.tcsetattr(fd, termios.TCSANOW, [iflag, oflag, cflag, lflag, speed, speed, cc])
 
 
+def resolve(host: str, port: int, kind: int) -> tuple:
+    """``(family, type, proto, canonname, sockaddr)`` of ``host``, IPv4 first as mavutil (a name
+    such as localhost may resolve to ::1 too; an IPv6 literal resolves to IPv6 only)."""
+    infos = socket.getaddrinfo(host, port, type=kind)
+    return next((i for i in infos if i[0] == socket.AF_INET), infos[0])
+
+
 def _udp_socket(host: str, port: int, bind: bool) -> tuple[socket.socket, tuple]:
     """A UDP socket of the family of ``host``; bound to it (listen) or to a free port (send)."""
-    family, kind, proto, _, addr = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)[0]
+    family, kind, proto, _, addr = resolve(host, port, socket.SOCK_DGRAM)
     sock = socket.socket(family, kind, proto)
     try:
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
@@ -411,7 +417,7 @@ def open_transport(endpoint: Endpoint, stats: LinkStats, *, shim: Shim | None = 
         sock, addr = _udp_socket(endpoint.host, endpoint.port, bind=kind == UDP_IN)
         return Udp(sock, stats, shim, peer=addr if kind == UDP_OUT else None)
     if kind == TCP_IN:
-        family, kind_, proto, _, addr = socket.getaddrinfo(endpoint.host, endpoint.port, type=socket.SOCK_STREAM)[0]
+        family, kind_, proto, _, addr = resolve(endpoint.host, endpoint.port, socket.SOCK_STREAM)
         sock = socket.socket(family, kind_, proto)
         try:
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from amlink import codec
 from amlink.lockstep import CompanionClient, SimServer
-from amlink.transport import MAX_BACKLOG, _socket_stream
+from amlink.transport import MAX_BACKLOG, _socket_stream, resolve
 from amlink.types import AttitudeTarget
 from amlink.udp import LinkStats
 from amlink.wire import SIGNATURE_LEN, Encoder, StreamFramer, split_frames
@@ -178,3 +178,28 @@ def test_companion_told_to_reach_a_missing_device_fails_fast():
     with pytest.raises(Exception) as err:
         c.connect(5.0)
     assert "/dev/does-not-exist" in str(err.value)
+
+
+def _ipv6_loopback() -> bool:
+    try:
+        with socket.socket(socket.AF_INET6, socket.SOCK_DGRAM) as s:
+            s.bind(("::1", 0))
+        return True
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not _ipv6_loopback(), reason="no IPv6 loopback")
+def test_lockstep_over_ipv6_udp_and_tcp():
+    with socket.socket(socket.AF_INET6, socket.SOCK_DGRAM) as u, socket.socket(socket.AF_INET6) as t:
+        u.bind(("::1", 0))
+        t.bind(("::1", 0))
+        udp, tcp = u.getsockname()[1], t.getsockname()[1]
+    stats, seen = _run_lockstep([f"udpin:[::1]:{udp}", f"tcpin:[::1]:{tcp}"],
+                                {2: f"udpout:[::1]:{udp}", 3: f"tcp:[::1]:{tcp}"}, 50)
+    assert seen == {2: list(range(50)), 3: list(range(50))}
+
+
+def test_a_name_resolves_to_ipv4_first_as_mavutil_does():
+    assert resolve("localhost", 14550, socket.SOCK_DGRAM)[0] == socket.AF_INET
+    assert resolve("::1", 14550, socket.SOCK_DGRAM)[0] == socket.AF_INET6
