@@ -196,7 +196,8 @@ class GcsLink:
         while True:
             stopping = self._stop.is_set()
             now = time.monotonic()
-            wait = min(0.05, max(0.0, min(next_beat, next_telemetry) - now))
+            due = min(next_beat, next_telemetry) if self._latest is not sent else next_beat
+            wait = min(0.05, max(0.0, due - now))  # a new snapshot waits at most 50 ms
             if self._transport is not None:
                 for data, addr in self._transport.recv(0.0 if stopping else wait):
                     self._on_input(data, addr)

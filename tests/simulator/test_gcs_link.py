@@ -151,6 +151,20 @@ def test_tcp_gcs_and_one_that_never_reads_cost_nothing(opened):
     stuck.close()
 
 
+def test_the_link_sleeps_while_there_is_nothing_new_to_send(opened):
+    """The simulator runs on two cores with its companions: a link that polled would take one."""
+    import resource
+
+    gcs, port = _udpin_gcs()
+    link = opened(f"udpout:127.0.0.1:{port}")
+    cpu0, t0 = resource.getrusage(resource.RUSAGE_SELF), time.monotonic()
+    time.sleep(1.0)  # HEARTBEATs go out; no new snapshot
+    cpu1 = resource.getrusage(resource.RUSAGE_SELF)
+    used = (cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime)
+    assert used < 0.05 * (time.monotonic() - t0), f"{used:.3f} s of CPU in a second of waiting"
+    assert _both_heard(_collect(gcs, 1.5, until=_both_heard))
+
+
 def test_without_a_gcs_endpoint_the_tlog_is_written_all_the_same(opened, tmp_path):
     link = opened(None, tlog=tmp_path / "gcs.tlog")
     time.sleep(0.3)
