@@ -15,7 +15,8 @@
 * :mod:`amlink.lockstep` -- SimServer / CompanionClient (retransmission, partial
   exchange, rejoin); :mod:`amlink.server`, :mod:`amlink.client`.
 * :mod:`amlink.endpoint` -- endpoint strings in mavutil's forms (udpin, udpout, tcp,
-  tcpin, serial); :mod:`amlink.transport` -- UDP, TCP and serial behind one interface.
+  tcpin, serial); :mod:`amlink.transport` -- UDP, TCP and serial behind one interface
+  (:mod:`amlink.stream`: the TCP and serial byte streams).
 * :mod:`amlink.tlog` -- .tlog files as MAVProxy writes them.
 * :mod:`amlink.pymavlink_dialect` -- lets stock pymavlink tools load the dialect by name.
 * :mod:`amlink.impair` -- deterministic sim-time impairment of the control path.

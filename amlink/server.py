@@ -12,7 +12,8 @@ from amlink.endpoint import UDP_OUT, Endpoint, parse_endpoint
 from amlink.errors import PeerMissingError, PeerTimeoutError
 from amlink.limits import DEFAULT_SETPOINT_LIMITS, SetpointLimits
 from amlink.signing import check_key
-from amlink.transport import Mux, StreamPeer, close_all, open_transport
+from amlink.stream import StreamPeer
+from amlink.transport import Mux, close_all, open_transport
 from amlink.types import AttitudeTarget, ScenarioInfo, SensorFrame, TorqueSetpoint
 from amlink.udp import (
     HEARTBEAT_PERIOD_S,

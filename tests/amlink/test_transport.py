@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from amlink import codec
 from amlink.lockstep import CompanionClient, SimServer
-from amlink.transport import MAX_BACKLOG, _socket_stream, resolve
+from amlink.stream import MAX_BACKLOG, _socket_stream, resolve
 from amlink.types import AttitudeTarget
 from amlink.udp import LinkStats
 from amlink.wire import SIGNATURE_LEN, Encoder, StreamFramer, split_frames
