@@ -45,12 +45,15 @@ class GcsSession:
         if k % self.every == 0:
             self.update()
 
-    def update(self) -> None:
+    def update(self, execute: bool = True) -> None:
+        """Snapshot and STATUSTEXTs to the link; then (``execute``) the GCS's commands."""
         snap = self.snapshot()
         for sysid, severity, text in gcs_messages.status_changes(self._last, snap):
             self.link.statustext(sysid, severity, text)
         self._last = snap
         self.link.publish(snap)
+        if not execute:
+            return
         for cmd in self.link.commands():
             answers, news = commands.execute(self.core, cmd)
             for a in answers:
@@ -61,6 +64,7 @@ class GcsSession:
                 self.link.announce(news, mav.MAV_SEVERITY_WARNING)
 
     def verdict(self, text: str, ok: bool) -> None:
-        """The end of the run, from every vehicle: called once, with the run's verdict."""
-        self.update()
+        """The end of the run, from every vehicle: called once, with the run's verdict.
+        Commands still queued are not executed: the run is over."""
+        self.update(execute=False)
         self.link.announce(text, mav.MAV_SEVERITY_NOTICE if ok else mav.MAV_SEVERITY_ERROR)

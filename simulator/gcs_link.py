@@ -2,7 +2,8 @@
 
 Like PX4 SITL's GCS port, on one endpoint (mavutil's forms, :mod:`amlink.endpoint`; the
 simulator's default is ``udpout:127.0.0.1:14551``), each vehicle speaks as (its sysid,
-MAV_COMP_ID_AUTOPILOT1): HEARTBEAT and SYS_STATUS at 1 Hz, ATTITUDE and LOCAL_POSITION_NED
+MAV_COMP_ID_AUTOPILOT1): HEARTBEAT and SYS_STATUS at 1 Hz and at once when a vehicle's
+mode or arming changes, ATTITUDE and LOCAL_POSITION_NED
 at up to 25 Hz of wall time from the newest snapshot (the main loop publishes one every
 ``snapshot_every`` steps, 50 Hz of simulation time), STATUSTEXT when the main loop queues
 one.  Each companion's HEARTBEAT (MAV_COMP_ID_ONBOARD_COMPUTER) is passed on as
@@ -193,6 +194,7 @@ class GcsLink:
     def _loop(self) -> None:
         next_beat = next_telemetry = 0.0
         sent: FleetSnapshot | None = None
+        beat_state: tuple = ()  # (mode, armed, failsafe) of every vehicle in the last HEARTBEATs
         while True:
             stopping = self._stop.is_set()
             now = time.monotonic()
@@ -205,8 +207,9 @@ class GcsLink:
                 self._stop.wait(wait)
             self._drain_outbox()
             snap, now = self._latest, time.monotonic()
-            if now >= next_beat:
-                next_beat = now + HEARTBEAT_PERIOD_S
+            state = tuple((v.mode, v.armed, v.failsafe) for v in snap.vehicles)
+            if now >= next_beat or state != beat_state:  # a new mode or arming is told at once
+                next_beat, beat_state = now + HEARTBEAT_PERIOD_S, state
                 for v in snap.vehicles:
                     self._send(v.sysid, mav.MAV_COMP_ID_AUTOPILOT1,
                                [gcs_messages.heartbeat(v), gcs_messages.sys_status(v)])

@@ -111,8 +111,12 @@ def test_a_gcs_sees_both_vehicles_and_their_companions_at_the_rates_promised(wat
         assert n[(s, 1, "ATTITUDE")] >= 0.4 * 10 and n[(s, 1, "LOCAL_POSITION_NED")] >= 0.4 * 10
         assert gcs.texts(s)[-1] == "run complete"  # the run's verdict, from every vehicle
         assert "mission phase: approach" in gcs.texts(s)
-    modes = {mavutil.mode_string_v10(m) for m in gcs.msgs if m.get_type() == "HEARTBEAT" and m.get_srcComponent() == 1}
-    assert "OFFBOARD" in modes
+    for s in (4, 5):  # a new mode is told at once: even a run shorter than a second shows it
+        beats = [m for m in gcs.msgs if m.get_type() == "HEARTBEAT" and m.get_srcSystem() == s
+                 and m.get_srcComponent() == 1]
+        assert "OFFBOARD" in {mavutil.mode_string_v10(m) for m in beats}
+        assert any(m.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED for m in beats)
+        assert "OFFBOARD: companion in control" in gcs.texts(s)
 
 
 def test_gcs_commands_are_answered_and_unsigned_ones_dropped_and_counted(watched):
