@@ -12,8 +12,13 @@
 * :mod:`amlink.wire` -- datagram <-> frames (strict framing, MAVLink 2 signing).
 * :mod:`amlink.signing` -- signing keys: formats, derivation, scenario keys.
 * :mod:`amlink.limits` -- plausibility bounds on setpoints and sensor frames.
-* :mod:`amlink.lockstep` -- SimServer / CompanionClient over UDP (retransmission,
-  partial exchange, rejoin); :mod:`amlink.server`, :mod:`amlink.client`.
+* :mod:`amlink.lockstep` -- SimServer / CompanionClient (retransmission, partial
+  exchange, rejoin); :mod:`amlink.server`, :mod:`amlink.client`.
+* :mod:`amlink.endpoint` -- endpoint strings in mavutil's forms (udpin, udpout, tcp,
+  tcpin, serial); :mod:`amlink.transport` -- UDP, TCP and serial behind one interface
+  (:mod:`amlink.stream`: the TCP and serial byte streams).
+* :mod:`amlink.tlog` -- .tlog files as MAVProxy writes them.
+* :mod:`amlink.pymavlink_dialect` -- lets stock pymavlink tools load the dialect by name.
 * :mod:`amlink.impair` -- deterministic sim-time impairment of the control path.
 * :mod:`amlink.shim` -- seeded lossy send shim for the real sockets (tests).
 

@@ -2,27 +2,28 @@
 
 from __future__ import annotations
 
-import socket
 import time
 from collections import deque
 
 from amlink import codec, fastcodec
 from amlink.codec import mav
+from amlink.endpoint import UDP_IN, UDP_OUT, Endpoint, parse_endpoint
 from amlink.errors import CommandRejectedError, SimulatorTimeoutError, SimulatorUnreachableError
 from amlink.limits import DEFAULT_SENSOR_LIMITS, SensorLimits
+from amlink.transport import open_transport
 from amlink.types import AttitudeTarget, ScenarioInfo, SensorFrame, TorqueSetpoint
 from amlink.udp import (
     COMMAND_RETRY_S,
     COMPANION_COMPID,
     HEARTBEAT_PERIOD_S,
+    RUN_HEARTBEAT_PERIOD_S,
     SIM_COMPID,
     SIM_SYSID,
     LinkStats,
     Shim,
-    Udp,
-    parse_endpoint,
 )
 
+_HEARTBEAT = mav.MAVLINK_MSG_ID_HEARTBEAT
 _SCENARIO = mav.MAVLINK_MSG_ID_AM_SCENARIO
 _ACK = mav.MAVLINK_MSG_ID_COMMAND_ACK
 _STATUSTEXT = mav.MAVLINK_MSG_ID_STATUSTEXT
@@ -30,7 +31,7 @@ _SIM_STEP = mav.MAVLINK_MSG_ID_AM_SIM_STEP
 _SENSOR_PART_IDS = frozenset(
     (mav.MAVLINK_MSG_ID_ODOMETRY, mav.MAVLINK_MSG_ID_AM_JOINT_STATE, mav.MAVLINK_MSG_ID_AM_WRENCH)
 )
-_ACCEPT = (_SCENARIO, _ACK, _STATUSTEXT, _SIM_STEP, *_SENSOR_PART_IDS)
+_ACCEPT = (_HEARTBEAT, _SCENARIO, _ACK, _STATUSTEXT, _SIM_STEP, *_SENSOR_PART_IDS)
 _MAX_TEXTS = 256
 _MAX_ACKS = 64
 
@@ -40,13 +41,24 @@ class CompanionClient:
 
     Args:
         sysid: this companion's MAVLink system id (2..255).
-        sim: simulator address ``"udp:HOST:PORT"`` (or ``udpout:``).
+        sim: the flight controller's (simulator's) endpoint, mavutil's forms
+            (:mod:`amlink.endpoint`): ``"udpout:HOST:PORT"`` sends to it;
+            ``"udp:HOST:PORT"`` is read the same way (this API's older form, kept);
+            ``"udpin:HOST:PORT"`` listens until it speaks (``udpout:`` on its side);
+            ``"tcp:HOST:PORT"``, ``"tcpin:HOST:PORT"``, or a serial device
+            ``"/dev/ttyUSB0:921600"``.
         compid: MAVLink component id, 191 = MAV_COMP_ID_ONBOARD_COMPUTER.
         signing_key: ``None`` -- signing off (default at this API level).  Else this
             vehicle's 32-byte key: everything sent is signed (link id = sysid) and
             only packets signed by the simulator with this key are accepted.
         limits: plausibility bounds a sensor frame must meet to be handed on.
         shim: send-path impairment hook of :class:`amlink.udp.Udp` (tests).
+        tlog: an open :class:`amlink.tlog.TlogWriter` that gets every frame sent and
+            received, or None.
+
+    The companion says HEARTBEAT (MAV_TYPE_ONBOARD_CONTROLLER) every
+    ``RUN_HEARTBEAT_PERIOD_S`` while connected, as a companion computer does; the
+    simulator forwards it to its GCS link.
 
     Messages that arrive while waiting for something else (a sensor batch
     while :meth:`arm` waits for its ACK, say) are kept, never dropped.
@@ -61,22 +73,27 @@ class CompanionClient:
     decides and the source address does not matter.
     """
 
-    def __init__(self, sysid: int, sim: str = "udp:127.0.0.1:14550", compid: int = COMPANION_COMPID, *,
-                 signing_key: bytes | None = None, limits: SensorLimits = DEFAULT_SENSOR_LIMITS,
-                 shim: Shim | None = None) -> None:  # fmt: skip
+    def __init__(self, sysid: int, sim: str | Endpoint = "udpout:127.0.0.1:14550",
+                 compid: int = COMPANION_COMPID, *, signing_key: bytes | None = None,
+                 limits: SensorLimits = DEFAULT_SENSOR_LIMITS, shim: Shim | None = None,
+                 tlog=None) -> None:  # fmt: skip
         if not 2 <= sysid <= 255:
             raise ValueError(f"sysid {sysid} must be in 2..255 (1 is the simulator)")
         self.sysid = sysid
         self.compid = compid
-        self.sim = sim
-        self.sim_host, self.sim_port = parse_endpoint(sim, ("udp", "udpout"))
+        ep = sim if isinstance(sim, Endpoint) else parse_endpoint(sim)
+        if ep.alias == "udp":  # the companion's --sim udp: has always meant "send to"
+            ep = Endpoint(UDP_OUT, ep.host, ep.port, alias="udp")
+        self.endpoint = ep
+        self.sim = sim.strip() if isinstance(sim, str) else str(ep)  # as written, for messages
+        self._tlog = tlog
         self.limits = limits
         self.stats = LinkStats()
         self.scenario: ScenarioInfo | None = None
         self.status_texts: deque[tuple[int, str]] = deque(maxlen=_MAX_TEXTS)  # (MAV_SEVERITY, text), latest
         self._shim = shim
-        self._udp: Udp | None = None
-        self._sim_addr: tuple[str, int] | None = None  # where we send
+        self._link = None  # the transport (amlink.transport), once connected
+        self._sim_addr = None  # where we send: the simulator's address, or its stream connection
         self._sim_rx_addr: tuple[str, int] | None = None  # signing off: the only source we read
         self._encoder = codec.Encoder(sysid, compid, signing_key=signing_key, link_id=sysid)
         keys = None if signing_key is None else {SIM_SYSID: signing_key}
@@ -89,49 +106,49 @@ class CompanionClient:
         self._newest_step = -1  # newest step queued or handed out
         self._answer: tuple[int, tuple] | None = None  # (step, (msgid, payload)s) of the last setpoint sent
         self._last_time_s = 0.0
+        self._next_beat = 0.0  # time.monotonic() of the next HEARTBEAT once connected
+        self._heartbeat = mav.MAVLink_heartbeat_message(
+            mav.MAV_TYPE_ONBOARD_CONTROLLER, mav.MAV_AUTOPILOT_INVALID, 0, 0, mav.MAV_STATE_ACTIVE, 3)
 
     @property
     def signing(self) -> bool:
         return self._decoder.signing
 
     def connect(self, timeout_s: float = 5.0) -> ScenarioInfo:
-        """Open a socket and say HEARTBEAT at 2 Hz until the simulator answers AM_SCENARIO.
+        """Open the endpoint and say HEARTBEAT at 2 Hz until the simulator answers AM_SCENARIO.
 
-        Raises SimulatorUnreachableError naming the address after ``timeout_s``.
+        Listening (udpin, tcpin) it first waits for the simulator to speak (or connect);
+        as a TCP client it retries connecting.  Raises SimulatorUnreachableError naming
+        the endpoint after ``timeout_s``, or at once if the endpoint cannot be opened.
         """
-        try:
-            infos = socket.getaddrinfo(self.sim_host, self.sim_port, socket.AF_INET, socket.SOCK_DGRAM)
-        except socket.gaierror as exc:
-            raise SimulatorUnreachableError(self.sim, 0.0, f"cannot resolve: {exc}") from exc
-        if self._udp is not None:
+        if self._link is not None:
             raise RuntimeError("CompanionClient is already connected")
-        self._sim_addr = infos[0][4]
-        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-        sock.bind(("0.0.0.0", 0))
-        self._udp = Udp(sock, self.stats, self._shim)
-        heartbeat = mav.MAVLink_heartbeat_message(
-            mav.MAV_TYPE_ONBOARD_CONTROLLER, mav.MAV_AUTOPILOT_INVALID, 0, 0, mav.MAV_STATE_ACTIVE, 3
-        )
+        try:
+            self._link = open_transport(self.endpoint, self.stats, shim=self._shim, client=True)
+        except OSError as exc:
+            raise SimulatorUnreachableError(self.sim, 0.0, f"cannot open: {exc}") from exc
+        self._sim_addr = self._link.peer if self.endpoint.kind == UDP_OUT else None
         deadline = time.monotonic() + timeout_s
         next_beat = 0.0
         try:
             while self.scenario is None:
                 now = time.monotonic()
                 if now >= deadline:
-                    raise SimulatorUnreachableError(self.sim, timeout_s)
-                if now >= next_beat:
-                    self._send([heartbeat])
+                    detail = getattr(self._link, "last_error", "")
+                    raise SimulatorUnreachableError(self.sim, timeout_s, detail)
+                if now >= next_beat and self._dest() is not None:
+                    self._send([self._heartbeat])
                     next_beat = now + HEARTBEAT_PERIOD_S
-                self._pump(min(deadline, next_beat) - now)
+                self._pump(min(deadline, next_beat if self._dest() is not None else now + 0.05) - now)
         except BaseException:
             self.close()
             raise
+        self._next_beat = time.monotonic() + RUN_HEARTBEAT_PERIOD_S
         return self.scenario
 
     @property
     def local_address(self) -> tuple[str, int]:
-        """The ``(host, port)`` this companion's socket is bound to (after connect)."""
+        """The ``(host, port)`` this companion's UDP socket is bound to (after connect)."""
         return self._require_connected().sock.getsockname()
 
     def arm(self, timeout_s: float = 1.0, arm: bool = True) -> None:
@@ -199,9 +216,9 @@ class CompanionClient:
         self._answer = (setpoint.step, payloads)
 
     def close(self) -> None:
-        if self._udp is not None:
-            self._udp.close()
-            self._udp = None
+        if self._link is not None:
+            self._link.close()
+            self._link = None
 
     def __enter__(self) -> CompanionClient:
         return self
@@ -210,31 +227,55 @@ class CompanionClient:
         self.close()
 
     # -- the one send path and the one receive path ------------------------------
-    def _require_connected(self) -> Udp:
-        if self._udp is None:
+    def _require_connected(self):
+        if self._link is None:
             raise RuntimeError("CompanionClient is not connected; call connect() first")
-        return self._udp
+        return self._link
+
+    def _dest(self):
+        """Where to send: the simulator's UDP address, or the stream's far end (None: unknown yet)."""
+        return self._sim_addr if self._sim_addr is not None else self._link.peer
 
     def _send(self, msgs) -> None:
         """Send pymavlink messages (handshake, commands) as one datagram."""
-        self._require_connected().send(self._sim_addr, self._encoder.pack(msgs))
+        self._out(self._encoder.pack(msgs))
 
     def _send_payloads(self, payloads) -> None:
         """Send a batch of :mod:`amlink.fastcodec` payloads as one datagram."""
-        self._require_connected().send(self._sim_addr, self._encoder.pack_payloads(payloads))
+        self._out(self._encoder.pack_payloads(payloads))
+
+    def _out(self, data: bytes) -> None:
+        link = self._require_connected()
+        dest = self._dest()
+        if dest is None:
+            self.stats.send_drops += 1
+            return
+        link.send(dest, data)
+        if self._tlog is not None:
+            self._tlog.write(data)
 
     def _pump(self, timeout_s: float) -> None:
+        link = self._require_connected()
         resend = False
-        for data, addr in self._require_connected().recv(timeout_s):
+        for data, addr in link.recv(timeout_s):
             if self._sim_rx_addr is not None and addr != self._sim_rx_addr and not self.signing:
                 self.stats.wrong_address += 1
                 continue
-            self._frames.reset()  # a sensor batch is one datagram
-            for record in self._decoder.feed_records(data):
+            if not link.stream:
+                self._frames.reset()  # a sensor batch is one datagram
+            if self._tlog is not None:
+                self._tlog.write(data)
+            records = self._decoder.feed_records(data)
+            if records and self._sim_addr is None and self.endpoint.kind == UDP_IN and records[0][1] == SIM_SYSID:
+                self._sim_addr = addr  # listening: the simulator spoke (authentic, signing on)
+            for record in records:
                 resend |= self._on_message(record, addr)
         if resend and self._answer is not None:
             self._send_payloads(self._answer[1])  # re-framed: a new sequence number and signing timestamp
             self.stats.retransmits += 1
+        if self.scenario is not None and time.monotonic() >= self._next_beat:
+            self._next_beat = time.monotonic() + RUN_HEARTBEAT_PERIOD_S
+            self._send([self._heartbeat])
 
     def _on_message(self, record, addr) -> bool:
         """Handle one decoder record; True if it asks for the last answer again.
@@ -249,6 +290,8 @@ class CompanionClient:
         if self._shutdown_seen:
             self.stats.ignored += 1
             return False
+        if mid == _HEARTBEAT:
+            return False  # the simulator's hello to a listening companion; its address is learned in _pump
         if mid == _SCENARIO:
             if self.scenario is None:
                 try:

@@ -1,11 +1,15 @@
-"""Lockstep UDP transport between the simulator and N companions (sockets only).
+"""Lockstep link between the simulator and N companions (sockets and serial ports only).
 
-Protocol (MAVLink 2, amstack dialect, one UDP socket on each side):
+Protocol (MAVLink 2, amstack dialect; UDP on the fast path, or TCP and serial byte
+streams, :mod:`amlink.transport`; the simulator may serve several endpoints at once):
 
 1. Handshake.  Each companion (sysid s, compid 191 = MAV_COMP_ID_ONBOARD_COMPUTER)
    sends HEARTBEAT at 2 Hz to the simulator.  The simulator (sysid 1, compid 1 =
    MAV_COMP_ID_AUTOPILOT1: it plays every vehicle's flight controller) learns
    the companion's address from that datagram and answers with AM_SCENARIO.
+   A companion that listens (udpin) waits for the simulator's HEARTBEAT first.
+   Once connected, a companion says HEARTBEAT once a second (each answered with
+   AM_SCENARIO, which it ignores); the simulator passes them on to its GCS link.
 2. Optional arming: COMMAND_LONG(MAV_CMD_COMPONENT_ARM_DISARM) -> COMMAND_ACK.
 3. Each step the simulator sends every companion ONE datagram
    ``ODOMETRY, AM_JOINT_STATE, AM_WRENCH, AM_SIM_STEP`` (all N first), then waits
@@ -37,8 +41,8 @@ inspector): put ``[link] signing = false`` in the scenario, and the mains pass
 end drops every unsigned packet (counted as ``unsigned``), and an unsigned end
 accepts signed packets without checking them.
 
-All companions share the simulator's single socket; the simulator tells them
-apart by the packet's sysid.  Neither object is thread-safe; use one per thread.
+Companions on one simulator endpoint share it; the simulator tells them apart by the
+packet's sysid.  Neither object is thread-safe; use one per thread.
 """
 
 from amlink.client import CompanionClient

@@ -2,18 +2,21 @@
 
 from __future__ import annotations
 
-import socket
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 from amlink import codec, fastcodec
 from amlink.codec import mav
+from amlink.endpoint import UDP_OUT, Endpoint, parse_endpoint
 from amlink.errors import PeerMissingError, PeerTimeoutError
 from amlink.limits import DEFAULT_SETPOINT_LIMITS, SetpointLimits
 from amlink.signing import check_key
+from amlink.stream import StreamPeer
+from amlink.transport import Mux, close_all, open_transport
 from amlink.types import AttitudeTarget, ScenarioInfo, SensorFrame, TorqueSetpoint
 from amlink.udp import (
+    HEARTBEAT_PERIOD_S,
     REJOIN_QUIET_S,
     SENSOR_RETRY_S,
     SHUTDOWN_COPIES,
@@ -22,8 +25,6 @@ from amlink.udp import (
     STATUSTEXT_MAX,
     LinkStats,
     Shim,
-    Udp,
-    parse_endpoint,
 )
 
 _HEARTBEAT = mav.MAVLINK_MSG_ID_HEARTBEAT
@@ -45,14 +46,20 @@ class _Peer:
     last_step: int = -1
     last_time_s: float = 0.0
     batch: tuple | None = None  # (msgid, payload)s of the sensor batch awaiting an answer (re-framed on re-send)
+    attitude: tuple | None = None  # stream links: SET_ATTITUDE_TARGET awaiting its AM_TORQUE_SETPOINT
 
 
 class SimServer:
     """Simulator end of the lockstep link: one UDP socket shared by all companions.
 
     Args:
-        bind: ``"udp:HOST:PORT"`` or ``"udpin:HOST:PORT"``; HOST ``0.0.0.0`` serves
-            other hosts, PORT 0 picks a free port (see :attr:`address`).
+        bind: one endpoint or several (:mod:`amlink.endpoint`, mavutil's forms), all
+            served at once: ``"udpin:HOST:PORT"`` (``udp:`` is the same; HOST
+            ``0.0.0.0`` serves other hosts, PORT 0 picks a free port, see
+            :attr:`address`), ``"tcpin:HOST:PORT"``, a serial device
+            (``"/dev/ttyUSB0:921600"``), or the sending forms ``"udpout:HOST:PORT"`` and
+            ``"tcp:HOST:PORT"`` for a companion that listens (the simulator says
+            HEARTBEAT there until a companion answers).
         sysids: companion system ids (2..255; 1 is the simulator).
         scenario: what :meth:`wait_for_peers` announces in AM_SCENARIO.
         timeout_s: default per-step answer timeout of :meth:`exchange` [s].
@@ -65,6 +72,8 @@ class SimServer:
         retry_s: wall time after which an unanswered sensor batch is re-sent
             (then 2x, 4x, 4x ... that) [s].
         shim: send-path impairment hook of :class:`amlink.udp.Udp` (tests).
+        on_heartbeat: called with ``(sysid, compid, message)`` for every admitted
+            companion HEARTBEAT (the simulator forwards them to its GCS link).
 
     Addresses.  A peer's address is learned from its packets.  Signing on: any
     authentic packet of sysid ``s`` moves ``s`` to the packet's source address
@@ -78,11 +87,16 @@ class SimServer:
     new address is a *rejoin*: the peer is disarmed until it arms again.
     """
 
-    def __init__(self, bind: str = "udp:127.0.0.1:14550", *, sysids: Sequence[int], scenario: ScenarioInfo,
+    def __init__(self, bind: str | Endpoint | Sequence[str | Endpoint] = "udpin:127.0.0.1:14550", *,
+                 sysids: Sequence[int], scenario: ScenarioInfo,
                  timeout_s: float = 1.0, signing_keys: Mapping[int, bytes] | None = None,
                  limits: SetpointLimits = DEFAULT_SETPOINT_LIMITS, retry_s: float = SENSOR_RETRY_S,
-                 shim: Shim | None = None) -> None:  # fmt: skip
-        self.bind_host, self.bind_port = parse_endpoint(bind, ("udp", "udpin"))
+                 shim: Shim | None = None,
+                 on_heartbeat: Callable[[int, int, object], None] | None = None) -> None:  # fmt: skip
+        binds = [bind] if isinstance(bind, (str, Endpoint)) else list(bind)
+        if not binds:
+            raise ValueError("bind: at least one endpoint")
+        self.endpoints = tuple(b if isinstance(b, Endpoint) else parse_endpoint(b) for b in binds)
         self.sysids = tuple(sysids)
         if not self.sysids or len(set(self.sysids)) != len(self.sysids) or not all(2 <= s <= 255 for s in self.sysids):
             raise ValueError(f"sysids {self.sysids} must be non-empty, distinct and in 2..255 (1 is the simulator)")
@@ -100,23 +114,31 @@ class SimServer:
         self.attitude_targets: dict[int, AttitudeTarget] = {}  # latest, informational
         self.last_missing: tuple[int, ...] = ()  # sysids without a setpoint in the last exchange
         self.last_rejection: tuple[int, str] | None = None  # (sysid, reason) of the last rejected setpoint
+        self.on_heartbeat = on_heartbeat
         self._keys = signing_keys
         self._shim = shim
-        self._udp: Udp | None = None
+        self._link: Mux | None = None
+        self._hello: list[tuple] = []  # udpout destinations: (address, transport)
+        self._next_hello = 0.0
         self._peers: dict[int, _Peer] = {}
         self._decoder: codec.Decoder | None = None
 
     # -- lifecycle -----------------------------------------------------------
-    def open(self) -> tuple[str, int]:
-        """Bind the socket; returns the bound ``(host, port)``."""
-        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    def open(self) -> tuple[str, int] | None:
+        """Open every endpoint; returns the first one's local ``(host, port)`` (None for a serial port).
+
+        OSError (closing what was opened) if one cannot be opened."""
+        transports = []
         try:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-            sock.bind((self.bind_host, self.bind_port))
+            for ep in self.endpoints:
+                transports.append(open_transport(ep, self.stats, shim=self._shim))
         except OSError:
-            sock.close()
+            close_all(transports)
             raise
-        self._udp = Udp(sock, self.stats, self._shim)
+        self._link = Mux(transports)
+        self._hello = [(t.peer, t) for ep, t in zip(self.endpoints, transports) if ep.kind == UDP_OUT]
+        for addr, t in self._hello:
+            self._link.route(addr, t)
         keys = self._keys or {}
         self._peers = {
             s: _Peer(s, codec.Encoder(SIM_SYSID, SIM_COMPID, signing_key=keys.get(s), link_id=s)) for s in self.sysids
@@ -125,8 +147,24 @@ class SimServer:
         return self.address
 
     @property
-    def address(self) -> tuple[str, int]:
-        return self._require_open().sock.getsockname()
+    def address(self) -> tuple[str, int] | None:
+        """The first endpoint's local ``(host, port)`` (None for a serial port or a TCP client)."""
+        return self._local(self._require_open().transports[0])
+
+    @property
+    def bound_endpoints(self) -> tuple[Endpoint, ...]:
+        """The endpoints as opened: a listening one's port 0 replaced by the port it got."""
+        link = self._require_open()
+        out = []
+        for ep, t in zip(self.endpoints, link.transports):
+            local = self._local(t)
+            out.append(ep.with_port(local[1]) if ep.listens and local is not None else ep)
+        return tuple(out)
+
+    @staticmethod
+    def _local(transport) -> tuple | None:
+        local = getattr(transport, "local_address", None)
+        return None if local is None else tuple(local[:2])
 
     @property
     def signing(self) -> bool:
@@ -141,7 +179,7 @@ class SimServer:
 
     def close(self, reason: str = "run complete", error: bool = False) -> None:
         """Send STATUSTEXT(reason) + AM_SIM_STEP(SHUTDOWN) (3 copies) to every known peer, then close."""
-        if self._udp is None:
+        if self._link is None:
             return
         severity = mav.MAV_SEVERITY_ERROR if error else mav.MAV_SEVERITY_NOTICE
         text = reason.encode("utf-8")[:STATUSTEXT_MAX].decode("utf-8", "ignore").encode("utf-8")
@@ -154,11 +192,18 @@ class SimServer:
             ]
             for _ in range(SHUTDOWN_COPIES):
                 try:
-                    self._udp.send(peer.addr, peer.encoder.pack(msgs))
+                    self._link.send(peer.addr, peer.encoder.pack(msgs))
                 except OSError:
                     pass  # closing anyway; the peer will time out
-        self._udp.close()
-        self._udp = None
+        self._flush_streams()
+        self._link.close()
+        self._link = None
+
+    def _flush_streams(self, within_s: float = 0.5) -> None:
+        """Give stream transports a moment to write what they still hold (the SHUTDOWN)."""
+        deadline = time.monotonic() + within_s
+        while any(t.wfds() for t in self._link.transports) and time.monotonic() < deadline:
+            self._link.recv(0.01)
 
     # -- queries ---------------------------------------------------------------
     def armed(self, sysid: int) -> bool:
@@ -186,18 +231,39 @@ class SimServer:
         self._wait_until(lambda p: p.armed, timeout_s, "ARM command")
 
     def _wait_until(self, ok, timeout_s: float, what: str) -> None:
-        udp = self._require_open()
+        link = self._require_open()
         deadline = time.monotonic() + timeout_s
         while True:
             missing = [s for s, p in self._peers.items() if not ok(p)]
             if not missing:
                 return
-            remaining = deadline - time.monotonic()
+            now = time.monotonic()
+            remaining = deadline - now
             if remaining <= 0:
                 raise PeerMissingError(missing, timeout_s, what)
-            for data, addr in udp.recv(remaining):
+            if self._hello:
+                if now >= self._next_hello:
+                    self._say_hello()
+                    self._next_hello = now + HEARTBEAT_PERIOD_S
+                remaining = min(remaining, self._next_hello - now)
+            for data, addr in link.recv(remaining):
                 for _setpoint in self._handle(data, addr):
                     self.stats.stale_setpoints += 1  # nothing awaited yet
+
+    def _say_hello(self) -> None:
+        """HEARTBEAT to every udpout destination no companion answers from yet, once per
+        companion not yet heard (each signed with that companion's key): a companion that
+        listens (udpin) learns the simulator's address from it."""
+        taken = {p.addr for p in self._peers.values()}
+        silent = [p for p in self._peers.values() if p.addr is None]
+        beat = mav.MAVLink_heartbeat_message(mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_GENERIC, 0, 0,
+                                             mav.MAV_STATE_STANDBY, 3)
+        for addr, transport in self._hello:
+            if addr in taken:
+                continue
+            self._link.route(addr, transport)
+            for peer in silent:
+                self._link.send(addr, peer.encoder.pack([beat]))
 
     # -- lockstep ----------------------------------------------------------------
     def exchange(self, frames: Mapping[int, SensorFrame] | Iterable[tuple[int, SensorFrame]],
@@ -238,7 +304,7 @@ class SimServer:
         once it shows life: any valid setpoint (even a late one), or an ARM
         command (a restarted companion: HEARTBEAT from a new address, then ARM).
         """
-        udp = self._require_open()
+        link = self._require_open()
         timeout = self.timeout_s if timeout_s is None else timeout_s
         expected: dict[int, int] = {}
         pairs = frames.items() if isinstance(frames, Mapping) else frames
@@ -252,7 +318,7 @@ class SimServer:
             peer.batch = fastcodec.sensor_frame_payloads(frame, self.scenario.scenario_id)
             expected[sysid] = frame.step
             if peer.addr is not None:
-                udp.send(peer.addr, peer.encoder.pack_payloads(peer.batch))
+                link.send(peer.addr, peer.encoder.pack_payloads(peer.batch))
             peer.last_step, peer.last_time_s = frame.step, frame.time_s
         if while_waiting is not None:
             while_waiting()
@@ -279,12 +345,12 @@ class SimServer:
                 for s in awaited.difference(results):
                     peer = self._peers[s]
                     if peer.addr is not None:
-                        udp.send(peer.addr, peer.encoder.pack_payloads(peer.batch))
+                        link.send(peer.addr, peer.encoder.pack_payloads(peer.batch))
                         self.stats.retransmits += 1
                 interval = min(2 * interval, _MAX_BACKOFF * self.retry_s)
                 next_retry = now + interval
             polled = True
-            for data, addr in udp.recv(min(deadline, next_retry) - now):
+            for data, addr in link.recv(min(deadline, next_retry) - now):
                 for sysid, sp, att in self._handle(data, addr):
                     step = expected.get(sysid)
                     if step is None or sp.step < step:
@@ -319,9 +385,11 @@ class SimServer:
     def _handle(self, data: bytes, addr: tuple[str, int]) -> list[tuple[int, TorqueSetpoint, AttitudeTarget | None]]:
         """Decode one datagram; answer control messages; return its valid setpoints."""
         out = []
-        attitude: dict[int, tuple] = {}  # SET_ATTITUDE_TARGET pairs with the setpoint of its datagram
+        # SET_ATTITUDE_TARGET pairs with the setpoint of its datagram; on a stream, with the next setpoint
+        stream = type(addr) is StreamPeer
+        attitude: dict[int, tuple] = {}
         # bodies: fastcodec.READERS tuples for the lockstep ids, pymavlink messages for the rest
-        for mid, sysid, _compid, body in self._decoder.feed_records(data):
+        for mid, sysid, compid, body in self._decoder.feed_records(data):
             peer = self._peers.get(sysid)
             if peer is None:
                 self.stats.unknown_sysid += 1
@@ -329,13 +397,22 @@ class SimServer:
             if not self._admit(peer, addr, mid):
                 continue
             if mid == _HEARTBEAT:
-                self._udp.send(addr, peer.encoder.pack([codec.scenario_message(self.scenario)]))
+                self._link.send(addr, peer.encoder.pack([codec.scenario_message(self.scenario)]))
+                if self.on_heartbeat is not None:
+                    self.on_heartbeat(sysid, compid, body)
             elif mid == _COMMAND_LONG:
                 self._on_command(peer, body)
             elif mid == _ATTITUDE:
-                attitude[peer.sysid] = body
+                if stream:
+                    peer.attitude = body
+                else:
+                    attitude[peer.sysid] = body
             elif mid == _SETPOINT:
-                got = self._setpoint(peer, body, attitude.pop(peer.sysid, None))
+                if stream:
+                    att, peer.attitude = peer.attitude, None
+                else:
+                    att = attitude.pop(peer.sysid, None)
+                got = self._setpoint(peer, body, att)
                 if got is not None:
                     peer.lost = False  # it is alive
                     out.append((peer.sysid, *got))
@@ -390,9 +467,9 @@ class SimServer:
         else:
             result = mav.MAV_RESULT_UNSUPPORTED
         ack = mav.MAVLink_command_ack_message(msg.command, result, 0, 0, peer.sysid, msg.get_srcComponent())
-        self._udp.send(peer.addr, peer.encoder.pack([ack]))
+        self._link.send(peer.addr, peer.encoder.pack([ack]))
 
-    def _require_open(self) -> Udp:
-        if self._udp is None:
+    def _require_open(self) -> Mux:
+        if self._link is None:
             raise RuntimeError("SimServer is not open; call open() first")
-        return self._udp
+        return self._link

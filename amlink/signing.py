@@ -15,6 +15,10 @@ simulator holds all of them.  :func:`resolve_key` picks a vehicle's key, first m
    an attacker.  :func:`resolve_key` reports which source was used so the process
    mains can warn about it.
 
+The GCS link (the simulator's flight controllers to a ground station) has a key of its own,
+:func:`gcs_key_from_passphrase`: SHA-256 of a passphrase, MAVProxy's rule (``signing key
+PASSPHRASE``), so a stock GCS can use it; a GCS key file holds the passphrase.
+
 Timestamps follow the MAVLink 2 signing spec: units of 10 us since
 2015-01-01T00:00:00Z; :func:`now_timestamp` is the wall clock in those units.  Both
 ends must have clocks within 60 s of each other (NTP), or a new stream is taken as
@@ -63,6 +67,26 @@ def read_key_file(path: str | Path) -> bytes:
     except (OSError, UnicodeDecodeError) as exc:
         raise SigningKeyError(f"{p}: cannot read key file: {exc}") from None
     return key_from_hex(text, str(p))
+
+
+def gcs_key_from_passphrase(passphrase: str) -> bytes:
+    """The 32-byte signing key of a passphrase: SHA-256 of its ASCII bytes, as MAVProxy derives it."""
+    if not passphrase or not passphrase.isascii() or passphrase != passphrase.strip():
+        raise SigningKeyError("a GCS passphrase is non-empty ASCII without surrounding whitespace")
+    return hashlib.sha256(passphrase.encode("ascii")).digest()
+
+
+def read_gcs_key_file(path: str | Path) -> bytes:
+    """The GCS key of a file holding its passphrase (one line; keep it mode 0600)."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="ascii").strip()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SigningKeyError(f"{p}: cannot read GCS key file: {exc}") from None
+    try:
+        return gcs_key_from_passphrase(text)
+    except SigningKeyError as exc:
+        raise SigningKeyError(f"{p}: {exc}") from None
 
 
 def derive_vehicle_key(master_key: bytes, sysid: int) -> bytes:

@@ -1,4 +1,4 @@
-"""UDP plumbing shared by both ends of the lockstep link: endpoints, ids, counters.
+"""UDP plumbing shared by both ends of the lockstep link: ids, timing constants, counters.
 
 ``Udp.send`` and ``Udp.recv`` are the only places datagrams leave and enter a
 process.  ``Udp.send`` passes every datagram through an optional *send shim*
@@ -19,7 +19,8 @@ from amlink.codec import mav
 SIM_SYSID = 1
 SIM_COMPID = mav.MAV_COMP_ID_AUTOPILOT1
 COMPANION_COMPID = mav.MAV_COMP_ID_ONBOARD_COMPUTER
-HEARTBEAT_PERIOD_S = 0.5
+HEARTBEAT_PERIOD_S = 0.5  # the companion's HEARTBEAT while it connects [s]
+RUN_HEARTBEAT_PERIOD_S = 1.0  # ... and once connected, as a companion computer does [s]
 COMMAND_RETRY_S = 0.25
 SENSOR_RETRY_S = 0.025  # first re-send of an unanswered sensor batch [s wall]; doubles up to 4x
 REJOIN_QUIET_S = 1.0  # signing off: a HEARTBEAT moves a peer only after this long silent [s]
@@ -28,20 +29,6 @@ STATUSTEXT_MAX = 50  # bytes in STATUSTEXT.text
 _MAX_DATAGRAM = 65535
 _MAX_DRAIN = 256  # datagrams read per wake-up before checking the clock again
 _DONTWAIT = getattr(socket, "MSG_DONTWAIT", None)
-
-
-def parse_endpoint(url: str, schemes: tuple[str, ...]) -> tuple[str, int]:
-    """Split ``"udp:HOST:PORT"`` into ``(HOST, PORT)``; the scheme must be in ``schemes``."""
-    try:
-        scheme, host, port = url.split(":")
-        port_n = int(port)
-    except ValueError:
-        raise ValueError(f"endpoint {url!r} is not SCHEME:HOST:PORT") from None
-    if scheme not in schemes:
-        raise ValueError(f"endpoint {url!r}: scheme must be one of {schemes}")
-    if not 0 <= port_n < 65536 or not host:
-        raise ValueError(f"endpoint {url!r}: bad host or port")
-    return host, port_n
 
 
 @dataclass
@@ -73,34 +60,67 @@ class LinkStats:
     retransmits: int = 0  # server: batches re-sent; companion: cached setpoints re-sent
     duplicate_frames: int = 0  # companion: sensor frames for a step already seen
     skipped_frames: int = 0  # companion: frames passed over for a newer one already queued (a backlog)
+    # byte streams (TCP, serial) and sending
+    junk_bytes: int = 0  # stream bytes skipped while finding the next whole frame (noise, a cut-off frame)
+    send_drops: int = 0  # datagrams not sent: no route to the address, or a stream's backlog full or closed
 
 
 Shim = Callable[[tuple[str, int], bytes], Iterable[tuple[tuple[str, int], bytes]]]
 
 
 class Udp:
-    """One UDP socket; ``send`` and ``recv`` are the only I/O paths (``shim``: impairment hook)."""
+    """One UDP socket; ``send`` and ``recv`` are the only I/O paths (``shim``: impairment hook).
 
-    def __init__(self, sock: socket.socket, stats: LinkStats, shim: Shim | None = None) -> None:
+    The transport interface of :mod:`amlink.transport`; ``peer`` is where a client sends
+    (the udpout destination; ``None`` on a listening socket until the caller learns it).
+    """
+
+    stream = False
+
+    def __init__(self, sock: socket.socket, stats: LinkStats, shim: Shim | None = None,
+                 peer: tuple | None = None) -> None:  # fmt: skip
         self.sock = sock
         self.stats = stats
         self.shim = shim
+        self.peer = peer
 
-    def send(self, addr: tuple[str, int], data: bytes) -> None:
-        if self.shim is None:
-            self.sock.sendto(data, addr)
-            self.stats.datagrams_tx += 1
-            return
-        for a, d in self.shim(addr, data):
-            self.sock.sendto(d, a)
-            self.stats.datagrams_tx += 1
+    @property
+    def local_address(self) -> tuple:
+        return self.sock.getsockname()
 
-    def recv(self, timeout_s: float) -> list[tuple[bytes, tuple[str, int]]]:
+    def peers(self) -> list:
+        """The far ends known to this transport (the udpout destination)."""
+        return [self.peer] if self.peer is not None else []
+
+    def send(self, addr: tuple, data: bytes) -> None:
+        try:
+            if self.shim is None:
+                self.sock.sendto(data, addr)
+                self.stats.datagrams_tx += 1
+                return
+            for a, d in self.shim(addr, data):
+                self.sock.sendto(d, a)
+                self.stats.datagrams_tx += 1
+        except (BlockingIOError, ConnectionRefusedError):  # a full buffer, an ICMP error of an earlier datagram
+            self.stats.send_drops += 1
+
+    def recv(self, timeout_s: float) -> list[tuple[bytes, tuple]]:
         """Datagrams available within ``timeout_s`` (waits for the first, drains the rest)."""
         ready, _, _ = select.select([self.sock], [], [], max(0.0, timeout_s))
-        out: list[tuple[bytes, tuple[str, int]]] = []
-        if not ready:
-            return out
+        return self._drain() if ready else []
+
+    def fds(self) -> list[int]:
+        return [self.sock.fileno()]
+
+    def wfds(self) -> list[int]:
+        return []
+
+    def poll(self, readable, writable) -> list[tuple[bytes, tuple]]:
+        """What :meth:`recv` returns, without waiting, when the socket is in ``readable``."""
+        return self._drain() if self.sock.fileno() in readable else []
+
+    def _drain(self) -> list[tuple[bytes, tuple]]:
+        out: list[tuple[bytes, tuple]] = []
         for i in range(_MAX_DRAIN):
             try:
                 if i == 0:
@@ -111,6 +131,8 @@ class Udp:
                     data, addr = self.sock.recvfrom(_MAX_DATAGRAM, _DONTWAIT)
             except BlockingIOError:
                 break
+            except ConnectionRefusedError:  # Linux: ICMP port unreachable of an earlier datagram
+                continue
             except ConnectionResetError:  # Windows reports ICMP port unreachable here
                 continue
             out.append((data, addr))
@@ -119,5 +141,3 @@ class Udp:
 
     def close(self) -> None:
         self.sock.close()
-
-

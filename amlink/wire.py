@@ -81,6 +81,57 @@ def split_frames(datagram: bytes) -> list[bytes]:
     return out
 
 
+class StreamFramer:
+    """Cuts a byte stream (TCP, serial) into whole MAVLink 2 frames.
+
+    :meth:`feed` takes the bytes just read and returns the frames they complete,
+    concatenated -- what :class:`Decoder` takes as one datagram; a partial frame waits
+    for the next call.  Bytes that do not begin a frame whose CRC checks (line noise, a
+    MAVLink 1 frame, a false magic byte) are skipped one at a time until the stream is in
+    step again, and counted in :attr:`junk_bytes`.  A frame of a message id unknown to the
+    dialect cannot be checked, so it counts as junk too: passing it on whole could swallow
+    the genuine frames behind a false magic byte.  The CRC does not cover a signature: a
+    frame cut off inside its signature is taken whole, with the first bytes of the next
+    frame; the decoder rejects it, and that next frame is lost too.
+    """
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+        self.junk_bytes = 0
+
+    def feed(self, data: bytes) -> bytes:
+        buf = self._buf
+        buf += data
+        n, i, out = len(buf), 0, []
+        while i < n:
+            j = buf.find(MAGIC_V2, i)
+            if j < 0:
+                self.junk_bytes += n - i
+                i = n
+                break
+            self.junk_bytes += j - i
+            i = j
+            if n - i < HEADER_LEN:
+                break  # the header is not all here yet
+            if buf[i + 2] & ~IFLAG_SIGNED:
+                self.junk_bytes += 1
+                i += 1
+                continue
+            crc_at = i + HEADER_LEN + buf[i + 1]
+            end = crc_at + CRC_LEN + (SIGNATURE_LEN if buf[i + 2] & IFLAG_SIGNED else 0)
+            if end > n:
+                break  # the rest of the frame is still on its way
+            extra = _CRC_EXTRA.get(buf[i + 7] | buf[i + 8] << 8 | buf[i + 9] << 16)
+            if extra is None or _mcrf4xx(bytes(buf[i + 1 : crc_at]) + extra) != buf[crc_at] | buf[crc_at + 1] << 8:
+                self.junk_bytes += 1
+                i += 1
+                continue
+            out.append(bytes(buf[i:end]))
+            i = end
+        del buf[:i]
+        return b"".join(out)
+
+
 class _Sink:
     """File-like target for MAVLink.send that collects frames for one datagram."""
 

@@ -104,7 +104,7 @@ def echo_rtf(path: Path, duration: float, run_dir: Path, spin_us: float = 0.0) -
             if not line:
                 raise RuntimeError(f"the simulator did not start (exit {sim.wait()})")
             event = json.loads(line)
-            bind = event.get("bind") if event.get("event") == "ready" else None
+            bind = event.get("connect") if event.get("event") == "ready" else None
         echoes = [subprocess.Popen([sys.executable, str(ROOT / "benchmarks" / "echo_companion.py"), "--sysid",
                                     str(am.sysid), "--sim", bind, "--config", str(path), "--spin-us", str(spin_us)], stderr=subprocess.DEVNULL)
                   for am in spec.ams]

@@ -1,7 +1,11 @@
 """Companion process of one AM: runs the paper's controller against a flight controller
 (here the SITL simulator) over MAVLink, in lockstep.
 
-    companion --sysid 4 [--sim udp:127.0.0.1:14550] [--config configs/scenarios/two_am_comp.toml]
+    companion --sysid 4 [--sim udpout:127.0.0.1:14550] [--config configs/scenarios/two_am_comp.toml]
+
+--sim takes mavutil's endpoint forms: udpout:HOST:PORT, udpin:HOST:PORT, tcp:HOST:PORT,
+tcpin:HOST:PORT or a serial device DEVICE[:BAUD] (a flight controller on /dev/ttyUSB0).
+The older --sim udp:HOST:PORT still means "send to" (mavutil's udp: listens): it warns.
 
 It loads its own [[am]] entry of the scenario, computes its own references (approach,
 grasp, lift, hover, timed on simulation time) and never sees another AM's state. It
@@ -20,8 +24,10 @@ from pathlib import Path
 
 from amcore.config import DEFAULT_SCENARIO, ConfigError, load_scenario, scenario_id
 from amlink import signing
+from amlink.endpoint import COMPANION_SIM, EndpointError, parse_endpoint
 from amlink.errors import LinkError, SimulatorUnreachableError
 from amlink.lockstep import CompanionClient
+from amlink.tlog import TlogWriter
 
 from telemetry.publisher import TelemetryPublisher
 from telemetry.session import TelemetryConfigError, add_zenoh_arguments, options_from_args
@@ -42,7 +48,10 @@ def _on_signal(signum, _frame):
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="companion", description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--sysid", type=int, required=True, help="this AM's MAVLink system id (its [[am]] entry)")
-    ap.add_argument("--sim", default="udp:127.0.0.1:14550", help="simulator endpoint udp:HOST:PORT")
+    ap.add_argument("--sim", default=COMPANION_SIM, metavar="ENDPOINT",
+                    help=f"the flight controller (simulator) endpoint (default {COMPANION_SIM}); mavutil's forms: "
+                         f"udpout:, udpin:, tcp:, tcpin:HOST:PORT or a serial DEVICE[:BAUD]; udp:HOST:PORT is "
+                         f"read as udpout: (as before) with a warning")
     ap.add_argument("--config", type=Path, default=DEFAULT_SCENARIO, help="scenario TOML")
     ap.add_argument("--connect-timeout", type=float, default=30.0, help="seconds to wait for the simulator")
     ap.add_argument("--frame-timeout", type=float, default=10.0, help="seconds without a sensor frame = link lost")
@@ -50,9 +59,20 @@ def main(argv: list[str] | None = None) -> int:
                     help="signing master key (64 hex digits); overrides [link].key_file of the scenario")
     ap.add_argument("--outcome", type=Path, default=None, help="write a per-phase error summary (JSON) here")
     ap.add_argument("--telemetry-every", type=int, default=1, help="publish the controller state every N steps")
+    ap.add_argument("--tlog", type=Path, default=None,
+                    help="write every MAVLink frame of the link to this .tlog (stock tools read it)")
     add_zenoh_arguments(ap, role="publisher")
     a = ap.parse_args(argv)
     tag = f"companion[{a.sysid}]"
+    try:
+        sim = parse_endpoint(a.sim)
+    except EndpointError as exc:
+        print(f"{tag}: error: --sim: {exc}", file=sys.stderr)
+        return 2
+    if sim.alias == "udp":
+        print(f"{tag}: warning: --sim {a.sim} is read as udpout:{a.sim.split(':', 1)[1]} (send to the simulator), "
+              f"as it always was here; in mavutil's convention udp: means udpin: (listen). Write udpout: "
+              f"(or udpin: to wait for a flight controller that sends to this port)", file=sys.stderr)
     try:
         spec = load_scenario(a.config)
         spec.am(a.sysid)  # ConfigError if this sysid is not in the scenario
@@ -73,13 +93,16 @@ def main(argv: list[str] | None = None) -> int:
 
     signal.signal(signal.SIGTERM, _on_signal)
     signal.signal(signal.SIGINT, _on_signal)
+    tlog = TlogWriter(a.tlog) if a.tlog is not None else None
     try:
-        client = CompanionClient(a.sysid, a.sim, signing_key=None if keys is None else keys[a.sysid])
+        client = CompanionClient(a.sysid, a.sim, signing_key=None if keys is None else keys[a.sysid], tlog=tlog)
     except ValueError as exc:
         print(f"{tag}: error: --sim: {exc}", file=sys.stderr)
         return 2
     why = "simulator ended the run"
     tele.open()  # never blocks: publishes are queued, dropped and counted while nobody listens
+    if tlog is not None:
+        tlog.open()
     try:
         if not tele.await_recorder(tele.keys.controller(a.sysid), a.telemetry_wait):
             print(f"{tag}: warning: telemetry: no subscriber (recorder) after {a.telemetry_wait:g} s; "
@@ -117,6 +140,8 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         client.close()
         tele.close()
+        if tlog is not None:
+            tlog.close()
     failure = [text for sev, text in client.status_texts if sev <= 3]  # MAV_SEVERITY_ERROR or worse
     if failure:
         print(f"{tag}: error: the simulator ended the run: {failure[-1]}", file=sys.stderr)

@@ -11,6 +11,9 @@ simulator main and the in-process runner (`simulator.inprocess`) both drive it:
                                              # (core.on_setpoint(sysid, sp) as each arrives)
     core.actuate(k, setpoints, lost)         # flight controllers apply them (or failsafe)
     core.step()
+
+Beyond the companions, a GCS can command each flight controller between steps (`arm`,
+`disarm`, `land`; `simulator.commands`), and `snapshot` says what each one reports.
 """
 from __future__ import annotations
 
@@ -28,13 +31,16 @@ from amcore.so3 import Rz
 from amlink.impair import ImpairedLink, LinkImpairment
 from amlink.types import SensorFrame, TorqueSetpoint, sensor_frame_from_wire
 
-from .failsafe import Failsafe
+from .failsafe import Failsafe, FailsafeGains
+from .fcstate import FcMode, FleetSnapshot, VehicleSnapshot
 from .outcome import RunOutcome
 from .sensors import SensorModel
 from .verdict import judge
 from .world import World
 
 TRUTH_EVERY = 10  # ground-truth sample period for the outcome and telemetry [steps]: 100 Hz at 1 kHz
+LAND_NOW = FailsafeGains(hold_s=0.0)  # a commanded landing: the failsafe's landing, without the hold
+_FAILSAFE_MODE = {"hold": FcMode.HOLD, "land": FcMode.LAND, "landed": FcMode.LANDED}
 
 
 def initial_state(spec: ScenarioSpec, am: AmSpec, model) -> AmState:
@@ -54,6 +60,7 @@ class SitlCore:
         self.model = build_model(spec.vehicle)
         self.sysids = [am.sysid for am in spec.ams]
         self.world = World(spec, {am.sysid: initial_state(spec, am, self.model) for am in spec.ams})
+        self._phase = am_mission(spec, spec.ams[0], self.model).phase  # the phases are timed alike for every AM
         ms = spec.mission
         self.outcome = RunOutcome(self.sysids, (ms.grasp_end_s + ms.lift_move_s + 1.0, ms.hover_end_s),
                                   slip_from_s=ms.grasp_end_s)
@@ -61,13 +68,18 @@ class SitlCore:
             dataclasses.replace(spec, link=am.link or spec.link)), stream=am.sysid) for am in spec.ams}
         self.sensors = {} if spec.sensors.exact else {
             am.sysid: SensorModel(spec.sensors, self.model.n, spec.dt_s, spec.seed, am.sysid) for am in spec.ams}
-        self.failsafes: dict[int, Failsafe] = {}
+        self.failsafes: dict[int, Failsafe] = {}  # companion lost
+        self.landing: dict[int, Failsafe] = {}  # landing on a GCS command (companion ignored)
+        self.disarmed: set[int] = set()  # disarmed by a GCS command: motors off, joints limp
+        self._overridden: set[int] = set()  # landing or disarmed: setpoints are not applied
         self.events: list[dict] = []
         self.rejected: list[tuple[float, int, str]] = []  # (t, sysid, why) of setpoints refused as implausible
         self.controller_errors: list[tuple[float, int, str]] = []  # (t, sysid, what): controllers that raised
         self.digest = hashlib.sha256()
         self._unobserved: tuple | None = None  # (k, values, frames) of `frames` awaiting `observe`
         self._k, self._actuated = -1, set()  # step of the last frames; AMs actuated on arrival
+        self._values: dict[int, list[float]] = {}  # the last frames' values and time (`snapshot`)
+        self._values_t = 0.0
 
     def connect(self) -> None:
         self.world.connect()
@@ -98,6 +110,7 @@ class SitlCore:
             out[s] = f = sensor_frame_from_wire(k, t, v if sensor is None else sensor(v), n, 0)
             yield s, f
         self._unobserved = (k, values, out)
+        self._values, self._values_t = values, t
 
     def observe(self) -> None:
         """Bookkeeping of the last `frames` call (once): every frame into the state digest, and
@@ -118,7 +131,7 @@ class SitlCore:
         """A setpoint answering the last frames, as it arrives: its flight controller applies
         it now, while the other companions still compute (`actuate` then skips this AM).
         One of a vehicle in failsafe is left to `actuate`, which ends the failsafe."""
-        if sysid in self.failsafes or sysid in self._actuated:
+        if sysid in self.failsafes or sysid in self._actuated or sysid in self._overridden:
             return
         self._actuated.add(sysid)
         self._apply(self._k, sysid, setpoint)
@@ -131,6 +144,13 @@ class SitlCore:
         done, self._actuated = (self._actuated if self._k == k else set()), set()
         for s in self.sysids:
             if s in done:  # applied on arrival (on_setpoint)
+                continue
+            if s in self._overridden:  # a GCS command rules this flight controller
+                if s in self.disarmed:
+                    w.apply(s, 0.0, np.zeros(3), np.zeros(self.model.n))
+                else:
+                    c = self.landing[s].command(t, w.state(s))
+                    w.apply(s, c.thrust_n, c.tau_B_nm, c.tau_q_nm)
                 continue
             if s in lost or (s in self.failsafes and s not in setpoints):
                 if s not in self.failsafes:
@@ -172,6 +192,63 @@ class SitlCore:
 
     def step(self) -> None:
         self.world.step()
+
+    # -- flight-controller commands (from the GCS) and state ---------------------------
+    def land(self, s: int, by: str = "GCS") -> None:
+        """Land vehicle `s` with the failsafe's landing, without its hold (arm compliant, motors
+        off on the ground); its companion's setpoints are ignored from now on."""
+        if s in self.landing:
+            return
+        t = self.world.time_s
+        self.landing[s] = Failsafe(self.model, self.world.state(s), t, LAND_NOW)
+        self.failsafes.pop(s, None)
+        self._overridden.add(s)
+        self.events.append({"t": t, "sysid": s, "event": "land", "by": by})
+        self.log(f"t={t:.3f} s sysid {s}: landing ({by} command)")
+
+    def disarm(self, s: int, force: bool = False, by: str = "GCS") -> bool:
+        """Motors off and joints limp; refused (False) in the air unless `force`."""
+        if s in self.disarmed:
+            return True
+        if not force and self.fc_mode(s) != FcMode.LANDED:
+            return False
+        t = self.world.time_s
+        self.disarmed.add(s)
+        self._overridden.add(s)
+        self.events.append({"t": t, "sysid": s, "event": "disarmed", "by": by, "forced": force})
+        self.log(f"t={t:.3f} s sysid {s}: disarmed ({by} command{', forced' if force else ''})")
+        return True
+
+    def arm(self, s: int, by: str = "GCS") -> None:
+        """Undo a disarm; the flight controller applies its companion's setpoints (or keeps landing)."""
+        if s not in self.disarmed:
+            return
+        t = self.world.time_s
+        self.disarmed.discard(s)
+        if s not in self.landing:
+            self._overridden.discard(s)
+        self.events.append({"t": t, "sysid": s, "event": "armed", "by": by})
+        self.log(f"t={t:.3f} s sysid {s}: armed ({by} command)")
+
+    def fc_mode(self, s: int) -> FcMode:
+        fs = self.landing.get(s) or self.failsafes.get(s)
+        if fs is not None:
+            return _FAILSAFE_MODE[fs.mode]
+        return FcMode.OFFBOARD if self._k >= 0 else FcMode.STANDBY
+
+    def snapshot(self, armed: Mapping[int, bool]) -> FleetSnapshot:
+        """What every flight controller reports now (`armed`: who its companion has armed).
+        Reads the last frames' values; before the first frame, the world's."""
+        t = self._values_t if self._values else self.world.time_s
+        vehicles = []
+        for s in self.sysids:
+            v = self._values.get(s) or self.world.sensor_values(s)
+            mode = self.fc_mode(s)
+            vehicles.append(VehicleSnapshot(
+                sysid=s, p_WB=tuple(v[0:3]), quat_WB_wxyz=tuple(v[3:7]), v_B=tuple(v[7:10]), w_B=tuple(v[10:13]),
+                mode=mode, armed=armed.get(s, False) and s not in self.disarmed and mode != FcMode.LANDED,
+                failsafe=s in self.failsafes and s not in self.landing))
+        return FleetSnapshot(time_s=t, phase=self._phase(t) if self._k >= 0 else "", vehicles=tuple(vehicles))
 
     def finish(self) -> dict:
         """Final ground-truth sample; the outcome as a dict."""

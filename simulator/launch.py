@@ -2,11 +2,13 @@
 MAVLink/UDP on loopback, with a progress bar and a run folder holding the outcome.
 
     am-run [configs/scenarios/two_am_comp.toml] [--run-dir runs/NAME] [--duration S]
+           [--gcs udpout:127.0.0.1:14551] [--tlog-companions]
 
 The run folder gets outcome.json (simulator ground truth), am<sysid>.json (each
-companion's controller errors per phase) and every process's log. Exit code: 0 when every
-process ended cleanly and the mission succeeded (simulator.verdict), 4 when the mission
-failed, 2 bad configuration, 1 when a process failed.
+companion's controller errors per phase), gcs.tlog (the flight controllers' GCS link, for
+stock MAVLink tools), gcs.key (its signing passphrase) and every process's log. Exit code:
+0 when every process ended cleanly and the mission succeeded (simulator.verdict), 4 when
+the mission failed, 2 bad configuration, 1 when a process failed.
 """
 from __future__ import annotations
 
@@ -23,6 +25,7 @@ import time
 from pathlib import Path
 
 from amcore.config import DEFAULT_SCENARIO, ConfigError, load_scenario
+from amlink.endpoint import DEFAULT_GCS, EndpointError, parse_endpoint
 
 from .verdict import MISSION_FAILED
 
@@ -62,7 +65,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-progress", action="store_true", help="no progress display")
     ap.add_argument("--no-telemetry", action="store_true", help="no Zenoh telemetry, no MCAP log, no review")
     ap.add_argument("--startup-timeout", type=float, default=120.0, help="seconds for all processes to connect")
+    ap.add_argument("--gcs", default=DEFAULT_GCS, metavar="ENDPOINT",
+                    help=f"the simulator's GCS link (default {DEFAULT_GCS}; mavutil's forms; 'none' for none)")
+    ap.add_argument("--tlog-companions", action="store_true",
+                    help="each companion also writes its link to companion-<sysid>.tlog (1 kHz: large)")
     a = ap.parse_args(argv)
+    try:
+        if a.gcs.strip().lower() != "none":
+            parse_endpoint(a.gcs)
+    except EndpointError as exc:
+        print(f"am-run: error: --gcs: {exc} (or none)", file=sys.stderr)
+        return 2
     try:
         spec = load_scenario(a.scenario)
     except ConfigError as exc:
@@ -72,8 +85,9 @@ def main(argv: list[str] | None = None) -> int:
     run_dir.mkdir(parents=True, exist_ok=True)
     cfg = str(Path(a.scenario).resolve())
     key_args = _fresh_key(spec, run_dir)
-    sim_cmd = _command("simulator") + key_args + ["--config", cfg, "--bind", "udp:127.0.0.1:0", "--run-dir", str(run_dir),
-                                       "--progress", "jsonl", "--peer-timeout", str(a.startup_timeout)]
+    sim_cmd = _command("simulator") + key_args + _gcs_key(spec, run_dir) + [
+        "--config", cfg, "--bind", "udpin:127.0.0.1:0", "--gcs", a.gcs, "--run-dir", str(run_dir),
+        "--progress", "jsonl", "--peer-timeout", str(a.startup_timeout)]
     if a.duration is not None:
         sim_cmd += ["--duration", str(a.duration)]
     env = dict(os.environ, PYTHONUNBUFFERED="1")
@@ -82,7 +96,8 @@ def main(argv: list[str] | None = None) -> int:
     procs: dict[str, subprocess.Popen] = {}
     logs = []
     bar = _Bar(not a.no_progress)
-    print(f"am-run: scenario '{spec.name}' with {len(spec.ams)} AMs; run folder {run_dir}", file=sys.stderr)
+    print(f"am-run: scenario '{spec.name}' with {len(spec.ams)} AMs; run folder {run_dir}; GCS link {a.gcs}",
+          file=sys.stderr)
     try:
         if not a.no_telemetry:
             # the logger listens on a free loopback port; every publisher connects to it
@@ -105,14 +120,15 @@ def main(argv: list[str] | None = None) -> int:
                 raise RuntimeError(f"the simulator did not start (exit {sim.poll()}); see {run_dir / 'simulator.log'}")
             ev = json.loads(line)
             if ev.get("event") == "ready":
-                bind = ev["bind"]
+                bind = ev["connect"]
         for am in spec.ams:
             clog = open(run_dir / f"companion-{am.sysid}.log", "w")
             logs.append(clog)
+            tlog = ["--tlog", str(run_dir / f"companion-{am.sysid}.tlog")] if a.tlog_companions else []
             procs[f"companion {am.sysid}"] = subprocess.Popen(
                 _command("companion") + key_args + ["--sysid", str(am.sysid), "--sim", bind, "--config", cfg,
                                          "--outcome", str(run_dir / f"am{am.sysid}.json"),
-                                         "--connect-timeout", str(a.startup_timeout)] + tele_args,
+                                         "--connect-timeout", str(a.startup_timeout)] + tlog + tele_args,
                 stdout=clog, stderr=subprocess.STDOUT, env=env)
         failed = _follow(sim, procs, bar)
     except KeyboardInterrupt:
@@ -154,6 +170,18 @@ def _fresh_key(spec, run_dir: Path) -> list[str]:
     with os.fdopen(fd, "w") as fh:
         fh.write(os.urandom(32).hex() + "\n")
     return ["--key-file", str(path)]
+
+
+def _gcs_key(spec, run_dir: Path) -> list[str]:
+    """A random GCS signing passphrase for this run (mode 0600 in the run folder, MAVProxy's
+    'signing key' takes it as is), unless the scenario turns signing off."""
+    if not spec.link.signing:
+        return []
+    path = run_dir / "gcs.key"
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as fh:
+        fh.write(os.urandom(16).hex() + "\n")
+    return ["--gcs-key-file", str(path)]
 
 
 def _free_tcp_port() -> int:

@@ -1,16 +1,18 @@
 """SITL simulator process: the PyBullet world of a scenario and every AM's flight-controller
-emulation, stepped in lockstep with one companion process per AM over MAVLink/UDP.
+emulation, stepped in lockstep with one companion process per AM over MAVLink (UDP, TCP or serial).
 
-    simulator [--config configs/scenarios/two_am_comp.toml] [--bind udp:127.0.0.1:14550]
+    simulator [--config configs/scenarios/two_am_comp.toml] [--bind udpin:127.0.0.1:14550]
+              [--gcs udpout:127.0.0.1:14551]
 
 Start-up waits for every [[am]] sysid's HEARTBEAT and ARM; then each step k it sends every
 companion its sensor frame (ODOMETRY, AM_JOINT_STATE, AM_WRENCH, AM_SIM_STEP), waits for
 all N setpoints answering step k (the N exchanges run concurrently), applies them through
 the rotor mixer and joint limits (saturation is counted and logged) and steps physics.
-The run folder gets outcome.json (the physical outcome from ground truth, see
-simulator.outcome, and the mission verdict, simulator.verdict). Exit codes: 0 run
-complete and its mission a success (or not failed so far, when --duration cut the mission
-short), 4 the mission failed (the verdict names the criterion and when), 2 bad
+It also plays each vehicle's flight-controller GCS port (--gcs, simulator.gcs_link), as
+PX4 SITL does. The run folder gets outcome.json (the physical outcome from ground truth, see
+simulator.outcome, and the mission verdict, simulator.verdict) and gcs.tlog. Exit codes: 0
+run complete and its mission a success (or not failed so far, when --duration cut the
+mission short), 4 the mission failed (the verdict names the criterion and when), 2 bad
 configuration, 1 link failure (a missing or silent companion, named), 130 interrupted.
 """
 from __future__ import annotations
@@ -25,6 +27,7 @@ from pathlib import Path
 
 from amcore.config import DEFAULT_SCENARIO, ConfigError, load_scenario, scenario_id
 from amlink import signing
+from amlink.endpoint import DEFAULT_GCS, SIM_BIND, EndpointError, parse_endpoint
 from amlink.errors import LinkError
 from amlink.limits import SetpointLimits
 from amlink.lockstep import SimServer
@@ -35,6 +38,8 @@ from telemetry.session import TelemetryConfigError, add_zenoh_arguments, options
 from telemetry.wiring import SimulatorTelemetry
 
 from .core import SitlCore
+from .gcs import GcsSession, snapshot_every
+from .gcs_link import GcsLink
 from .verdict import MISSION_FAILED
 
 
@@ -84,8 +89,16 @@ class Progress:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="simulator", description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--config", type=Path, default=DEFAULT_SCENARIO, help="scenario TOML")
-    ap.add_argument("--bind", default="udp:127.0.0.1:14550",
-                    help="MAVLink endpoint udp:HOST:PORT (0.0.0.0 to serve other hosts, port 0 = any free port)")
+    ap.add_argument("--bind", action="append", metavar="ENDPOINT",
+                    help=f"where the companions reach their flight controllers, repeatable (default "
+                         f"{SIM_BIND}; HOST 0.0.0.0 serves other hosts, port 0 = any free port); "
+                         "mavutil's forms: udpin:/udp:, udpout:, tcpin:, tcp:HOST:PORT, serial DEVICE[:BAUD]")
+    ap.add_argument("--gcs", default=DEFAULT_GCS, metavar="ENDPOINT",
+                    help=f"the flight controllers' GCS link (default {DEFAULT_GCS}; mavutil's forms; 'none': "
+                         f"no GCS endpoint, gcs.tlog is written all the same)")
+    ap.add_argument("--gcs-key-file", type=Path, default=None,
+                    help="GCS signing passphrase file (key = SHA-256 of the passphrase, as MAVProxy's 'signing "
+                         "key'); with signing on, GCS commands are executed only if signed with it")
     ap.add_argument("--run-dir", type=Path, default=None, help="folder for outcome.json (default runs/<name>-<time>)")
     ap.add_argument("--duration", type=float, default=None, help="override [scenario].duration_s")
     ap.add_argument("--peer-timeout", type=float, default=60.0, help="seconds to wait for every companion at start")
@@ -98,13 +111,27 @@ def main(argv: list[str] | None = None) -> int:
     add_zenoh_arguments(ap, role="publisher")
     a = ap.parse_args(argv)
     try:
+        binds = [parse_endpoint(b) for b in (a.bind or [SIM_BIND])]
+    except EndpointError as exc:
+        print(f"simulator: error: --bind: {exc}", file=sys.stderr)
+        return 2
+    try:
+        gcs_endpoint = None if a.gcs.strip().lower() == "none" else parse_endpoint(a.gcs)
+    except EndpointError as exc:
+        print(f"simulator: error: --gcs: {exc} (or none)", file=sys.stderr)
+        return 2
+    try:
         spec = load_scenario(a.config)
         keys, warning = signing.keys_for_run(spec, a.key_file)
+        gcs_key = signing.read_gcs_key_file(a.gcs_key_file) if a.gcs_key_file is not None else None
     except (ConfigError, signing.SigningKeyError) as exc:
         print(f"simulator: error: {exc}", file=sys.stderr)
         return 2
     if warning:
         print(f"simulator: warning: {warning}", file=sys.stderr)
+    if keys is not None and gcs_key is None and gcs_endpoint is not None:
+        print("simulator: warning: no --gcs-key-file: the GCS link sends telemetry but executes no command "
+              "(am-run writes a GCS key to the run folder)", file=sys.stderr)
     duration = spec.duration_s if a.duration is None else a.duration
     if not duration > 0:
         print(f"simulator: error: --duration must be > 0, got {duration}", file=sys.stderr)
@@ -132,12 +159,10 @@ def main(argv: list[str] | None = None) -> int:
     core = SitlCore(spec, log=log, on_truth=sim_tele.truth)
     v = spec.vehicle
     limits = SetpointLimits.for_vehicle(v.rotors.count * v.rotors.thrust_max_n, max(v.joint_torque_max_nm), v.n_joints)
-    try:
-        server = SimServer(a.bind, sysids=sysids, scenario=info, timeout_s=a.step_timeout, signing_keys=keys,
-                           limits=limits)
-    except ValueError as exc:
-        print(f"simulator: error: --bind: {exc}", file=sys.stderr)
-        return 2
+    gcs_link = GcsLink(gcs_endpoint, sysids, key=gcs_key, accept_unsigned=keys is None, tlog=run_dir / "gcs.tlog")
+    server = SimServer(binds, sysids=sysids, scenario=info, timeout_s=a.step_timeout, signing_keys=keys,
+                       limits=limits, on_heartbeat=gcs_link.forward_heartbeat)
+    gcs = GcsSession(core, gcs_link, server.armed, snapshot_every(spec.rate_hz))
     status, code, k = "run complete", 0, 0
     completed = False  # the run reached its end (a vehicle in failsafe makes the code 1, not the run an error)
     told = status  # what the companions hear (STATUSTEXT carries 50 bytes)
@@ -147,12 +172,22 @@ def main(argv: list[str] | None = None) -> int:
     try:
         core.connect()
         try:
-            host, port = server.open()
+            server.open()
         except OSError as exc:
-            raise _BindError(f"cannot listen on {a.bind}: {exc}") from None
-        progress.event(event="ready", bind=f"udp:{host}:{port}", scenario=spec.name, sysids=sysids)
-        print(f"simulator: '{spec.name}' listening on udp:{host}:{port}, waiting for sysids {sysids}",
-              file=sys.stderr, flush=True)
+            raise _BindError(f"cannot listen on {', '.join(a.bind or map(str, binds))}: {exc}") from None
+        try:
+            gcs.open()
+        except OSError as exc:
+            raise _BindError(f"cannot open --gcs {gcs_endpoint}: {exc}") from None
+        bound = [str(e) for e in server.bound_endpoints]
+        first = server.bound_endpoints[0]
+        # "bind" as before (udp:HOST:PORT); "connect" is what a companion passes as --sim to reach it
+        progress.event(event="ready", bind=f"udp:{first.host}:{first.port}" if first.kind == "udpin" else bound[0],
+                       connect=f"udpout:{first.host}:{first.port}" if first.kind == "udpin" else None,
+                       endpoints=bound, gcs=str(gcs_endpoint) if gcs_endpoint else None, scenario=spec.name,
+                       sysids=sysids)
+        print(f"simulator: '{spec.name}' on {', '.join(bound)}, waiting for sysids {sysids}; GCS link "
+              f"{gcs_endpoint or 'none'}", file=sys.stderr, flush=True)
         server.wait_for_peers(a.peer_timeout)
         server.wait_for_armed(a.peer_timeout)
         if not tele.await_recorder(tele.keys.sim_event, a.telemetry_wait):
@@ -161,9 +196,14 @@ def main(argv: list[str] | None = None) -> int:
         progress.t_wall0 = time.perf_counter()
         sim_tele.start(core.time_s)
         rejected = server.stats.rejected_setpoints
+
+        def bookkeeping() -> None:  # while the companions compute step k
+            core.observe()
+            gcs.tick(k)  # every few steps: the GCS link's snapshot, STATUSTEXTs, GCS commands
+
         for k in range(n_steps):
             # each frame leaves as soon as it is read; each setpoint is applied as it arrives
-            setpoints = server.exchange(core.iter_frames(k), partial=True, while_waiting=core.observe,
+            setpoints = server.exchange(core.iter_frames(k), partial=True, while_waiting=bookkeeping,
                                         on_setpoint=core.on_setpoint)
             if server.stats.rejected_setpoints != rejected:  # the verdict names the first and counts them
                 for _ in range(server.stats.rejected_setpoints - rejected):
@@ -193,7 +233,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\nsimulator: error: {exc}", file=sys.stderr)
     finally:
         sim_tele.end(core.time_s, status, level="info" if code == 0 else "error")
+        if gcs_link.is_open:
+            gcs.verdict(told, ok=code == 0)  # the one place the run's end goes to the GCS
         server.close(told, error=code != 0 and not completed)
+        gcs_link.close()
         if not result:
             try:
                 result = core.finish()
@@ -205,7 +248,9 @@ def main(argv: list[str] | None = None) -> int:
     sim_time = k * spec.dt_s
     result = {"scenario": spec.name, "scenario_id": info.scenario_id, "status": status, "exit_code": code,
               "steps": k, "sim_time_s": sim_time, "wall_s": wall,
-              "real_time_factor": (sim_time / wall) if wall > 0 else None, "link": vars(server.stats), **result}
+              "real_time_factor": (sim_time / wall) if wall > 0 else None, "link": vars(server.stats),
+              "gcs": {"endpoint": str(gcs_endpoint) if gcs_endpoint else None, **vars(gcs_link.stats),
+                      "error": gcs_link.error, "link": vars(gcs_link.link_stats)}, **result}
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "outcome.json").write_text(json.dumps(result, indent=1))
     progress.event(event="done", status=status, exit_code=code, outcome=str(run_dir / "outcome.json"))

@@ -85,8 +85,8 @@ class Fuzzer:
 
     def _oversize(self, step):
         data = self.rng.choice(self.captured)
-        if self.rng.random() < 0.05:
-            return data + self.rng.randbytes(self.rng.randrange(1500, 65000))
+        if self.rng.random() < 0.05:  # up to the largest UDP payload (65507 bytes)
+            return data + self.rng.randbytes(self.rng.randrange(1500, 65507 - len(data)))
         return data + self.rng.randbytes(self.rng.randrange(1, 400))
 
     def _bad_value(self, step):

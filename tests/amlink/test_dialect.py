@@ -40,6 +40,21 @@ def test_our_ids_collide_with_no_shipped_dialect():
         assert not same_name, f"{path.name} already defines {same_name}"
 
 
+def _commands(path: Path) -> dict[int, str]:
+    return {int(e.get("value")): e.get("name") for enum in ET.parse(path).getroot().iter("enum")
+            if enum.get("name") == "MAV_CMD" for e in enum.iter("entry")}
+
+
+def test_our_commands_collide_with_no_shipped_dialect():
+    ours = _commands(dialect.XML_PATH)
+    assert ours == {24000: "MAV_CMD_AM_ABORT_MISSION"}
+    for path in SHIPPED_XML:
+        theirs = _commands(path)
+        assert not set(ours) & set(theirs), f"{path.name} already uses MAV_CMD {set(ours) & set(theirs)}"
+    mav = dialect.load()
+    assert mav.MAV_CMD_AM_ABORT_MISSION == 24000 and mav.MAV_CMD_NAV_LAND == 21  # merged into common's MAV_CMD
+
+
 def test_our_ids_fit_mavlink2_and_uint16_message_id_fields():
     for msg_id in _messages(dialect.XML_PATH):
         assert 255 < msg_id < 2**24  # MAVLink 2 only, 24-bit id

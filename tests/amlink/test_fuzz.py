@@ -181,7 +181,7 @@ def test_fuzz_companion_while_it_keeps_lockstep(signing, steps, per_step):
         try:
             thread.start()
             server.wait_for_peers(5.0)
-            attacker = own if signing else server._udp.sock
+            attacker = own if signing else server._link.transports[0].sock
             target = client.local_address
             for d in fuzzer.batch(per_step, 0):  # while it arms
                 attacker.sendto(d, target)

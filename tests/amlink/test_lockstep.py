@@ -20,16 +20,7 @@ from amlink.errors import (
 )
 from amlink.lockstep import CompanionClient, SimServer
 from amlink.types import AttitudeTarget, SensorFrame, StepFlag, TorqueSetpoint
-from amlink.udp import parse_endpoint
 from tests.amlink.kit import SCENARIO, answer, key_for, linked, make_frame, server_for, url
-
-
-def test_parse_endpoint_forms():
-    assert parse_endpoint("udp:0.0.0.0:14550", ("udp", "udpin")) == ("0.0.0.0", 14550)
-    assert parse_endpoint("udpin:127.0.0.1:0", ("udp", "udpin")) == ("127.0.0.1", 0)
-    for bad in ("tcp:1.2.3.4:5", "udp:1.2.3.4", "udp:host:port", "udp::5", "udp:h:70000"):
-        with pytest.raises(ValueError):
-            parse_endpoint(bad, ("udp", "udpin"))
 
 
 def test_constructors_do_no_io():

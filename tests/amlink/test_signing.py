@@ -161,7 +161,7 @@ def test_captured_datagram_replayed_is_rejected_by_the_server():
     with linked([2], timeout_s=0.3, signing=True) as (server, clients):
         c = clients[2]
         captured: list[bytes] = []
-        c._udp.shim = lambda addr, data: captured.append(data) or [(addr, data)]
+        c._link.shim = lambda addr, data: captured.append(data) or [(addr, data)]
         c.send_setpoint(answer(make_frame(2, 0), 2))
         assert server.exchange({2: make_frame(2, 0)})[2].step == 0
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as spy:

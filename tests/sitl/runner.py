@@ -48,7 +48,7 @@ class Sim:
         line = self.proc.stdout.readline()
         if not line:
             raise RuntimeError(f"simulator did not start: {self.proc.stderr.read()}")
-        self.bind = json.loads(line)["bind"]
+        self.bind = json.loads(line)["connect"]  # what a companion passes as --sim
 
     def wait(self, timeout_s: float) -> tuple[int, str]:
         out, err = self.proc.communicate(timeout=timeout_s)

@@ -1,0 +1,147 @@
+"""Byte transports of a MAVLink link, one interface for UDP, TCP and serial.
+
+:func:`open_transport` opens what an :class:`amlink.endpoint.Endpoint` names and returns
+an object with
+
+* ``recv(timeout_s) -> [(data, addr)]`` -- waits up to ``timeout_s`` for input and
+  returns what is there: ``data`` is one datagram (UDP) or the whole frames a stream
+  delivered (TCP, serial; cut by :class:`amlink.wire.StreamFramer`), ``addr`` the far
+  end: a ``(host, port)`` tuple for UDP, a :class:`StreamPeer` for a stream connection;
+* ``send(addr, data)`` -- never blocks.  A stream that cannot take the data now keeps it
+  and writes it when it can, whole frames in order; past ``MAX_BACKLOG`` bytes, or with
+  no connection to ``addr``, the data is dropped and counted (``send_drops``);
+* ``peer`` -- where a client sends: the udpout destination, a stream's far end once
+  connected, ``None`` while unknown (udpin until the far end speaks; tcp before it
+  connects); ``peers()``: every far end connected now (a listening TCP endpoint's all);
+* ``stream``; ``fds()``, ``wfds()`` and ``poll(readable, writable)`` for :class:`Mux`;
+  ``close()``.
+
+UDP is :class:`amlink.udp.Udp`, the lockstep's fast path (one ``select``, then drain);
+TCP and serial ports are in :mod:`amlink.stream`.
+"""
+
+from __future__ import annotations
+
+import select
+import socket
+import time
+from collections.abc import Iterable, Sequence
+
+from amlink.endpoint import SERIAL, TCP_IN, TCP_OUT, UDP_IN, UDP_OUT, Endpoint
+from amlink.stream import MAX_BACKLOG, SerialPort, StreamPeer, TcpClient, TcpServer, resolve  # noqa: F401
+from amlink.udp import LinkStats, Shim, Udp
+
+_ROUTES_MAX = 4096  # Mux: addresses remembered (datagrams from many ports cannot grow it without bound)
+
+
+def _udp_socket(host: str, port: int, bind: bool) -> tuple[socket.socket, tuple]:
+    """A UDP socket of the family of ``host``; bound to it (listen) or to a free port (send)."""
+    family, kind, proto, _, addr = resolve(host, port, socket.SOCK_DGRAM)
+    sock = socket.socket(family, kind, proto)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+        sock.bind(addr if bind else (("::", 0) if family == socket.AF_INET6 else ("0.0.0.0", 0)))
+    except OSError:
+        sock.close()
+        raise
+    return sock, addr
+
+
+def open_transport(endpoint: Endpoint, stats: LinkStats, *, shim: Shim | None = None, client: bool = False):
+    """Open ``endpoint``.  OSError if it cannot be (a port in use, no such device).
+
+    ``client``: the companion's end, which talks to one flight controller (a listening
+    TCP endpoint keeps only its newest connection).  A TCP client is not connected yet
+    when this returns; it connects while ``recv`` waits."""
+    kind = endpoint.kind
+    if kind in (UDP_IN, UDP_OUT):
+        sock, addr = _udp_socket(endpoint.host, endpoint.port, bind=kind == UDP_IN)
+        return Udp(sock, stats, shim, peer=addr if kind == UDP_OUT else None)
+    if kind == TCP_IN:
+        family, kind_, proto, _, addr = resolve(endpoint.host, endpoint.port, socket.SOCK_STREAM)
+        sock = socket.socket(family, kind_, proto)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            sock.bind(addr)
+            sock.listen(16)
+            sock.setblocking(False)
+        except OSError:
+            sock.close()
+            raise
+        return TcpServer(sock, stats, newest_only=client)
+    if kind == TCP_OUT:
+        return TcpClient(endpoint, stats)
+    if kind == SERIAL:
+        port = SerialPort(endpoint, stats)
+        port.open()
+        return port
+    raise ValueError(f"unknown endpoint kind {kind!r}")  # pragma: no cover - Endpoint guards it
+
+
+class Mux:
+    """Several transports behind one ``recv``/``send`` (the simulator's ``--bind`` list).
+
+    ``send(addr, ...)`` goes out through the transport that ``addr`` last came in on (or
+    was registered with :meth:`route`).  With one transport, both calls go straight to
+    it: the UDP lockstep path is unchanged."""
+
+    def __init__(self, transports: Sequence) -> None:
+        self.transports = list(transports)
+        self._single = self.transports[0] if len(self.transports) == 1 else None
+        self._owner: dict[object, object] = {}
+
+    def route(self, addr, transport) -> None:
+        self._owner[addr] = transport
+
+    def recv(self, timeout_s: float) -> list[tuple[bytes, object]]:
+        if self._single is not None:
+            return self._single.recv(timeout_s)
+        r: list[int] = []
+        w: list[int] = []
+        wake = None
+        for t in self.transports:
+            r += t.fds()
+            w += t.wfds()
+            wt = getattr(t, "wakeup_s", None)
+            if wt is not None:
+                wake = wt if wake is None else min(wake, wt)
+        timeout = max(0.0, timeout_s)
+        if wake is not None:
+            timeout = min(timeout, max(0.0, wake - time.monotonic()))
+        ready_r, ready_w, _ = select.select(r, w, [], timeout)
+        readable, writable = set(ready_r), set(ready_w)
+        out: list[tuple[bytes, object]] = []
+        for t in self.transports:
+            got = t.poll(readable, writable)
+            if got:
+                owner = self._owner
+                for _, addr in got:  # most recently heard last: a flood of other addresses evicts them first
+                    owner.pop(addr, None)
+                    owner[addr] = t
+                while len(owner) > _ROUTES_MAX:
+                    del owner[next(iter(owner))]
+                out += got
+        return out
+
+    def send(self, addr, data: bytes) -> None:
+        t = self._single or self._owner.get(addr)
+        if t is None:
+            self.transports[0].stats.send_drops += 1
+            return
+        t.send(addr, data)
+
+    @property
+    def stats(self) -> LinkStats:
+        return self.transports[0].stats
+
+    def close(self) -> None:
+        for t in self.transports:
+            t.close()
+
+
+def close_all(transports: Iterable) -> None:
+    for t in transports:
+        try:
+            t.close()
+        except OSError:
+            pass
