@@ -55,7 +55,10 @@ def _both_heard(msgs) -> bool:
 
 
 @pytest.fixture
-def opened():
+def opened(monkeypatch):
+    # a GCS that signs speaks MAVLink 2 from the start (mavutil would start in MAVLink 1, switch
+    # on the first MAVLink 2 frame it hears and lose its signing set-up doing so)
+    monkeypatch.setenv("MAVLINK20", "1")
     links = []
 
     def open_link(endpoint, **kw) -> GcsLink:
@@ -120,6 +123,14 @@ def test_only_commands_signed_with_the_gcs_key_are_executed(opened):
         time.sleep(0.3)
         assert link.commands() == [] and getattr(link.link_stats, counter) == 1
         intruder.close()
+    from pymavlink.dialects.v10 import common as v1  # MAVLink 1 cannot be signed at all
+
+    old = v1.MAVLink(None, srcSystem=254, srcComponent=190)
+    frame = old.command_long_encode(4, 1, mav.MAV_CMD_NAV_LAND, 0, 0, 0, 0, 0, 0, 0, 0).pack(old)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.sendto(frame, ("127.0.0.1", link.local_address[1]))
+    time.sleep(0.3)
+    assert link.commands() == [] and link.link_stats.unsigned == 2
     assert reply_to
 
 
