@@ -136,6 +136,24 @@ class _Waiting:
             ready_r = ready_w = []
         return self.poll(set(ready_r), set(ready_w))
 
+    def _poll_conn(self, readable, writable) -> list[tuple[bytes, object]]:
+        """One connected stream (``self._conn``): flush, read, and after a close retry in
+        RECONNECT_S (the client and the serial port alike)."""
+        conn = self._conn
+        if conn is None:
+            return []
+        if conn.fd in writable:
+            conn.flush()
+        out = []
+        if conn.fd in readable:
+            data = conn.read()
+            if data:
+                self.stats.datagrams_rx += 1
+                out.append((data, conn.peer))
+        if conn.closed:
+            self._conn, self.wakeup_s = None, time.monotonic() + RECONNECT_S
+        return out
+
 
 class TcpServer(_Waiting):
     """A listening TCP socket and its connections (``newest_only``: a client end keeps one)."""
@@ -263,20 +281,7 @@ class TcpClient(_Waiting):
                 self._failed(sock, OSError(err, os.strerror(err)))
             else:
                 self._connecting, self._conn = None, _socket_stream(sock, self.stats)
-        conn = self._conn
-        if conn is None:
-            return []
-        if conn.fd in writable:
-            conn.flush()
-        out = []
-        if conn.fd in readable:
-            data = conn.read()
-            if data:
-                self.stats.datagrams_rx += 1
-                out.append((data, conn.peer))
-        if conn.closed:
-            self._conn, self.wakeup_s = None, time.monotonic() + RECONNECT_S
-        return out
+        return self._poll_conn(readable, writable)
 
     def send(self, addr, data: bytes) -> None:
         if self._conn is None or addr is not self._conn.peer:
@@ -333,20 +338,7 @@ class SerialPort(_Waiting):
         return [self._conn.fd] if self._conn is not None and self._conn.pending else []
 
     def poll(self, readable, writable) -> list[tuple[bytes, object]]:
-        conn = self._conn
-        if conn is None:
-            return []
-        if conn.fd in writable:
-            conn.flush()
-        out = []
-        if conn.fd in readable:
-            data = conn.read()
-            if data:
-                self.stats.datagrams_rx += 1
-                out.append((data, conn.peer))
-        if conn.closed:
-            self._conn, self.wakeup_s = None, time.monotonic() + RECONNECT_S
-        return out
+        return self._poll_conn(readable, writable)
 
     def send(self, addr, data: bytes) -> None:
         if self._conn is None:

@@ -165,11 +165,7 @@ def _fresh_key(spec, run_dir: Path) -> list[str]:
     scenario names its own keys or turns signing off."""
     if not spec.link.signing or spec.link.key_file or any(am.signing_key_hex for am in spec.ams):
         return []
-    path = run_dir / "link.key"
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "w") as fh:
-        fh.write(os.urandom(32).hex() + "\n")
-    return ["--key-file", str(path)]
+    return ["--key-file", str(_secret_file(run_dir / "link.key", os.urandom(32).hex()))]
 
 
 def _gcs_key(spec, run_dir: Path) -> list[str]:
@@ -177,11 +173,15 @@ def _gcs_key(spec, run_dir: Path) -> list[str]:
     'signing key' takes it as is), unless the scenario turns signing off."""
     if not spec.link.signing:
         return []
-    path = run_dir / "gcs.key"
+    return ["--gcs-key-file", str(_secret_file(run_dir / "gcs.key", os.urandom(16).hex()))]
+
+
+def _secret_file(path: Path, text: str) -> Path:
+    """`text` and a newline in a file only its owner can read or write (mode 0600)."""
     fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
     with os.fdopen(fd, "w") as fh:
-        fh.write(os.urandom(16).hex() + "\n")
-    return ["--gcs-key-file", str(path)]
+        fh.write(text + "\n")
+    return path
 
 
 def _free_tcp_port() -> int:
