@@ -19,7 +19,8 @@ from collections.abc import Callable
 import numpy as np
 
 from amcore.config import ConfigError, ScenarioSpec, load_scenario
-from amlink.types import SensorFrame
+from amlink import fastcodec
+from amlink.types import AttitudeSetpoint, SensorFrame, TorqueSetpoint
 from companion.pilot import Pilot
 
 from .core import SitlCore
@@ -33,6 +34,16 @@ def as_on_the_wire(f: SensorFrame) -> SensorFrame:
                        wrench_E=f.wrench_E, flags=f.flags)
 
 
+def setpoint_as_on_the_wire(sp: TorqueSetpoint | AttitudeSetpoint) -> TorqueSetpoint | AttitudeSetpoint:
+    """The setpoint the simulator decodes: AM_TORQUE_SETPOINT is float64 (exact); an attitude
+    setpoint's target goes through SET_ATTITUDE_TARGET (float32, NED/FRD and back)."""
+    if not isinstance(sp, AttitudeSetpoint):
+        return sp
+    (att_id, att), (joint_id, joints) = fastcodec.attitude_setpoint_payloads(sp)
+    read = fastcodec.READERS
+    return fastcodec.attitude_setpoint_from_fields(read[att_id](att, 0, len(att)), read[joint_id](joints, 0, len(joints)))
+
+
 def run(spec: ScenarioSpec, duration_s: float | None = None,
         lost: Callable[[float], set[int]] = lambda _t: set()) -> dict:  # fmt: skip
     """Run a scenario in-process; `lost(t)` -> sysids whose companion is silent at t (tests)."""
@@ -41,12 +52,17 @@ def run(spec: ScenarioSpec, duration_s: float | None = None,
     n = int(round((spec.duration_s if duration_s is None else duration_s) * spec.rate_hz))
     core.connect()
     t0 = time.perf_counter()
+    gone: set[int] = set()
     try:
         for k in range(n):
-            frames = core.frames(k)
-            gone = lost(core.time_s)
-            setpoints = {s: pilots[s].step(as_on_the_wire(f))[0] for s, f in frames.items() if s not in gone}
-            core.actuate(k, setpoints, gone)
+            if core.is_control_step(k):
+                frames = core.frames(k)
+                gone = lost(core.time_s)
+                setpoints = {s: setpoint_as_on_the_wire(pilots[s].step(as_on_the_wire(f))[0])
+                             for s, f in frames.items() if s not in gone}
+                core.actuate(k, setpoints, gone)
+            else:  # as the UDP simulator: who was lost at the last exchange stays lost until the next
+                core.hold(k, gone)
             core.step()
         result = core.finish()
     finally:

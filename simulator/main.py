@@ -3,10 +3,11 @@ emulation, stepped in lockstep with one companion process per AM over MAVLink/UD
 
     simulator [--config configs/scenarios/two_am_comp.toml] [--bind udp:127.0.0.1:14550]
 
-Start-up waits for every [[am]] sysid's HEARTBEAT and ARM; then each step k it sends every
-companion its sensor frame (ODOMETRY, AM_JOINT_STATE, AM_WRENCH, AM_SIM_STEP), waits for
-all N setpoints answering step k (the N exchanges run concurrently), applies them through
-the rotor mixer and joint limits (saturation is counted and logged) and steps physics.
+Start-up waits for every [[am]] sysid's HEARTBEAT and ARM; then each control step k it sends
+every companion its sensor frame (ODOMETRY, AM_JOINT_STATE, AM_WRENCH, AM_SIM_STEP), waits for
+all N setpoints answering step k (the N exchanges run concurrently) and applies them through
+the flight controller (torque mode: the rotor mixer; attitude mode: the emulated autopilot)
+and the joint limits (saturation is counted and logged); it steps physics every step.
 The run folder gets outcome.json (the physical outcome from ground truth, see
 simulator.outcome). Exit codes: 0 run complete, 2 bad configuration, 1 link failure
 (a missing or silent companion, named), 130 interrupted.
@@ -158,10 +159,13 @@ def main(argv: list[str] | None = None) -> int:
         progress.t_wall0 = time.perf_counter()
         sim_tele.start(core.time_s)
         for k in range(n_steps):
-            # each frame leaves as soon as it is read; each setpoint is applied as it arrives
-            setpoints = server.exchange(core.iter_frames(k), partial=True, while_waiting=core.observe,
-                                        on_setpoint=core.on_setpoint)
-            core.actuate(k, setpoints, server.lost_peers)
+            if core.is_control_step(k):
+                # each frame leaves as soon as it is read; each setpoint is applied as it arrives
+                setpoints = server.exchange(core.iter_frames(k), partial=True, while_waiting=core.observe,
+                                            on_setpoint=core.on_setpoint)
+                core.actuate(k, setpoints, server.lost_peers)
+            else:  # between the companions' control steps the flight controllers fly on their own
+                core.hold(k, server.lost_peers)
             core.step()
             progress.update(core.time_s)
         progress.update(core.time_s, force=True)

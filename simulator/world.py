@@ -301,6 +301,15 @@ class World:
         return AmState(p_WB=np.array(p), R_WB=np.array(R).reshape(3, 3), v_B=np.array(v_B), w_B=np.array(w_B),
                        q=np.array(q), qdot=np.array(qdot))
 
+    def attitude_and_rate(self, sysid: int) -> tuple[tuple[float, ...], tuple[float, float, float]]:
+        """(quat_WB (w, x, y, z; w >= 0), w_B [rad/s]) on Python floats: what a flight
+        controller's attitude estimate and gyro give (here exact)."""
+        c, am = self._c(), self._am(sysid)
+        _, (x, y, z, w) = pb.getBasePositionAndOrientation(am.body_id, physicsClientId=c)
+        _, w_W = pb.getBaseVelocity(am.body_id, physicsClientId=c)
+        quat = (w, x, y, z) if w >= 0.0 else (-w, -x, -y, -z)
+        return quat, _mtv(pb.getMatrixFromQuaternion((x, y, z, w)), w_W)
+
     def sensor_values(self, sysid: int) -> list[float]:
         """One sensor frame's values as Python floats: p_WB, quat_WB (w, x, y, z; w >= 0),
         v_B, w_B, q, qdot, wrench_E (the order of `amlink.types.sensor_frame_from_wire`).
