@@ -48,6 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from . import linalg3
 from .control import Command, ControllerMemory, ControllerParams, Reference, StepResult, step
 from .model import AmModel, AmState
 
@@ -99,7 +100,7 @@ def joint_torques_for_body_torque(res: StepResult, tau_b: np.ndarray) -> np.ndar
     if d.damping > 0.0:  # near the arm's singularity: the same damped least squares, in Lambda_y's metric
         A, rhs = d.Lambda_y.dot(A), d.Lambda_y.dot(rhs)
         return c.tau_q_nm - A.T.dot(np.linalg.solve(A.dot(A.T) + d.damping * np.eye(A.shape[0]), rhs))
-    return c.tau_q_nm - np.linalg.solve(A, rhs)
+    return c.tau_q_nm - linalg3.solve(A, rhs)
 
 
 def offboard_step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmState, ref: Reference,

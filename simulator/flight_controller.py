@@ -211,8 +211,12 @@ class Px4Allocation:
     def allocate(self, roll: float, pitch: float, yaw: float, thrust: float) -> AllocationResult:
         """Outputs for normalized (roll, pitch, yaw) torque and thrust in [0, 1] (mixAirmodeDisabled)."""
         r, p, y, t = self._roll, self._pitch, self._yaw, self._thrust
-        hi = self.out_max
+        lo, hi = self.out_min, self.out_max
         out = [roll * a + pitch * b + thrust * c for a, b, c in zip(r, p, t)]
+        full = [x + yaw * a for x, a in zip(out, y)]
+        if min(out) >= lo and max(out) <= hi and min(full) >= lo and max(full) <= hi:
+            # inside the limits with and without yaw: every desaturation gain below is zero
+            return AllocationResult(tuple(full), (roll, pitch, yaw, thrust), (0.0, 0.0, 0.0, 0.0), False)
         out = self._desaturate(out, t, hi, thrust_down_only=True)
         out = self._desaturate(out, r, hi)
         out = self._desaturate(out, p, hi)
