@@ -43,6 +43,8 @@ import numpy as np
 
 from amcore.config import FlightControllerParams, RotorParams
 
+from .mixer import QuadMixer  # the rotor geometry, defined once
+
 _I_ATTENUATION_RAD_S = math.radians(400.0)  # RateControl::updateIntegral's i_factor scale
 _YAW_MARGIN = 0.15  # ControlAllocationSequentialDesaturation: yaw's room above full output
 _WEAK_EFFECTIVENESS = 0.2  # computeDesaturationGain ignores actuators weaker than this
@@ -162,8 +164,6 @@ class Px4Allocation:
     def __init__(self, rotors: RotorParams) -> None:
         if rotors.count != 4 or rotors.layout != "x":
             raise ValueError(f"the PX4 allocation here supports the X quad (count 4); got {rotors.count}, {rotors.layout}")
-        from .mixer import QuadMixer  # the rotor geometry, defined once
-
         m = QuadMixer.from_rotors(rotors)
         # effectiveness of one unit of output per rotor, rows (tau_x, tau_y, tau_z, T): A reordered, times f_max
         B = np.vstack([m.A[1:4], m.A[0:1]]) * rotors.thrust_max_n
