@@ -112,8 +112,8 @@ class FlightControllerParams:
       attitude P loop alone makes it).
 
     The upper-case keys are PX4 parameters under their PX4 names and in PX4's units (rad/s
-    per rad, normalized torque per rad/s, deg/s, Hz); their defaults are PX4's (v1.14), the
-    vehicle file sets this vehicle's. They act in attitude mode only.
+    per rad, normalized torque per rad/s, deg/s, Hz); their defaults are PX4's, the vehicle
+    file sets this vehicle's. They act in attitude mode only.
     """
 
     mode: str = "torque"
@@ -145,7 +145,7 @@ class FlightControllerParams:
     MC_YAWRATE_K: float = 1.0
     MC_YR_INT_LIM: float = 0.30
     IMU_GYRO_CUTOFF: float = 40.0  # low-pass on the gyro the rate loop uses [Hz]; 0: none
-    IMU_DGYRO_CUTOFF: float = 30.0  # low-pass on the angular acceleration of the D term [Hz]; 0: none
+    IMU_DGYRO_CUTOFF: float = 20.0  # low-pass on the angular acceleration of the D term [Hz]; 0: none
 
 
 FC_MODES = ("torque", "attitude")

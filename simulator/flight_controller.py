@@ -1,7 +1,7 @@
 """Emulated stock autopilot for attitude mode: PX4's multicopter attitude and rate loops and its
 control allocation, fed SET_ATTITUDE_TARGET (pure: numpy for set-up, Python floats per step).
 
-What runs, at [flight_controller].rate_hz, each named after the PX4 (v1.14) code it follows:
+What runs, at [flight_controller].rate_hz, each named after the PX4 code it follows:
 
 1. Attitude P loop (mc_att_control, AttitudeControl::update). With q the vehicle's attitude
    and q_d the target: the reduced target q_red turns the thrust axis e_z onto e_z,d by the
