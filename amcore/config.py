@@ -34,6 +34,9 @@ class RotorParams:
     yaw_moment_coeff_m: float = 0.016  # rotor drag torque / rotor thrust [N m / N]
     count: int = 4
     layout: str = "x"
+    # First-order lag of each rotor's thrust behind its command [s]; 0 is an ideal actuator.
+    # The vehicle file gives the physical value and its source (configs/vehicles/am3dof.toml).
+    time_constant_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -153,6 +156,59 @@ class PadSpec:
 
 
 @dataclass(frozen=True)
+class FlightControllerParams:
+    """[flight_controller]: what the companion's setpoints command (docs/flight_controller.md).
+
+    - mode = "torque": the companion sends thrust, body torque and joint torques
+      (AM_TORQUE_SETPOINT) and the flight controller mixes them as they are.
+    - mode = "attitude": the companion sends what a stock autopilot takes in offboard mode,
+      SET_ATTITUDE_TARGET (attitude, body-rate feed-forward, thrust normalized to [0, 1]),
+      and the joint torques in their own message (AM_JOINT_TORQUE_SETPOINT); the emulated
+      autopilot (`simulator.flight_controller`) closes attitude and rate loops at `rate_hz`.
+      body_rate_feedforward: add the target's body rates to the rate setpoint (false: the
+      attitude P loop alone makes it).
+
+    The upper-case keys are PX4 parameters under their PX4 names and in PX4's units (rad/s
+    per rad, normalized torque per rad/s, deg/s, Hz); their defaults are PX4's, the vehicle
+    file sets this vehicle's. They act in attitude mode only.
+    """
+
+    mode: str = "torque"
+    rate_hz: float = 1000.0
+    body_rate_feedforward: bool = True
+    MC_ROLL_P: float = 6.5
+    MC_PITCH_P: float = 6.5
+    MC_YAW_P: float = 2.8
+    MC_YAW_WEIGHT: float = 0.4
+    MC_ROLLRATE_MAX: float = 220.0
+    MC_PITCHRATE_MAX: float = 220.0
+    MC_YAWRATE_MAX: float = 200.0
+    MC_ROLLRATE_P: float = 0.15
+    MC_ROLLRATE_I: float = 0.2
+    MC_ROLLRATE_D: float = 0.003
+    MC_ROLLRATE_FF: float = 0.0
+    MC_ROLLRATE_K: float = 1.0
+    MC_RR_INT_LIM: float = 0.30
+    MC_PITCHRATE_P: float = 0.15
+    MC_PITCHRATE_I: float = 0.2
+    MC_PITCHRATE_D: float = 0.003
+    MC_PITCHRATE_FF: float = 0.0
+    MC_PITCHRATE_K: float = 1.0
+    MC_PR_INT_LIM: float = 0.30
+    MC_YAWRATE_P: float = 0.2
+    MC_YAWRATE_I: float = 0.1
+    MC_YAWRATE_D: float = 0.0
+    MC_YAWRATE_FF: float = 0.0
+    MC_YAWRATE_K: float = 1.0
+    MC_YR_INT_LIM: float = 0.30
+    IMU_GYRO_CUTOFF: float = 40.0  # low-pass on the gyro the rate loop uses [Hz]; 0: none
+    IMU_DGYRO_CUTOFF: float = 20.0  # low-pass on the angular acceleration of the D term [Hz]; 0: none
+
+
+FC_MODES = ("torque", "attitude")
+
+
+@dataclass(frozen=True)
 class VehicleParams:
     name: str
     urdf: Path
@@ -168,6 +224,7 @@ class VehicleParams:
     safety: Safety = Safety()
     options: ControllerOptions = ControllerOptions()
     pad: PadSpec = PadSpec()
+    flight_controller: FlightControllerParams = FlightControllerParams()
     baseline: BaselineGains | None = None  # needed when options.controller = "baseline"
     gravity_mps2: float = 9.81
 
@@ -344,7 +401,10 @@ class ScenarioSpec:
     mission: MissionSpec
     ams: tuple[AmSpec, ...]
     duration_s: float = 20.0
-    rate_hz: float = 1000.0
+    rate_hz: float = 1000.0  # physics
+    # the companions' rate; the lockstep exchanges every rate_hz / control_rate_hz physics
+    # steps (a whole number). None: every physics step
+    control_rate_hz: float | None = None
     seed: int = 0
     link: LinkSpec = LinkSpec()
     sensors: SensorSpec = SensorSpec()
@@ -354,6 +414,15 @@ class ScenarioSpec:
     @property
     def dt_s(self) -> float:
         return 1.0 / self.rate_hz
+
+    @property
+    def control_every(self) -> int:
+        """Physics steps per control step (1 when the companions run at the physics rate)."""
+        return 1 if self.control_rate_hz is None else round(self.rate_hz / self.control_rate_hz)
+
+    @property
+    def control_dt_s(self) -> float:
+        return self.control_every * self.dt_s
 
     def am(self, sysid: int) -> AmSpec:
         for a in self.ams:
@@ -450,14 +519,15 @@ def _is_key_hex(text: str) -> bool:
 def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     where = str(path)
     kw = _build(VehicleParams, data.get("vehicle", {}), f"{where}: [vehicle]",
-                skip=("rotors", "task", "gains", "safety", "options", "pad", "baseline"))
-    extra = set(data) - {"vehicle", "rotors", "task", "gains", "safety", "options", "pad", "baseline"}
+                skip=("rotors", "task", "gains", "safety", "options", "pad", "baseline", "flight_controller"))
+    extra = set(data) - {"vehicle", "rotors", "task", "gains", "safety", "options", "pad", "baseline",
+                         "flight_controller"}
     if extra:
         raise ConfigError(f"{where}: unknown table [{sorted(extra)[0]}]")
     sub = {}
     for name, cls in (("rotors", RotorParams), ("task", TaskSpec), ("gains", Gains),
                       ("safety", Safety), ("options", ControllerOptions), ("pad", PadSpec),
-                      ("baseline", BaselineGains)):
+                      ("baseline", BaselineGains), ("flight_controller", FlightControllerParams)):
         if name in data:
             sub[name] = cls(**_build(cls, data[name], f"{where}: [{name}]"))
         elif name in ("rotors", "task", "gains"):
@@ -505,10 +575,16 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     if v.options.controller not in CONTROLLERS:
         raise ConfigError(f"{where}: [options].controller: unknown controller '{v.options.controller}' "
                           f"(known: {', '.join(CONTROLLERS)})")
+    if v.options.controller == "baseline" and v.flight_controller.mode == "attitude":
+        raise ConfigError(f"{where}: [options].controller = 'baseline' flies in [flight_controller].mode = 'torque' "
+                          f"only (its attitude loop is its own torque law)")
     if v.options.controller == "baseline" and v.baseline is None:
         raise ConfigError(f"{where}: [options].controller = 'baseline' needs a [baseline] table")
     if v.baseline is not None:
         _check_baseline(v.baseline, n, f"{where}: [baseline]")
+    if not v.rotors.time_constant_s >= 0.0:
+        raise ConfigError(f"{where}: [rotors].time_constant_s: must be >= 0, got {v.rotors.time_constant_s!r}")
+    _check_flight_controller(v.flight_controller, f"{where}: [flight_controller]")
     return v
 
 
@@ -528,6 +604,19 @@ def _check_baseline(b: BaselineGains, n: int, where: str) -> None:
         raise ConfigError(f"{where}.ik_damping: must be >= 0, got {b.ik_damping!r}")
 
 
+def _check_flight_controller(fc: FlightControllerParams, where: str) -> None:
+    if fc.mode not in FC_MODES:
+        raise ConfigError(f"{where}.mode: expected one of {', '.join(FC_MODES)}, got '{fc.mode}'")
+    _positive(f"{where}.rate_hz", fc.rate_hz)
+    for f in dataclasses.fields(fc):
+        if f.name.isupper() and not getattr(fc, f.name) >= 0.0:
+            raise ConfigError(f"{where}.{f.name}: must be >= 0, got {getattr(fc, f.name)!r}")
+    for key in ("MC_ROLL_P", "MC_PITCH_P", "MC_YAW_P", "MC_ROLLRATE_MAX", "MC_PITCHRATE_MAX", "MC_YAWRATE_MAX"):
+        _positive(f"{where}.{key}", getattr(fc, key))
+    if not fc.MC_YAW_WEIGHT <= 1.0:
+        raise ConfigError(f"{where}.MC_YAW_WEIGHT: must be in [0, 1], got {fc.MC_YAW_WEIGHT!r}")
+
+
 def load_vehicle(path: str | Path) -> VehicleParams:
     path = Path(path).resolve()
     return vehicle_from_dict(_read_toml(path), path)
@@ -537,14 +626,16 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
     """Load a scenario TOML; its [scenario].vehicle names a vehicle TOML relative to it.
 
     A scenario may override controller options with an [options] table (e.g. to turn
-    force compensation off), safety settings with [safety] and the pad with [pad].
+    force compensation off), safety settings with [safety], the pad with [pad], the flight
+    controller with [flight_controller] (e.g. attitude mode) and rotor settings with [rotors]
+    (e.g. the rotors' time constant); each is merged key by key onto the vehicle's table.
     """
     path = Path(path).resolve()
     return scenario_from_dict(_read_toml(path), path)
 
 
-SCENARIO_TABLES = ("scenario", "object", "mission", "am", "options", "safety", "pad", "link", "sensors",
-                   "success", "randomize")
+SCENARIO_TABLES = ("scenario", "object", "mission", "am", "options", "safety", "pad", "flight_controller",
+                   "rotors", "link", "sensors", "success", "randomize")
 
 
 def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
@@ -561,12 +652,18 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
         raise ConfigError(f"{where}: [scenario]: missing key 'vehicle'")
     vpath = (path.parent / sc.pop("vehicle")).resolve()
     vdata = _read_toml(vpath)
-    for tbl in ("options", "safety", "pad"):
+    for tbl in _VEHICLE_OVERRIDES:
         if tbl in data:
             merged = dict(vdata.get(tbl, {}))
             merged.update(data[tbl])
             vdata[tbl] = merged
-    vehicle = vehicle_from_dict(vdata, vpath)
+    try:
+        vehicle = vehicle_from_dict(vdata, vpath)
+    except ConfigError as exc:  # a value the scenario set: name the scenario too
+        named = [t for t in _VEHICLE_OVERRIDES if t in data and f"[{t}]" in str(exc)]
+        if named:
+            raise ConfigError(f"{where}: [{named[0]}] (merged onto the vehicle's): {exc}") from None
+        raise
     kw = _build(ScenarioSpec, sc, f"{where}: [scenario]",
                 skip=("vehicle", "object", "mission", "ams", "path", "link", "sensors", "success"))
     if "object" not in data:
@@ -642,6 +739,12 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
                         sensors=sensors, success=success, **kw)
     _positive(f"{where}: [scenario].rate_hz", spec.rate_hz)
     _positive(f"{where}: [scenario].duration_s", spec.duration_s)
+    if spec.control_rate_hz is not None:
+        c = _check_type(spec.control_rate_hz, float, f"{where}: [scenario].control_rate_hz")
+        _positive(f"{where}: [scenario].control_rate_hz", c)
+        spec = dataclasses.replace(spec, control_rate_hz=c)
+        _check_divides(spec.rate_hz, c, f"{where}: [scenario].control_rate_hz")
+    _check_divides(spec.rate_hz, vehicle.flight_controller.rate_hz, f"{where}: [flight_controller].rate_hz")
     return spec
 
 
@@ -650,6 +753,16 @@ def _table(data: dict, name: str, where: str) -> dict:
     if not isinstance(t, dict):
         raise ConfigError(f"{where}: [{name}] must be a table")
     return t
+def _check_divides(physics_hz: float, rate_hz: float, where: str) -> None:
+    """A rate that runs every whole number of physics steps, and not faster than physics."""
+    ratio = physics_hz / rate_hz
+    if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-9:
+        raise ConfigError(f"{where}: {rate_hz:g} Hz must divide the physics rate {physics_hz:g} Hz "
+                          f"(a whole number of physics steps per period)")
+
+
+# vehicle tables a scenario may override key by key (see load_scenario)
+_VEHICLE_OVERRIDES = ("options", "safety", "pad", "flight_controller", "rotors")
 
 
 def _link_spec(table: dict, where: str) -> LinkSpec:

@@ -40,8 +40,8 @@ from . import vec3 as v3
 from .attitude import desired_attitude_cols
 from .config import VehicleParams
 from .filters import FilterState, LowPass2, lowpass_update_floats
-from .model import AmModel, AmState, decoupled_terms
-from .task import TaskFrame, task_terms
+from .model import AmModel, AmState, DecoupledTerms, decoupled_terms
+from .task import TaskFrame, TaskTerms, task_terms
 
 E3 = np.array([0.0, 0.0, 1.0])
 _ZERO3 = np.zeros(3)
@@ -175,6 +175,9 @@ class Diagnostics:
     Lambda_y: np.ndarray
     Lambda_y_dot: np.ndarray | None = None
     wrench_W_filtered: np.ndarray | None = None  # filtered [f; m] of F_e in W axes, moment about {e} [N, N m]
+    # the model and task terms this step evaluated, for laws built on it (amcore.offboard)
+    decoupled: DecoupledTerms | None = None
+    task: TaskTerms | None = None
 
 
 @dataclass
@@ -377,5 +380,6 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
         sigma_min, damping, P is not None,  # sigma_min_J3, damping, com_err_saturated
         any(map(float.__ne__, y_err_s, y_err_l)),  # y_err_saturated: the clip changed something
         u, tau, Lambda_y, Lambda_y_dot, v[30:36],  # u, tau, Lambda_y, Lambda_y_dot, wrench_W_filtered
+        tm, tk,  # decoupled, task
     )
     return StepResult(cmd, diag, ControllerMemory(t_s, FilterState(v[42:48], v[48:54])))

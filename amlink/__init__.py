@@ -3,7 +3,7 @@
 * :mod:`amlink.dialect` -- the amstack MAVLink 2 dialect (XML in ``amlink/dialect/``),
   generated with pymavlink's mavgen into a cache on first use.
 * :mod:`amlink.types` -- value types (numpy only): SensorFrame, TorqueSetpoint,
-  AttitudeTarget, ScenarioInfo.
+  AttitudeTarget, AttitudeSetpoint, ScenarioInfo.
 * :mod:`amlink.codec` -- value types <-> MAVLink frames via pymavlink message objects
   (the reference; tools, tests and rare messages).
 * :mod:`amlink.fastcodec` -- the same for the lockstep batches with precompiled
@@ -28,6 +28,7 @@ Importing this package does no I/O; the dialect is generated when
 
 from amlink.types import (
     MAX_JOINTS,
+    AttitudeSetpoint,
     AttitudeTarget,
     ScenarioInfo,
     SensorFrame,
@@ -38,6 +39,7 @@ from amlink.types import (
 
 __all__ = [
     "MAX_JOINTS",
+    "AttitudeSetpoint",
     "AttitudeTarget",
     "ScenarioInfo",
     "SensorFrame",

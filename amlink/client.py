@@ -11,7 +11,7 @@ from amlink.endpoint import UDP_IN, UDP_OUT, Endpoint, parse_endpoint
 from amlink.errors import CommandRejectedError, SimulatorTimeoutError, SimulatorUnreachableError
 from amlink.limits import DEFAULT_SENSOR_LIMITS, SensorLimits
 from amlink.transport import open_transport
-from amlink.types import AttitudeTarget, ScenarioInfo, SensorFrame, TorqueSetpoint
+from amlink.types import AttitudeSetpoint, AttitudeTarget, ScenarioInfo, SensorFrame, TorqueSetpoint
 from amlink.udp import (
     COMMAND_RETRY_S,
     COMPANION_COMPID,
@@ -208,10 +208,14 @@ class CompanionClient:
             polled = True
         return None
 
-    def send_setpoint(self, setpoint: TorqueSetpoint, attitude: AttitudeTarget | None = None) -> None:
-        """Send the answer to step ``setpoint.step`` (one datagram); kept for re-sending."""
+    def send_setpoint(self, setpoint: TorqueSetpoint | AttitudeSetpoint, attitude: AttitudeTarget | None = None) -> None:
+        """Send the answer to step ``setpoint.step`` (one datagram); kept for re-sending.
+        An :class:`AttitudeSetpoint` carries its own target (``attitude`` is not used)."""
         time_boot_ms = round(self._last_time_s * 1e3)
-        payloads = fastcodec.setpoint_payloads(setpoint, attitude, time_boot_ms, SIM_SYSID, SIM_COMPID)
+        if isinstance(setpoint, AttitudeSetpoint):
+            payloads = fastcodec.attitude_setpoint_payloads(setpoint, time_boot_ms, SIM_SYSID, SIM_COMPID)
+        else:
+            payloads = fastcodec.setpoint_payloads(setpoint, attitude, time_boot_ms, SIM_SYSID, SIM_COMPID)
         self._send_payloads(payloads)
         self._answer = (setpoint.step, payloads)
 

@@ -5,7 +5,8 @@ Batches (each one UDP datagram, frames concatenated, the marker frame LAST):
 * sensor batch, simulator -> companion:
   ``ODOMETRY, AM_JOINT_STATE, AM_WRENCH, AM_SIM_STEP``
 * setpoint batch, companion -> simulator:
-  ``[SET_ATTITUDE_TARGET,] AM_TORQUE_SETPOINT``
+  ``[SET_ATTITUDE_TARGET,] AM_TORQUE_SETPOINT`` (torque mode), or
+  ``SET_ATTITUDE_TARGET, AM_JOINT_TORQUE_SETPOINT`` (attitude mode: :class:`AttitudeSetpoint`)
 
 ODOMETRY conventions (documented choice): ``frame_id = MAV_FRAME_LOCAL_ENU`` (4),
 the only earth-fixed z-up frame in common.xml with fixed axes (the simulator's
@@ -36,6 +37,7 @@ from dataclasses import dataclass
 from amlink import wire
 from amlink.types import (
     MAX_JOINTS,
+    AttitudeSetpoint,
     AttitudeTarget,
     ScenarioInfo,
     SensorFrame,
@@ -161,6 +163,26 @@ def setpoint_messages(
     return out
 
 
+def attitude_setpoint_messages(
+    sp: AttitudeSetpoint, time_boot_ms: int = 0, target_system: int = 1, target_component: int = 1,
+) -> list:  # fmt: skip
+    """The messages of an attitude-mode setpoint batch: SET_ATTITUDE_TARGET, then
+    AM_JOINT_TORQUE_SETPOINT (last: it carries the step)."""
+    att = sp.attitude
+    quat, r, tau_q = att.quat_wxyz.tolist(), att.rates_rad_s.tolist(), sp.tau_q_nm.tolist()
+    if not all_finite([*quat, *r, att.thrust_normalized]):
+        raise EncodeError(f"non-finite value in AttitudeTarget step {att.step}")
+    if not all_finite(tau_q):
+        raise EncodeError(f"non-finite value in AttitudeSetpoint step {sp.step}")
+    return [
+        mav.MAVLink_set_attitude_target_message(
+            time_boot_ms & 0xFFFFFFFF, target_system, target_component, 0,
+            list(enu_flu_to_ned_frd(quat)), r[0], -r[1], -r[2], att.thrust_normalized,
+        ),  # FLU -> FRD body rates
+        mav.MAVLink_am_joint_torque_setpoint_message(sp.step, len(tau_q), _pad(tau_q), int(sp.flags)),
+    ]  # fmt: skip
+
+
 def scenario_message(info: ScenarioInfo) -> object:
     return mav.MAVLink_am_scenario_message(
         info.scenario_id, info.n_am, info.name.encode("ascii"), info.seed, info.rate_hz
@@ -228,6 +250,16 @@ def setpoint_from_message(msg) -> TorqueSetpoint:
     return TorqueSetpoint(msg.step, msg.thrust_n, tau_B, tau_q, msg.flags)
 
 
+def attitude_setpoint_from_messages(att_msg, joint_msg) -> AttitudeSetpoint:
+    """An attitude-mode setpoint from its SET_ATTITUDE_TARGET and AM_JOINT_TORQUE_SETPOINT."""
+    n = joint_msg.n_joints
+    if n > MAX_JOINTS:
+        raise CodecError(f"AM_JOINT_TORQUE_SETPOINT.n_joints={n} > {MAX_JOINTS}")
+    tau_q = joint_msg.joint_torque_nm[:n]
+    _check_finite("AM_JOINT_TORQUE_SETPOINT", "joint_torque_nm", tau_q)
+    return AttitudeSetpoint(joint_msg.step, attitude_from_message(att_msg, joint_msg.step), tau_q, joint_msg.flags)
+
+
 def attitude_from_message(msg, step: int) -> AttitudeTarget:
     vals = (*msg.q, msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate, msg.thrust)
     _check_finite("SET_ATTITUDE_TARGET", "q/rates/thrust", vals)
@@ -283,7 +315,8 @@ class SensorFrameAssembler:
 
 
 class SetpointAssembler:
-    """Pairs an optional SET_ATTITUDE_TARGET with the AM_TORQUE_SETPOINT that follows it."""
+    """Pairs a SET_ATTITUDE_TARGET with the setpoint message that follows it: optional before
+    AM_TORQUE_SETPOINT, required before AM_JOINT_TORQUE_SETPOINT (CodecError without)."""
 
     def __init__(self) -> None:
         self._attitude = None
@@ -291,7 +324,7 @@ class SetpointAssembler:
     def reset(self) -> None:
         self._attitude = None
 
-    def push(self, msg) -> tuple[TorqueSetpoint, AttitudeTarget | None] | None:
+    def push(self, msg) -> tuple[TorqueSetpoint | AttitudeSetpoint, AttitudeTarget | None] | None:
         mid = msg.get_msgId()  # not msg.id: STATUSTEXT has a field named "id"
         if mid == mav.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET:
             self._attitude = msg
@@ -299,4 +332,10 @@ class SetpointAssembler:
             att_msg, self._attitude = self._attitude, None
             sp = setpoint_from_message(msg)
             return sp, (attitude_from_message(att_msg, sp.step) if att_msg is not None else None)
+        elif mid == mav.MAVLINK_MSG_ID_AM_JOINT_TORQUE_SETPOINT:
+            att_msg, self._attitude = self._attitude, None
+            if att_msg is None:
+                raise BatchMismatchError(f"step {msg.step}: AM_JOINT_TORQUE_SETPOINT without SET_ATTITUDE_TARGET")
+            asp = attitude_setpoint_from_messages(att_msg, msg)
+            return asp, asp.attitude
         return None

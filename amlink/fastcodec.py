@@ -46,10 +46,12 @@ from amlink.codec import (
 from amlink.layout import MessageLayout
 from amlink.types import (
     MAX_JOINTS,
+    AttitudeSetpoint,
     AttitudeTarget,
     SensorFrame,
     StepFlag,
     TorqueSetpoint,
+    attitude_setpoint_from_wire,
     attitude_target_from_wire,
     sensor_frame_from_wire,
     torque_setpoint_from_wire,
@@ -61,8 +63,10 @@ WRENCH = MessageLayout.of(mav.MAVLink_am_wrench_message)
 SIM_STEP = MessageLayout.of(mav.MAVLink_am_sim_step_message)
 TORQUE_SETPOINT = MessageLayout.of(mav.MAVLink_am_torque_setpoint_message)
 ATTITUDE_TARGET = MessageLayout.of(mav.MAVLink_set_attitude_target_message)
+JOINT_TORQUE_SETPOINT = MessageLayout.of(mav.MAVLink_am_joint_torque_setpoint_message)
 _ODOMETRY_ID, _JOINT_STATE_ID, _WRENCH_ID = ODOMETRY.msgid, JOINT_STATE.msgid, WRENCH.msgid
 _SIM_STEP_ID, _TORQUE_SETPOINT_ID, _ATTITUDE_TARGET_ID = SIM_STEP.msgid, TORQUE_SETPOINT.msgid, ATTITUDE_TARGET.msgid
+_JOINT_TORQUE_SETPOINT_ID = JOINT_TORQUE_SETPOINT.msgid
 
 _BASE = ("x", "y", "z", "q", "vx", "vy", "vz", "rollspeed", "pitchspeed", "yawspeed")  # 13 floats
 _UNKNOWN_COV = [float("nan")] + [0.0] * 20  # as codec: NaN first element = unknown
@@ -78,6 +82,7 @@ _pack_wrench = WRENCH.packer("step", "force_n", "torque_nm").pack
 _pack_step = SIM_STEP.packer("step", "time_usec", "scenario_id", "flags").pack
 _pack_setpoint = TORQUE_SETPOINT.packer("step", "thrust_n", "body_torque_nm", "joint_torque_nm", "n_joints",
                                         "flags").pack  # fmt: skip
+_pack_joint_setpoint = JOINT_TORQUE_SETPOINT.packer("step", "joint_torque_nm", "n_joints", "flags").pack
 _pack_attitude = ATTITUDE_TARGET.packer("time_boot_ms", "q", "body_roll_rate", "body_pitch_rate", "body_yaw_rate",
                                         "thrust", "target_system", "target_component", type_mask=0).pack  # fmt: skip
 
@@ -93,6 +98,7 @@ READERS = {
     ATTITUDE_TARGET.msgid: ATTITUDE_TARGET.reader(
         "q", "body_roll_rate", "body_pitch_rate", "body_yaw_rate", "thrust"
     ).read,
+    JOINT_TORQUE_SETPOINT.msgid: JOINT_TORQUE_SETPOINT.reader("step", "joint_torque_nm", "n_joints", "flags").read,
 }
 """``msgid -> read`` for :class:`amlink.wire.Decoder`; body tuples as documented on each assembler."""
 
@@ -151,6 +157,26 @@ def setpoint_payloads(
     except (struct.error, OverflowError) as exc:
         raise EncodeError(f"cannot pack SET_ATTITUDE_TARGET: {exc}") from exc
     return (_ATTITUDE_TARGET_ID, att), setpoint
+
+
+def attitude_setpoint_payloads(
+    sp: AttitudeSetpoint, time_boot_ms: int = 0, target_system: int = 1, target_component: int = 1,
+) -> tuple[tuple[int, bytes], ...]:  # fmt: skip
+    """``(msgid, payload)`` of an attitude-mode batch (as :func:`amlink.codec.attitude_setpoint_messages`)."""
+    att = sp.attitude
+    quat, r, tau_q = att.quat_wxyz.tolist(), att.rates_rad_s.tolist(), sp.tau_q_nm.tolist()
+    if not all_finite([*quat, *r, att.thrust_normalized]):
+        raise EncodeError(f"non-finite value in AttitudeTarget step {att.step}")
+    if not all_finite(tau_q):
+        raise EncodeError(f"non-finite value in AttitudeSetpoint step {sp.step}")
+    try:  # FLU -> FRD body rates: (p, q, r) -> (p, -q, -r)
+        payload = _pack_attitude(time_boot_ms & 0xFFFFFFFF, *enu_flu_to_ned_frd(quat), r[0], -r[1], -r[2],
+                                 att.thrust_normalized, target_system, target_component)  # fmt: skip
+    except (struct.error, OverflowError) as exc:
+        raise EncodeError(f"cannot pack SET_ATTITUDE_TARGET: {exc}") from exc
+    n = len(tau_q)
+    return ((_ATTITUDE_TARGET_ID, payload),
+            (_JOINT_TORQUE_SETPOINT_ID, _pack_joint_setpoint(sp.step, *tau_q, *_ZEROS[n:], n, int(sp.flags))))
 
 
 # -- decoders (bodies are READERS tuples) --------------------------------------------------
@@ -217,6 +243,18 @@ def attitude_from_fields(fields: tuple, step: int) -> AttitudeTarget:
                                             fields[7]))  # fmt: skip
 
 
+def attitude_setpoint_from_fields(att_fields: tuple, joint_fields: tuple) -> AttitudeSetpoint:
+    """As :func:`amlink.codec.attitude_setpoint_from_messages`; ``joint_fields`` = (step, tau_q[8], n, flags)."""
+    n = joint_fields[9]
+    if n > MAX_JOINTS:
+        raise CodecError(f"AM_JOINT_TORQUE_SETPOINT.n_joints={n} > {MAX_JOINTS}")
+    if not all_finite(joint_fields[1 : 1 + n]):
+        raise NonFiniteValueError("AM_JOINT_TORQUE_SETPOINT", "joint_torque_nm")
+    step = joint_fields[0]
+    return attitude_setpoint_from_wire(step, attitude_from_fields(att_fields, step), joint_fields[1:9], n,
+                                       joint_fields[10])  # fmt: skip
+
+
 class SensorFrameAssembler:
     """As :class:`amlink.codec.SensorFrameAssembler`, fed ``(msgid, body)`` of reader records."""
 
@@ -257,12 +295,18 @@ class SetpointAssembler:
     def reset(self) -> None:
         self._attitude = None
 
-    def push(self, msgid: int, body) -> tuple[TorqueSetpoint, AttitudeTarget | None] | None:
+    def push(self, msgid: int, body) -> tuple[TorqueSetpoint | AttitudeSetpoint, AttitudeTarget | None] | None:
         if msgid == _ATTITUDE_TARGET_ID:
             self._attitude = body
         elif msgid == _TORQUE_SETPOINT_ID:
             att, self._attitude = self._attitude, None
             sp = setpoint_from_fields(body)
             return sp, (attitude_from_fields(att, sp.step) if att is not None else None)
+        elif msgid == _JOINT_TORQUE_SETPOINT_ID:
+            att, self._attitude = self._attitude, None
+            if att is None:
+                raise BatchMismatchError(f"step {body[0]}: AM_JOINT_TORQUE_SETPOINT without SET_ATTITUDE_TARGET")
+            asp = attitude_setpoint_from_fields(att, body)
+            return asp, asp.attitude
         return None
 

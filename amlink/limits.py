@@ -20,27 +20,35 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from amlink.types import MAX_JOINTS, SensorFrame, TorqueSetpoint
+from amlink.types import MAX_JOINTS, AttitudeSetpoint, SensorFrame, TorqueSetpoint
 
 
 @dataclass(frozen=True)
 class SetpointLimits:
-    """Bounds a :class:`TorqueSetpoint` must satisfy to be applied.
+    """Bounds a :class:`TorqueSetpoint` or an :class:`AttitudeSetpoint` must satisfy to be applied.
 
     Attributes:
         thrust_max_n: bound on |thrust_n| [N].
         body_torque_max_nm: bound on each |tau_B_nm| component [N m].
         joint_torque_max_nm: bound on each |tau_q_nm| entry [N m].
         n_joints: required joint count; ``None`` accepts any count <= 8.
+        body_rate_max_rad_s: bound on each |rates_rad_s| component of an attitude target [rad/s].
+        quat_norm_tol: allowed |norm(quat_wxyz) - 1| of an attitude target (float32 on the wire).
+
+    An attitude target's normalized thrust must lie in [-1, 1] (SET_ATTITUDE_TARGET's range;
+    the flight controller uses [0, 1]).
     """
 
     thrust_max_n: float = 1.0e4
     body_torque_max_nm: float = 1.0e4
     joint_torque_max_nm: float = 1.0e4
     n_joints: int | None = None
+    body_rate_max_rad_s: float = 1.0e3
+    quat_norm_tol: float = 1.0e-2
 
     def __post_init__(self) -> None:
-        for name in ("thrust_max_n", "body_torque_max_nm", "joint_torque_max_nm"):
+        for name in ("thrust_max_n", "body_torque_max_nm", "joint_torque_max_nm", "body_rate_max_rad_s",
+                     "quat_norm_tol"):
             v = getattr(self, name)
             if not (v > 0.0 and math.isfinite(v)):
                 raise ValueError(f"SetpointLimits.{name} must be positive and finite, got {v}")
@@ -54,14 +62,30 @@ class SetpointLimits:
         tau_b = thrust_max_n if body_torque_max_nm is None else body_torque_max_nm
         return cls(margin * thrust_max_n, margin * tau_b, margin * joint_torque_max_nm, n_joints)
 
-    def violation(self, sp: TorqueSetpoint) -> str | None:
+    def violation(self, sp: TorqueSetpoint | AttitudeSetpoint) -> str | None:
         """Why ``sp`` is implausible, or ``None`` if it is within bounds (finite by construction)."""
         if self.n_joints is not None and sp.n_joints != self.n_joints:
             return f"{sp.n_joints} joint torques, expected {self.n_joints}"
+        if isinstance(sp, AttitudeSetpoint):
+            return self._attitude_violation(sp)
         if not abs(sp.thrust_n) <= self.thrust_max_n:
             return f"|thrust_n| = {abs(sp.thrust_n):.3g} > {self.thrust_max_n:.3g}"
         if not _max_abs(sp.tau_B_nm) <= self.body_torque_max_nm:
             return f"|tau_B_nm| > {self.body_torque_max_nm:.3g}"
+        if not _max_abs(sp.tau_q_nm) <= self.joint_torque_max_nm:
+            return f"|tau_q_nm| > {self.joint_torque_max_nm:.3g}"
+        return None
+
+    def _attitude_violation(self, sp: AttitudeSetpoint) -> str | None:
+        att = sp.attitude
+        if not abs(att.thrust_normalized) <= 1.0:
+            return f"|thrust_normalized| = {abs(att.thrust_normalized):.3g} > 1"
+        w, x, y, z = att.quat_wxyz.tolist()
+        norm = math.sqrt(w * w + x * x + y * y + z * z)
+        if not abs(norm - 1.0) <= self.quat_norm_tol:
+            return f"attitude quaternion norm {norm:.6g} is not 1"
+        if not _max_abs(att.rates_rad_s) <= self.body_rate_max_rad_s:
+            return f"|rates_rad_s| > {self.body_rate_max_rad_s:.3g}"
         if not _max_abs(sp.tau_q_nm) <= self.joint_torque_max_nm:
             return f"|tau_q_nm| > {self.joint_torque_max_nm:.3g}"
         return None

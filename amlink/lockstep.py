@@ -11,10 +11,12 @@ streams, :mod:`amlink.transport`; the simulator may serve several endpoints at o
    Once connected, a companion says HEARTBEAT once a second (each answered with
    AM_SCENARIO, which it ignores); the simulator passes them on to its GCS link.
 2. Optional arming: COMMAND_LONG(MAV_CMD_COMPONENT_ARM_DISARM) -> COMMAND_ACK.
-3. Each step the simulator sends every companion ONE datagram
+3. Each control step the simulator sends every companion ONE datagram
    ``ODOMETRY, AM_JOINT_STATE, AM_WRENCH, AM_SIM_STEP`` (all N first), then waits
    until every companion has answered with ``[SET_ATTITUDE_TARGET,]
-   AM_TORQUE_SETPOINT`` for that same step.  Loss: the simulator re-sends an
+   AM_TORQUE_SETPOINT`` (torque mode) or ``SET_ATTITUDE_TARGET,
+   AM_JOINT_TORQUE_SETPOINT`` (attitude mode) for that same step.  A control
+   step is every physics step, or every rate_hz / control_rate_hz of them.  Loss: the simulator re-sends an
    unanswered batch after ``retry_s`` (backing off); a companion answers a
    batch it already answered with its cached setpoint, so the controller sees
    each step once and the setpoint sequence does not depend on loss.

@@ -14,7 +14,7 @@ from amlink.limits import DEFAULT_SETPOINT_LIMITS, SetpointLimits
 from amlink.signing import check_key
 from amlink.stream import StreamPeer
 from amlink.transport import Mux, close_all, open_transport
-from amlink.types import AttitudeTarget, ScenarioInfo, SensorFrame, TorqueSetpoint
+from amlink.types import AttitudeSetpoint, AttitudeTarget, ScenarioInfo, SensorFrame, TorqueSetpoint
 from amlink.udp import (
     HEARTBEAT_PERIOD_S,
     REJOIN_QUIET_S,
@@ -31,7 +31,8 @@ _HEARTBEAT = mav.MAVLINK_MSG_ID_HEARTBEAT
 _COMMAND_LONG = mav.MAVLINK_MSG_ID_COMMAND_LONG
 _ATTITUDE = mav.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET
 _SETPOINT = mav.MAVLINK_MSG_ID_AM_TORQUE_SETPOINT
-_ACCEPT = (_HEARTBEAT, _COMMAND_LONG, _ATTITUDE, _SETPOINT)  # all else: counted as ignored, not unpacked
+_JOINT_SETPOINT = mav.MAVLINK_MSG_ID_AM_JOINT_TORQUE_SETPOINT  # attitude mode: with SET_ATTITUDE_TARGET
+_ACCEPT = (_HEARTBEAT, _COMMAND_LONG, _ATTITUDE, _SETPOINT, _JOINT_SETPOINT)  # all else: counted as ignored
 _MAX_BACKOFF = 4  # retry interval grows 1, 2, 4, 4, ... x retry_s
 
 
@@ -269,8 +270,8 @@ class SimServer:
     def exchange(self, frames: Mapping[int, SensorFrame] | Iterable[tuple[int, SensorFrame]],
                  timeout_s: float | None = None, *, partial: bool = False,
                  while_waiting: Callable[[], None] | None = None,
-                 on_setpoint: Callable[[int, TorqueSetpoint], None] | None = None,
-                 ) -> dict[int, TorqueSetpoint]:  # fmt: skip
+                 on_setpoint: Callable[[int, TorqueSetpoint | AttitudeSetpoint], None] | None = None,
+                 ) -> dict[int, TorqueSetpoint | AttitudeSetpoint]:  # fmt: skip
         """Send each companion its frame, then wait for the setpoints of those steps.
 
         ``frames``: sysid -> frame, or (sysid, frame) pairs produced lazily: with
@@ -322,7 +323,7 @@ class SimServer:
             peer.last_step, peer.last_time_s = frame.step, frame.time_s
         if while_waiting is not None:
             while_waiting()
-        results: dict[int, TorqueSetpoint] = {}
+        results: dict[int, TorqueSetpoint | AttitudeSetpoint] = {}
         start = time.monotonic()
         deadline, interval = start + timeout, self.retry_s
         next_retry = start + interval
@@ -382,7 +383,8 @@ class SimServer:
         return {s for s in expected if not self._peers[s].lost and self._peers[s].addr is not None}
 
     # -- receive path ----------------------------------------------------------
-    def _handle(self, data: bytes, addr: tuple[str, int]) -> list[tuple[int, TorqueSetpoint, AttitudeTarget | None]]:
+    def _handle(self, data: bytes, addr: tuple[str, int]
+                ) -> list[tuple[int, TorqueSetpoint | AttitudeSetpoint, AttitudeTarget | None]]:  # fmt: skip
         """Decode one datagram; answer control messages; return its valid setpoints."""
         out = []
         # SET_ATTITUDE_TARGET pairs with the setpoint of its datagram; on a stream, with the next setpoint
@@ -407,12 +409,12 @@ class SimServer:
                     peer.attitude = body
                 else:
                     attitude[peer.sysid] = body
-            elif mid == _SETPOINT:
+            elif mid in (_SETPOINT, _JOINT_SETPOINT):
                 if stream:
                     att, peer.attitude = peer.attitude, None
                 else:
                     att = attitude.pop(peer.sysid, None)
-                got = self._setpoint(peer, body, att)
+                got = self._setpoint(peer, mid, body, att)
                 if got is not None:
                     peer.lost = False  # it is alive
                     out.append((peer.sysid, *got))
@@ -440,10 +442,17 @@ class SimServer:
         peer.addr = addr
         return True
 
-    def _setpoint(self, peer: _Peer, fields: tuple, att_fields: tuple | None):
+    def _setpoint(self, peer: _Peer, mid: int, fields: tuple, att_fields: tuple | None):
         try:
-            sp = fastcodec.setpoint_from_fields(fields)
-            att = fastcodec.attitude_from_fields(att_fields, sp.step) if att_fields is not None else None
+            if mid == _JOINT_SETPOINT:  # attitude mode: the target is part of the setpoint
+                if att_fields is None:
+                    raise codec.BatchMismatchError(f"step {fields[0]}: AM_JOINT_TORQUE_SETPOINT without "
+                                                   f"SET_ATTITUDE_TARGET")  # fmt: skip
+                sp = fastcodec.attitude_setpoint_from_fields(att_fields, fields)
+                att = sp.attitude
+            else:
+                sp = fastcodec.setpoint_from_fields(fields)
+                att = fastcodec.attitude_from_fields(att_fields, sp.step) if att_fields is not None else None
             reason = self.limits.violation(sp)
         except codec.NonFiniteValueError as exc:
             self.stats.nonfinite_values += 1

@@ -41,7 +41,7 @@ class StepFlag(enum.IntFlag):
 
 
 class SetpointFlag(enum.IntFlag):
-    """Flags of a torque setpoint (AM_TORQUE_SETPOINT.flags; mirrors AM_SETPOINT_FLAG)."""
+    """Flags of a setpoint (AM_TORQUE_SETPOINT.flags, AM_JOINT_TORQUE_SETPOINT.flags; mirrors AM_SETPOINT_FLAG)."""
 
     NONE = 0
     FAULT = 1  # controller detected a fault; this is its safe fallback
@@ -157,7 +157,8 @@ class TorqueSetpoint:
 
 @dataclass(frozen=True, eq=False)
 class AttitudeTarget:
-    """Informational attitude target a companion sends with its setpoint.
+    """Attitude target: the flight controller's setpoint in attitude mode (part of an
+    :class:`AttitudeSetpoint`), informational next to a :class:`TorqueSetpoint` in torque mode.
 
     Attributes:
         step: step of the setpoint it accompanies.
@@ -180,6 +181,38 @@ class AttitudeTarget:
         s(self, "quat_wxyz", _vec("quat_wxyz", self.quat_wxyz, 4))
         s(self, "rates_rad_s", _vec("rates_rad_s", self.rates_rad_s, 3))
         s(self, "thrust_normalized", float(self.thrust_normalized))
+
+
+@dataclass(frozen=True, eq=False)
+class AttitudeSetpoint:
+    """A companion's actuation answer in attitude mode (what a stock autopilot takes).
+
+    Attributes:
+        step: the step of the :class:`SensorFrame` this answers.
+        attitude: the flight controller's target (SET_ATTITUDE_TARGET); ``attitude.step == step``.
+        tau_q_nm: (n,) joint torques [N m], n <= 8, for the arm's servo driver
+            (AM_JOINT_TORQUE_SETPOINT).
+        flags: :class:`SetpointFlag` bits.
+    """
+
+    step: int
+    attitude: AttitudeTarget
+    tau_q_nm: np.ndarray
+    flags: SetpointFlag = SetpointFlag.NONE
+
+    def __post_init__(self) -> None:
+        s = object.__setattr__
+        s(self, "step", _uint("step", self.step, 64))
+        if not isinstance(self.attitude, AttitudeTarget):
+            raise TypeError(f"attitude must be an AttitudeTarget, got {type(self.attitude).__name__}")
+        if self.attitude.step != self.step:
+            raise ValueError(f"attitude target of step {self.attitude.step} in the setpoint of step {self.step}")
+        s(self, "tau_q_nm", _vec("tau_q_nm", self.tau_q_nm, None))
+        s(self, "flags", _SETPOINT_FLAGS[_uint("flags", self.flags, 8)])
+
+    @property
+    def n_joints(self) -> int:
+        return int(self.tau_q_nm.shape[0])
 
 
 # -- decoders' constructors ----------------------------------------------------
@@ -226,6 +259,12 @@ def attitude_target_from_wire(step: int, values) -> AttitudeTarget:
     a = _frozen_f64(values[:7])
     return _assemble(AttitudeTarget, step=step, quat_wxyz=a[0:4], rates_rad_s=a[4:7],
                      thrust_normalized=float(values[7]))  # fmt: skip
+
+
+def attitude_setpoint_from_wire(step: int, attitude: AttitudeTarget, tau_q, n: int, flags: int) -> AttitudeSetpoint:
+    """AttitudeSetpoint of wire values: ``attitude`` decoded for ``step``, ``tau_q`` = tau_q_nm[:n] (bounds as above)."""
+    a = _frozen_f64(tau_q[:n])
+    return _assemble(AttitudeSetpoint, step=step, attitude=attitude, tau_q_nm=a, flags=_SETPOINT_FLAGS[flags])
 
 
 @dataclass(frozen=True)

@@ -12,8 +12,8 @@ import numpy as np
 from amcore.control import StepResult
 from amcore.model import AmState
 from amcore.so3 import quat_wxyz_to_R, quat_xyzw_of_R
-from amlink.types import (MAX_JOINTS, AttitudeTarget, SensorFrame, TorqueSetpoint, attitude_target_from_wire,
-                          torque_setpoint_from_wire)
+from amlink.types import (MAX_JOINTS, AttitudeSetpoint, AttitudeTarget, SensorFrame, TorqueSetpoint,
+                          attitude_setpoint_from_wire, attitude_target_from_wire, torque_setpoint_from_wire)
 
 
 def state_from_frame(frame: SensorFrame) -> AmState:
@@ -49,3 +49,14 @@ def setpoint_from_result(step: int, res: StepResult, thrust_max_n: float) -> tup
     sp = torque_setpoint_from_wire(step, c.thrust_n, [*c.tau_B_nm.tolist(), *c.tau_q_nm.tolist()], n, 0)
     att = attitude_target_from_wire(step, [w, x, y, z, *d.w_bd.tolist(), thrust])
     return sp, att
+
+
+def attitude_setpoint_from_result(step: int, res: StepResult, thrust_max_n: float) -> AttitudeSetpoint:
+    """Attitude mode's setpoint: the attitude target of `setpoint_from_result` (R_b,d, w_b,d,
+    the thrust normalized by the vehicle's maximum, PX4's offboard thrust) and the joint torques."""
+    c = res.command
+    _, att = setpoint_from_result(step, res, thrust_max_n)
+    n = c.tau_q_nm.shape[0]
+    if not (0 <= step < 1 << 64 and n <= MAX_JOINTS):  # the validating constructor says why
+        return AttitudeSetpoint(step=step, attitude=att, tau_q_nm=c.tau_q_nm)
+    return attitude_setpoint_from_wire(step, att, c.tau_q_nm.tolist(), n, 0)

@@ -10,8 +10,9 @@ The older --sim udp:HOST:PORT still means "send to" (mavutil's udp: listens): it
 It loads its own [[am]] entry of the scenario, computes its own references (approach,
 grasp, lift, hover, timed on simulation time) and never sees another AM's state. It
 checks that the simulator runs the same scenario (AM_SCENARIO.scenario_id), arms, answers
-every sensor frame with a torque setpoint, and exits 0 when the simulator ends the run
-or on SIGINT/SIGTERM. Exit codes: 2 bad configuration, 3 scenario mismatch, 1 link failure.
+every sensor frame with a setpoint (torque mode: AM_TORQUE_SETPOINT; attitude mode:
+SET_ATTITUDE_TARGET and AM_JOINT_TORQUE_SETPOINT, docs/flight_controller.md), and exits 0
+when the simulator ends the run or on SIGINT/SIGTERM. Exit codes: 2 bad configuration, 3 scenario mismatch, 1 link failure.
 """
 from __future__ import annotations
 

@@ -3,8 +3,9 @@
 `Pilot(spec, sysid)` builds the AM's model, its own mission references from its [[am]]
 entry, and the controller that [options].controller names: the paper's law
 (`amcore.control`) or the baseline (`amcore.baseline`), which take and give the same
-shapes. `pilot.step(frame)` returns the torque setpoint and
-attitude target for that frame, and keeps the per-phase error summary
+shapes. `pilot.step(frame)` returns the setpoint for that frame (torque mode: the torque
+setpoint and, informational, the attitude target; attitude mode: the attitude setpoint,
+`amcore.offboard`'s law), and keeps the per-phase error summary
 (`companion.outcome`); `command` and `record` are its two halves, for a caller that sends
 the setpoint before the bookkeeping. A pilot whose first frame comes after t = 0 (a
 companion restarted during a run) starts its references at its vehicle's state and joins
@@ -22,9 +23,10 @@ from amcore.config import ScenarioSpec
 from amcore.control import StepResult
 from amcore.mission import JoinBlend, am_mission, join_blend
 from amcore.model import build_model, create_data
-from amlink.types import AttitudeTarget, SensorFrame, TorqueSetpoint
+from amcore.offboard import OffboardMemory, offboard_step
+from amlink.types import AttitudeSetpoint, AttitudeTarget, SensorFrame, TorqueSetpoint
 
-from .adapter import setpoint_from_result, state_from_frame
+from .adapter import attitude_setpoint_from_result, setpoint_from_result, state_from_frame
 from .outcome import Outcome
 
 _NO_WRENCH = (0.0,) * 6
@@ -37,6 +39,7 @@ class Pilot:
         self.model = model if model is not None else build_model(spec.vehicle)
         self.data = create_data(self.model)
         self.mission = am_mission(spec, self.am, self.model)
+        self.attitude_mode = spec.vehicle.flight_controller.mode == "attitude"
         if spec.vehicle.options.controller == "baseline":
             self.law = baseline.step
             self.params = baseline.BaselineParams.from_vehicle(spec.vehicle, self.model, self.mission.frame)
@@ -44,7 +47,7 @@ class Pilot:
         else:
             self.law = control.step
             self.params = control.ControllerParams.from_vehicle(spec.vehicle, self.mission.frame)
-            self.memory = control.ControllerMemory()
+            self.memory = OffboardMemory() if self.attitude_mode else control.ControllerMemory()
         self.thrust_max_n = spec.vehicle.rotors.thrust_max_n * spec.vehicle.rotors.count
         ms = spec.mission
         self.outcome = Outcome(sysid, ("approach", "grasp", "hover"), (ms.grasp_end_s + ms.lift_move_s + 1.0,
@@ -62,13 +65,13 @@ class Pilot:
         self._started = False
         self._blend: JoinBlend | None = None  # set when the first frame comes after t = 0 (a rejoin)
 
-    def step(self, frame: SensorFrame) -> tuple[TorqueSetpoint, AttitudeTarget, StepResult]:
+    def step(self, frame: SensorFrame) -> tuple[TorqueSetpoint | AttitudeSetpoint, AttitudeTarget | None, StepResult]:
         """`command`, then `record`: the setpoint answering `frame`, its errors summarized."""
         sp, att, res = self.command(frame)
         self.record(frame.time_s, res)
         return sp, att, res
 
-    def command(self, frame: SensorFrame) -> tuple[TorqueSetpoint, AttitudeTarget, StepResult]:
+    def command(self, frame: SensorFrame) -> tuple[TorqueSetpoint | AttitudeSetpoint, AttitudeTarget | None, StepResult]:
         """The controller's answer to `frame`, and nothing else: in lockstep the simulator is
         waiting for it, so the companion sends it before it does any bookkeeping (`record`)."""
         t = frame.time_s
@@ -96,6 +99,11 @@ class Pilot:
             ref = turn_reference(ref, self.heading_state, pivot)
             task_frame = turn_frame(self.mission.frame, self.heading_state, pivot)
         args = (self.model, self.data, self.params, state, ref, frame.wrench_E, self.memory, t)
+        if self.attitude_mode:  # the autopilot flies the attitude; the arm law is amcore.offboard's
+            out = offboard_step(*args, task_frame)
+            self.memory, res = out.memory, out.result
+            self._wrench_E_f, self._t_last = res.diagnostics.wrench_E_filtered, t
+            return attitude_setpoint_from_result(frame.step, res, self.thrust_max_n), None, res
         res = self.law(*args) if task_frame is None else self.law(*args, task_frame)
         self.memory = res.memory
         self._wrench_E_f, self._t_last = res.diagnostics.wrench_E_filtered, t
@@ -106,7 +114,7 @@ class Pilot:
         """Adds the step answered at time t [s] to the per-phase error summary."""
         d = res.diagnostics
         self.outcome.add(t, self.mission.phase(t), d)
-        while self._snaps and t >= self._snaps[0][1] - 0.5 * self.spec.dt_s:
+        while self._snaps and t >= self._snaps[0][1] - 0.5 * self.spec.control_dt_s:
             self.outcome.snapshot(self._snaps.pop(0)[0], t, d)
         self.last = (t, d)
         self.steps += 1

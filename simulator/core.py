@@ -1,15 +1,20 @@
 """The simulator's per-step work, independent of how setpoints travel (no sockets).
 
 `SitlCore` owns the PyBullet world, each AM's flight-controller emulation (the link as the
-flight controller sees it, `amlink.impair`, and the failsafe after companion loss,
-`simulator.failsafe`), the ground-truth outcome and a digest of every state. The UDP
-simulator main and the in-process runner (`simulator.inprocess`) both drive it:
+flight controller sees it, `amlink.impair`; in attitude mode the emulated autopilot,
+`simulator.flight_controller`; the failsafe after companion loss, `simulator.failsafe`),
+the ground-truth outcome and a digest of every state sent. The UDP simulator main and the
+in-process runner (`simulator.inprocess`) both drive it, once per physics step k:
 
-    frames = core.frames(k)                  # sensor frames of step k, one per AM
-    <send them>; core.observe()              # bookkeeping while the companions compute
-    setpoints = <the companions answer>      # dict sysid -> TorqueSetpoint (some may miss)
+    if core.is_control_step(k):              # every step, or every rate_hz / control_rate_hz
+        frames = core.frames(k)              # sensor frames of step k, one per AM
+        <send them>; core.observe()          # bookkeeping while the companions compute
+        setpoints = <the companions answer>  # dict sysid -> TorqueSetpoint (torque mode) or
+                                             # AttitudeSetpoint (attitude mode); some may miss
                                              # (core.on_setpoint(sysid, sp) as each arrives)
-    core.actuate(k, setpoints, lost)         # flight controllers apply them (or failsafe)
+        core.actuate(k, setpoints, lost)     # flight controllers apply them (or failsafe)
+    else:
+        core.hold(k, lost)                   # flight controllers fly on what they hold
     core.step()
 
 Beyond the companions, a GCS can command each flight controller between steps (`arm`,
@@ -29,14 +34,17 @@ from amcore.mission import am_mission
 from amcore.model import AmState, build_model
 from amcore.so3 import Rz
 from amlink.impair import ImpairedLink, LinkImpairment
-from amlink.types import SensorFrame, TorqueSetpoint, sensor_frame_from_wire
+from amlink.types import AttitudeSetpoint, SensorFrame, TorqueSetpoint, sensor_frame_from_wire
 
 from .failsafe import Failsafe, FailsafeGains
 from .fcstate import FcMode, FleetSnapshot, VehicleSnapshot
+from .flight_controller import FlightController
 from .outcome import RunOutcome
 from .sensors import SensorModel
 from .verdict import judge
 from .world import World
+
+Setpoint = TorqueSetpoint | AttitudeSetpoint
 
 TRUTH_EVERY = 10  # ground-truth sample period for the outcome and telemetry [steps]: 100 Hz at 1 kHz
 LAND_NOW = FailsafeGains(hold_s=0.0)  # a commanded landing: the failsafe's landing, without the hold
@@ -67,11 +75,19 @@ class SitlCore:
         self.fc_links = {am.sysid: ImpairedLink(LinkImpairment.for_scenario(
             dataclasses.replace(spec, link=am.link or spec.link)), stream=am.sysid) for am in spec.ams}
         self.sensors = {} if spec.sensors.exact else {
-            am.sysid: SensorModel(spec.sensors, self.model.n, spec.dt_s, spec.seed, am.sysid) for am in spec.ams}
+            am.sysid: SensorModel(spec.sensors, self.model.n, spec.control_dt_s, spec.seed, am.sysid) for am in spec.ams}
         self.failsafes: dict[int, Failsafe] = {}  # companion lost
         self.landing: dict[int, Failsafe] = {}  # landing on a GCS command (companion ignored)
         self.disarmed: set[int] = set()  # disarmed by a GCS command: motors off, joints limp
         self._overridden: set[int] = set()  # landing or disarmed: setpoints are not applied
+        v = spec.vehicle
+        self.mode = v.flight_controller.mode
+        self._kind = AttitudeSetpoint if self.mode == "attitude" else TorqueSetpoint  # what the autopilot takes
+        self.fcs: dict[int, FlightController] = {}  # attitude mode: each AM's emulated autopilot
+        if self.mode == "attitude":
+            self.fcs = {s: FlightController(v.flight_controller, v.rotors, spec.dt_s) for s in self.sysids}
+        self.control_every = spec.control_every
+        self.wrong_kind: dict[int, int] = {s: 0 for s in self.sysids}  # setpoints of the other mode, ignored
         self.events: list[dict] = []
         self.rejected: list[tuple[float, int, str]] = []  # (t, sysid, why) of setpoints refused as implausible
         self.controller_errors: list[tuple[float, int, str]] = []  # (t, sysid, what): controllers that raised
@@ -90,6 +106,10 @@ class SitlCore:
     @property
     def time_s(self) -> float:
         return self.world.time_s
+
+    def is_control_step(self, k: int) -> bool:
+        """Whether physics step k exchanges frames and setpoints with the companions."""
+        return k % self.control_every == 0
 
     def frames(self, k: int) -> dict[int, SensorFrame]:
         """Step k's sensor frames (exact state, wrist F/T reading). Their bookkeeping (the
@@ -122,12 +142,24 @@ class SitlCore:
         for s in self.sysids:
             self.digest.update(array("d", values[s]).tobytes())
         if k % TRUTH_EVERY == 0:
-            gt = self.world.ground_truth()
-            self.outcome.add(gt, {s: f.wrench_E for s, f in frames.items()})
-            if self.on_truth is not None:
-                self.on_truth(gt)
+            self._truth({s: f.wrench_E for s, f in frames.items()})
 
-    def on_setpoint(self, sysid: int, setpoint: TorqueSetpoint) -> None:
+    def _truth(self, wrench_E: dict) -> None:
+        gt = self.world.ground_truth()
+        self.outcome.add(gt, wrench_E)
+        if self.on_truth is not None:
+            self.on_truth(gt)
+
+    def hold(self, k: int, lost: Collection[int] = ()) -> None:
+        """Physics step k between control steps: no frames and no setpoints; each flight
+        controller flies on what it holds (its failsafe while its companion is lost), and
+        ground truth is sampled as on control steps."""
+        self.observe()
+        if k % TRUTH_EVERY == 0:
+            self._truth({s: self.world.wrench_ee(s) for s in self.sysids})
+        self.actuate(k, {}, lost)
+
+    def on_setpoint(self, sysid: int, setpoint: Setpoint) -> None:
         """A setpoint answering the last frames, as it arrives: its flight controller applies
         it now, while the other companions still compute (`actuate` then skips this AM).
         One of a vehicle in failsafe is left to `actuate`, which ends the failsafe."""
@@ -136,7 +168,7 @@ class SitlCore:
         self._actuated.add(sysid)
         self._apply(self._k, sysid, setpoint)
 
-    def actuate(self, k: int, setpoints: Mapping[int, TorqueSetpoint], lost: Collection[int] = ()) -> None:
+    def actuate(self, k: int, setpoints: Mapping[int, Setpoint], lost: Collection[int] = ()) -> None:
         """Each flight controller applies what reached it (zero-order hold), or its failsafe
         while its companion is lost; a companion that answers again takes over again."""
         self.observe()
@@ -162,21 +194,38 @@ class SitlCore:
                 continue
             if s in self.failsafes:
                 del self.failsafes[s]
+                if s in self.fcs:  # the autopilot's loops start afresh from the failsafe's flight
+                    v = self.spec.vehicle
+                    self.fcs[s] = FlightController(v.flight_controller, v.rotors, self.spec.dt_s)
                 self.events.append({"t": t, "sysid": s, "event": "rejoined"})
                 self.log(f"t={t:.3f} s sysid {s}: companion back, failsafe ended")
             self._apply(k, s, setpoints.get(s))
 
-    def _apply(self, k: int, s: int, setpoint: TorqueSetpoint | None) -> None:
-        """The flight controller of `s` at step k: what its link delivers (zero-order hold)."""
+    def _apply(self, k: int, s: int, setpoint: Setpoint | None) -> None:
+        """The flight controller of `s` at step k: what its link delivers (zero-order hold);
+        in attitude mode the emulated autopilot flies the held target. A setpoint of the other
+        mode is ignored (a stock autopilot takes no body torques), counted and logged once."""
+        if setpoint is not None and not isinstance(setpoint, self._kind):
+            self.wrong_kind[s] += 1
+            if self.wrong_kind[s] == 1:
+                self.log(f"t={self.world.time_s:.3f} s sysid {s}: ignored a {type(setpoint).__name__} in "
+                         f"{self.mode} mode; counted in outcome.json, further ones not printed")
+            setpoint = None
         sp = self.fc_links[s].step(k, setpoint)
         if sp is None:  # nothing has reached this flight controller yet: keep the last command
             return
-        rep = self.world.apply(s, sp.thrust_n, sp.tau_B_nm, sp.tau_q_nm)
-        if rep.saturated:
+        if self.fcs:
+            quat, w_B = self.world.attitude_and_rate(s)
+            out = self.fcs[s].step(quat, w_B, sp.attitude)
+            joints = self.world.apply_rotors(s, out.rotor_thrusts_n, sp.tau_q_nm, out.allocation.saturated)
+            rotors_saturated, joints_saturated = out.allocation.saturated, joints.saturated
+        else:
+            rep = self.world.apply(s, sp.thrust_n, sp.tau_B_nm, sp.tau_q_nm)
+            rotors_saturated, joints_saturated = rep.mix.saturated, rep.joints.saturated
+        if rotors_saturated or joints_saturated:
             t = self.world.time_s
-            if self.outcome.saturation(s, t, rep.mix.saturated, rep.joints.saturated):
-                self.log(f"t={t:.3f} s sysid {s}: command saturated (thrust {sp.thrust_n:.2f} N, tau_B "
-                         f"{np.round(sp.tau_B_nm, 3)}, tau_q {np.round(sp.tau_q_nm, 3)}); counted in outcome.json, "
+            if self.outcome.saturation(s, t, rotors_saturated, joints_saturated):
+                self.log(f"t={t:.3f} s sysid {s}: command saturated ({_describe(sp)}); counted in outcome.json, "
                          f"further ones not printed")
 
     def note_rejected(self, sysid: int, why: str) -> None:
@@ -258,7 +307,17 @@ class SitlCore:
         v = judge(self.outcome, self.spec.success, w.step_index, self.failsafes, self.rejected, self.controller_errors)
         return {"state_digest": self.digest.hexdigest(), "verdict": v.to_dict(), "events": self.events,
                 "rejected_setpoints": len(self.rejected),
+                "flight_controller": self.mode, "control_every": self.control_every,
                 "failsafe_at_end": sorted(self.failsafes),
-                "fc_link": {str(s): {**vars(link.channel.stats), "stale": link.hold.stale}
+                "fc_link": {str(s): {**vars(link.channel.stats), "stale": link.hold.stale,
+                                     "other_mode": self.wrong_kind[s]}
                             for s, link in self.fc_links.items()},
                 **self.outcome.to_dict()}
+
+
+def _describe(sp: Setpoint) -> str:
+    if isinstance(sp, AttitudeSetpoint):
+        a = sp.attitude
+        return (f"thrust {a.thrust_normalized:.3f} of full, q_d {np.round(a.quat_wxyz, 3)}, rates "
+                f"{np.round(a.rates_rad_s, 3)}, tau_q {np.round(sp.tau_q_nm, 3)}")
+    return f"thrust {sp.thrust_n:.2f} N, tau_B {np.round(sp.tau_B_nm, 3)}, tau_q {np.round(sp.tau_q_nm, 3)}"

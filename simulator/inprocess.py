@@ -21,8 +21,9 @@ from collections.abc import Callable
 import numpy as np
 
 from amcore.config import ConfigError, ScenarioSpec, load_scenario
+from amlink import fastcodec
 from amlink.limits import SetpointLimits
-from amlink.types import SensorFrame
+from amlink.types import AttitudeSetpoint, SensorFrame, TorqueSetpoint
 from companion.pilot import Pilot
 
 from .core import SitlCore
@@ -35,6 +36,16 @@ def as_on_the_wire(f: SensorFrame) -> SensorFrame:
     return SensorFrame(step=f.step, time_s=round(f.time_s * 1e6) / 1e6, p_WB=f32(f.p_WB),
                        quat_WB_wxyz=f32(f.quat_WB_wxyz), v_B=f32(f.v_B), w_B=f32(f.w_B), q=f.q, qdot=f.qdot,
                        wrench_E=f.wrench_E, flags=f.flags)
+
+
+def setpoint_as_on_the_wire(sp: TorqueSetpoint | AttitudeSetpoint) -> TorqueSetpoint | AttitudeSetpoint:
+    """The setpoint the simulator decodes: AM_TORQUE_SETPOINT is float64 (exact); an attitude
+    setpoint's target goes through SET_ATTITUDE_TARGET (float32, NED/FRD and back)."""
+    if not isinstance(sp, AttitudeSetpoint):
+        return sp
+    (att_id, att), (joint_id, joints) = fastcodec.attitude_setpoint_payloads(sp)
+    read = fastcodec.READERS
+    return fastcodec.attitude_setpoint_from_fields(read[att_id](att, 0, len(att)), read[joint_id](joints, 0, len(joints)))
 
 
 def run(spec: ScenarioSpec, duration_s: float | None = None,
@@ -56,26 +67,30 @@ def run(spec: ScenarioSpec, duration_s: float | None = None,
     crashed: set[int] = set()
     core.connect()
     t0 = time.perf_counter()
+    gone: set[int] = set()
     try:
         for k in range(n):
-            frames = core.frames(k)
-            gone = lost(core.time_s) | crashed
-            setpoints = {}
-            for s, f in frames.items():
-                if s in gone:
-                    continue
-                try:
-                    sp = pilots[s].step(as_on_the_wire(f))[0]
-                    why = limits.violation(sp)
-                except (ArithmeticError, ValueError) as exc:  # LinAlgError, non-finite setpoints
-                    core.note_controller_error(s, f"{type(exc).__name__}: {exc}")
-                    crashed.add(s)
-                    continue
-                if why is None:
-                    setpoints[s] = sp
-                else:
-                    core.note_rejected(s, why)
-            core.actuate(k, setpoints, gone | crashed)
+            if core.is_control_step(k):
+                frames = core.frames(k)
+                gone = lost(core.time_s) | crashed
+                setpoints = {}
+                for s, f in frames.items():
+                    if s in gone:
+                        continue
+                    try:
+                        sp = setpoint_as_on_the_wire(pilots[s].step(as_on_the_wire(f))[0])
+                        why = limits.violation(sp)
+                    except (ArithmeticError, ValueError) as exc:  # LinAlgError, non-finite setpoints
+                        core.note_controller_error(s, f"{type(exc).__name__}: {exc}")
+                        crashed.add(s)
+                        continue
+                    if why is None:
+                        setpoints[s] = sp
+                    else:
+                        core.note_rejected(s, why)
+                core.actuate(k, setpoints, gone | crashed)
+            else:  # as the UDP simulator: who was lost at the last exchange stays lost until the next
+                core.hold(k, gone | crashed)
             core.step()
             if progress is not None and k % every == 0:
                 progress(core.time_s)

@@ -4,10 +4,11 @@ emulation, stepped in lockstep with one companion process per AM over MAVLink (U
     simulator [--config configs/scenarios/two_am_comp.toml] [--bind udpin:127.0.0.1:14550]
               [--gcs udpout:127.0.0.1:14551]
 
-Start-up waits for every [[am]] sysid's HEARTBEAT and ARM; then each step k it sends every
-companion its sensor frame (ODOMETRY, AM_JOINT_STATE, AM_WRENCH, AM_SIM_STEP), waits for
-all N setpoints answering step k (the N exchanges run concurrently), applies them through
-the rotor mixer and joint limits (saturation is counted and logged) and steps physics.
+Start-up waits for every [[am]] sysid's HEARTBEAT and ARM; then each control step k it sends
+every companion its sensor frame (ODOMETRY, AM_JOINT_STATE, AM_WRENCH, AM_SIM_STEP), waits for
+all N setpoints answering step k (the N exchanges run concurrently) and applies them through
+the flight controller (torque mode: the rotor mixer; attitude mode: the emulated autopilot)
+and the joint limits (saturation is counted and logged); it steps physics every step.
 It also plays each vehicle's flight-controller GCS port (--gcs, simulator.gcs_link), as
 PX4 SITL does. The run folder gets outcome.json (the physical outcome from ground truth, see
 simulator.outcome, and the mission verdict, simulator.verdict) and gcs.tlog. Exit codes: 0
@@ -202,14 +203,18 @@ def main(argv: list[str] | None = None) -> int:
             gcs.tick(k)  # every few steps: the GCS link's snapshot, STATUSTEXTs, GCS commands
 
         for k in range(n_steps):
-            # each frame leaves as soon as it is read; each setpoint is applied as it arrives
-            setpoints = server.exchange(core.iter_frames(k), partial=True, while_waiting=bookkeeping,
-                                        on_setpoint=core.on_setpoint)
-            if server.stats.rejected_setpoints != rejected:  # the verdict names the first and counts them
-                for _ in range(server.stats.rejected_setpoints - rejected):
-                    core.note_rejected(*server.last_rejection)
-                rejected = server.stats.rejected_setpoints
-            core.actuate(k, setpoints, server.lost_peers)
+            if core.is_control_step(k):
+                # each frame leaves as soon as it is read; each setpoint is applied as it arrives
+                setpoints = server.exchange(core.iter_frames(k), partial=True, while_waiting=bookkeeping,
+                                            on_setpoint=core.on_setpoint)
+                if server.stats.rejected_setpoints != rejected:  # the verdict names the first and counts them
+                    for _ in range(server.stats.rejected_setpoints - rejected):
+                        core.note_rejected(*server.last_rejection)
+                    rejected = server.stats.rejected_setpoints
+                core.actuate(k, setpoints, server.lost_peers)
+            else:  # between the companions' control steps the flight controllers fly on their own
+                core.hold(k, server.lost_peers)
+                gcs.tick(k)
             core.step()
             progress.update(core.time_s)
         progress.update(core.time_s, force=True)

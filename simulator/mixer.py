@@ -69,6 +69,7 @@ class QuadMixer:
     p_B_rotors_m: np.ndarray = field(repr=False)  # (4, 3) rotor positions in B
     spin: np.ndarray = field(repr=False)  # (4,) sign of each rotor's drag torque about +z_B
     A_inv_rows: tuple[tuple[float, ...], ...] = field(repr=False, default=())  # A_inv as floats (per-step path)
+    A_rows: tuple[tuple[float, ...], ...] = field(repr=False, default=())  # A as floats (per-step path)
 
     @staticmethod
     def from_rotors(rotors: RotorParams) -> "QuadMixer":
@@ -85,7 +86,7 @@ class QuadMixer:
         A = np.stack([np.ones(4), p[:, 1], -p[:, 0], spin * rotors.yaw_moment_coeff_m])
         A_inv = np.linalg.inv(A)
         return QuadMixer(rotors=rotors, A=A, A_inv=A_inv, p_B_rotors_m=p, spin=spin,
-                         A_inv_rows=tuple(map(tuple, A_inv.tolist())))
+                         A_inv_rows=tuple(map(tuple, A_inv.tolist())), A_rows=tuple(map(tuple, A.tolist())))
 
     # ------------------------------------------------------------------ allocation
     def rotor_thrusts(self, thrust_n: float, tau_B_nm) -> np.ndarray:
@@ -96,6 +97,12 @@ class QuadMixer:
         """(T [N], tau_B [N m]) produced by the given rotor thrusts."""
         u = self.A @ np.asarray(rotor_thrusts_n, dtype=float)
         return float(u[0]), u[1:].copy()
+
+    def wrench_floats(self, rotor_thrusts_n) -> tuple[float, list[float]]:
+        """`wrench` on Python floats (the per-step path): (T [N], [tau_x, tau_y, tau_z] [N m])."""
+        f0, f1, f2, f3 = rotor_thrusts_n
+        T, tx, ty, tz = (a0 * f0 + a1 * f1 + a2 * f2 + a3 * f3 for a0, a1, a2, a3 in self.A_rows)
+        return T, [tx, ty, tz]
 
     def feasible(self, thrust_n: float, tau_B_nm) -> bool:
         f = self.rotor_thrusts(thrust_n, tau_B_nm)

@@ -3,7 +3,8 @@
 `World(spec, initial)` stores only; `connect()` builds the scene in its own DIRECT client.
 Then, once per physics step (1 / spec.rate_hz):
 
-    report = world.apply(sysid, thrust_n, tau_B_nm, tau_q_nm)   # for each AM
+    report = world.apply(sysid, thrust_n, tau_B_nm, tau_q_nm)   # for each AM (torque mode),
+    joints = world.apply_rotors(sysid, rotor_thrusts_n, tau_q_nm)  # or rotor thrusts (attitude mode)
     world.step()
     state, wrench = world.state(sysid), world.wrench_ee(sysid)
 
@@ -15,6 +16,8 @@ the pad's contact face, x = outward normal). Conventions verified by tests/simul
   applied with LINK_FRAME on the base (for the base, LINK_FRAME torque is body-frame).
   PyBullet clears external forces and joint torques after every step, so `step()`
   re-applies the latest command: commands persist until replaced.
+* Rotors: with [rotors].time_constant_s > 0 each rotor's thrust lags its command
+  (`simulator.rotors`), advanced in `step()`; with 0 the commanded wrench acts at once.
 * The wrist sensor on `ft_joint` reports the wrench the parent link exerts on the pad,
   in the pad's inertial (CoM) frame, moment about the pad's CoM. `wrench_ee` turns it
   into the wrench the environment applies on E (see there).
@@ -32,6 +35,7 @@ from amcore.model import AmState
 
 from . import scene
 from .mixer import JointTorqueResult, MixResult, QuadMixer, limit_joint_torques
+from .rotors import RotorLag
 
 
 class WorldNotConnected(RuntimeError):
@@ -145,6 +149,11 @@ class World:
         self._ams: dict[int, scene.AmBody] = {}
         self._commands: dict[int, tuple[float, list[float], list[float]]] = {}  # applied T, tau_B, tau_q
         self._saturated = {a.sysid: [0, 0] for a in spec.ams}  # saturated commands so far: rotors, joints
+        # lagging rotors (time_constant_s > 0): per AM the lag, the rotor thrust command
+        # (None before the first) and the joint torques
+        self._lags: dict[int, RotorLag] = {}
+        self._rotor_commands: dict[int, list[float] | None] = {}
+        self._joint_commands: dict[int, list[float]] = {}
         self._names: dict[int, str] = {}
         self._object_id = -1
         self._step_index = 0
@@ -176,6 +185,11 @@ class World:
             self._ams[a.sysid] = am
             self._names[am.body_id] = f"am{a.sysid}"
             self._commands[a.sysid] = (0.0, [0.0] * 3, [0.0] * n)
+            if self.spec.vehicle.rotors.time_constant_s > 0.0:
+                r = self.spec.vehicle.rotors
+                self._lags[a.sysid] = RotorLag(r.time_constant_s, self.spec.dt_s, r.count)
+                self._rotor_commands[a.sysid] = None
+                self._joint_commands[a.sysid] = [0.0] * n
             self._arm_ids[a.sysid] = list(am.arm_joint_ids)
             self._sensed_links[a.sysid] = [am.pad_link_id, am.ee_link_id, *am.tool_link_ids]
             self._tool_weights[a.sysid] = tuple(m / am.tool_mass_kg for m in am.tool_link_masses_kg)
@@ -238,18 +252,51 @@ class World:
         self._am(sysid)
         mix = self._mixer.mix(float(thrust_n), tau_B_nm)
         joints = limit_joint_torques(tau_q_nm, self._tau_q_max)
-        if mix.saturated or joints.saturated:
-            sat = self._saturated[sysid]
-            sat[0] += mix.saturated
-            sat[1] += joints.saturated
-        self._commands[sysid] = (mix.applied_thrust_n, mix.applied_tau_B_nm.tolist(), joints.applied_nm.tolist())
+        self._count_saturation(sysid, mix.saturated, joints.saturated)
+        if self._lags:  # the rotors go toward the mixer's thrusts in step()
+            self._rotor_commands[sysid] = mix.rotor_thrusts_n.tolist()
+            self._joint_commands[sysid] = joints.applied_nm.tolist()
+        else:
+            self._commands[sysid] = (mix.applied_thrust_n, mix.applied_tau_B_nm.tolist(), joints.applied_nm.tolist())
         return ApplyReport(mix=mix, joints=joints)
 
+    def apply_rotors(self, sysid: int, rotor_thrusts_n, tau_q_nm, rotors_saturated: bool = False) -> JointTorqueResult:
+        """Command each rotor's thrust [N] (rotor order of `simulator.mixer`, within the
+        rotor limits: a flight controller that allocates itself, and says whether its
+        allocation saturated) and the joint torques [N m] (limited here); they act from the
+        next `step()` until replaced."""
+        self._am(sysid)
+        joints = limit_joint_torques(tau_q_nm, self._tau_q_max)
+        self._count_saturation(sysid, rotors_saturated, joints.saturated)
+        f = [float(x) for x in rotor_thrusts_n]
+        if self._lags:
+            self._rotor_commands[sysid] = f
+            self._joint_commands[sysid] = joints.applied_nm.tolist()
+        else:
+            thrust, tau_B = self._mixer.wrench_floats(f)
+            self._commands[sysid] = (thrust, tau_B, joints.applied_nm.tolist())
+        return joints
+
+    def _count_saturation(self, sysid: int, rotors: bool, joints: bool) -> None:
+        if rotors or joints:
+            sat = self._saturated[sysid]
+            sat[0] += rotors
+            sat[1] += joints
+
+    def rotor_thrusts(self, sysid: int) -> list[float] | None:
+        """The lagging rotors' thrusts [N] after the last step (None: ideal rotors, or no step yet)."""
+        lag = self._lags.get(sysid)
+        return None if lag is None or lag.thrusts_n is None else list(lag.thrusts_n)
+
     def step(self) -> None:
-        """Apply every AM's latest command and advance one physics step."""
+        """Apply every AM's latest command (through the rotors' lag) and advance one physics step."""
         c = self._c()
         for sysid, am in self._ams.items():
-            thrust, tau_B, tau_q = self._commands[sysid]
+            if self._lags and self._rotor_commands[sysid] is not None:
+                thrust, tau_B = self._mixer.wrench_floats(self._lags[sysid].step(self._rotor_commands[sysid]))
+                tau_q = self._joint_commands[sysid]
+            else:
+                thrust, tau_B, tau_q = self._commands[sysid]
             pb.applyExternalForce(am.body_id, -1, [0.0, 0.0, thrust], [0.0, 0.0, 0.0], pb.LINK_FRAME,
                                   physicsClientId=c)
             pb.applyExternalTorque(am.body_id, -1, tau_B, pb.LINK_FRAME, physicsClientId=c)
@@ -265,6 +312,15 @@ class World:
         p, _, R, v_B, w_B, q, qdot = self._base_and_joints(c, sysid, am)
         return AmState(p_WB=np.array(p), R_WB=np.array(R).reshape(3, 3), v_B=np.array(v_B), w_B=np.array(w_B),
                        q=np.array(q), qdot=np.array(qdot))
+
+    def attitude_and_rate(self, sysid: int) -> tuple[tuple[float, ...], tuple[float, float, float]]:
+        """(quat_WB (w, x, y, z; w >= 0), w_B [rad/s]) on Python floats: what a flight
+        controller's attitude estimate and gyro give (here exact)."""
+        c, am = self._c(), self._am(sysid)
+        _, (x, y, z, w) = pb.getBasePositionAndOrientation(am.body_id, physicsClientId=c)
+        _, w_W = pb.getBaseVelocity(am.body_id, physicsClientId=c)
+        quat = (w, x, y, z) if w >= 0.0 else (-w, -x, -y, -z)
+        return quat, _mtv(pb.getMatrixFromQuaternion((x, y, z, w)), w_W)
 
     def sensor_values(self, sysid: int) -> list[float]:
         """One sensor frame's values as Python floats: p_WB, quat_WB (w, x, y, z; w >= 0),

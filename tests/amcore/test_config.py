@@ -46,6 +46,14 @@ BASE = (ROOT / "configs" / "scenarios" / "two_am_comp.toml").read_text()
     ("[mission]", "[sensors]\ngps_noise_m = 1.0\n[mission]", "[sensors]: unknown key 'gps_noise_m'"),
     ("sysid = 4\n", "sysid = 4\nmisalignment_deg = 50.0\n", "misalignment_deg: must be within +/-45"),
     ("sysid = 4\n", "sysid = 4\nstart_offset_m = [0.1]\n", "start_offset_m: expected 3 entries"),
+    ("[object]", '[flight_controller]\nmode = "rates"\n[object]', "[flight_controller].mode: expected one of torque"),
+    ("[object]", "[flight_controller]\nrate_hz = 300.0\n[object]", "[flight_controller].rate_hz: 300 Hz must divide"),
+    ("[object]", "[flight_controller]\nMC_ROLLRATE_D = -0.1\n[object]", "MC_ROLLRATE_D: must be >= 0"),
+    ("[object]", "[flight_controller]\nMC_YAW_WEIGHT = 1.5\n[object]", "MC_YAW_WEIGHT: must be in [0, 1]"),
+    ("[object]", "[flight_controller]\nMC_ROLL_RATE_P = 0.1\n[object]", "unknown key 'MC_ROLL_RATE_P'"),
+    ("time_constant_s = 0.0", "time_constant_s = -0.01", "[rotors].time_constant_s: must be >= 0"),
+    ("rate_hz = 1000.0", "rate_hz = 1000.0\ncontrol_rate_hz = 400.0", "control_rate_hz: 400 Hz must divide"),
+    ("rate_hz = 1000.0", "rate_hz = 1000.0\ncontrol_rate_hz = 2000.0", "control_rate_hz: 2000 Hz must divide"),
 ])
 def test_malformed_scenario_names_file_and_key(tmp_path, old, new, key):
     assert old in BASE
@@ -134,3 +142,17 @@ def test_baseline_controller_needs_its_gains(tmp_path):
         load_scenario(p)
     p.write_text(p.read_text().replace('controller = "baseline"', 'controller = "passivity"'))
     assert load_scenario(p).vehicle.baseline is None  # the paper's law does not need it
+def test_scenario_overrides_the_vehicles_flight_controller_and_rotors_key_by_key(tmp_path):
+    """The paper's scenarios keep ideal rotors although the vehicle's lag; an attitude-mode
+    variant changes only what it names."""
+    base = load_scenario(ROOT / "configs" / "scenarios" / "two_am_comp.toml")
+    vehicle_only = _write(tmp_path, BASE.replace("[rotors]\ntime_constant_s = 0.0", ""))
+    assert base.vehicle.rotors.time_constant_s == 0.0
+    assert load_scenario(vehicle_only).vehicle.rotors.time_constant_s > 0.0  # the vehicle file's value
+    text = BASE.replace("rate_hz = 1000.0", "rate_hz = 1000.0\ncontrol_rate_hz = 250.0").replace(
+        "[object]", '[flight_controller]\nmode = "attitude"\nMC_ROLL_P = 9.0\n[object]')
+    spec = load_scenario(_write(tmp_path, text))
+    fc, fc0 = spec.vehicle.flight_controller, base.vehicle.flight_controller
+    assert (fc.mode, fc.MC_ROLL_P, fc0.mode) == ("attitude", 9.0, "torque")
+    assert fc.MC_PITCH_P == fc0.MC_PITCH_P and spec.vehicle.rotors == base.vehicle.rotors
+    assert (spec.control_every, base.control_every) == (4, 1) and spec.control_dt_s == pytest.approx(0.004)

@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 
 from amlink import codec
 from amlink.codec import mav
-from amlink.types import AttitudeTarget, ScenarioInfo, SensorFrame, SetpointFlag, StepFlag, TorqueSetpoint
+from amlink.types import (AttitudeSetpoint, AttitudeTarget, ScenarioInfo, SensorFrame, SetpointFlag, StepFlag,
+                          TorqueSetpoint)
 
 F64 = st.floats(allow_nan=False, allow_infinity=False)  # any finite double
 F32 = st.floats(min_value=-1e30, max_value=1e30, allow_nan=False)  # representable range of float32 fields
@@ -243,3 +244,34 @@ def test_corrupt_and_truncated_frames_are_dropped_and_counted():
     [m] = dec.feed(good)  # the parser starts clean on the next datagram
     assert m.step == 1
     assert dec.feed(b"\x00garbage") == [] and dec.bad_frames >= 3
+
+
+@st.composite
+def attitude_setpoints(draw):
+    """Attitude-mode setpoints with wire-representable targets (float32 fields)."""
+    step, n = draw(st.integers(0, 2**64 - 1)), draw(st.integers(0, 8))
+    att = AttitudeTarget(step, draw(vec(4, st.floats(-1, 1))), draw(vec(3, st.floats(-50, 50))), draw(st.floats(0, 1)))
+    return AttitudeSetpoint(step, att, draw(vec(n)), draw(st.sampled_from(list(SetpointFlag))))
+
+
+@settings(max_examples=150, deadline=None, database=None)
+@given(attitude_setpoints())
+def test_attitude_setpoint_round_trip(sp):
+    """Attitude mode: SET_ATTITUDE_TARGET (float32, NED/FRD) + AM_JOINT_TORQUE_SETPOINT (float64, exact)."""
+    [(got, att)] = decode_setpoints(codec.Encoder(2, 191).pack(codec.attitude_setpoint_messages(sp, 1234)))
+    assert isinstance(got, AttitudeSetpoint) and att is got.attitude
+    assert (got.step, got.flags, att.step) == (sp.step, sp.flags, sp.step)
+    np.testing.assert_array_equal(got.tau_q_nm, sp.tau_q_nm)
+    np.testing.assert_allclose(att.quat_wxyz, sp.attitude.quat_wxyz, atol=1e-6)
+    np.testing.assert_allclose(att.rates_rad_s, sp.attitude.rates_rad_s, rtol=1e-6, atol=1e-6)
+    assert att.thrust_normalized == f32(sp.attitude.thrust_normalized)
+
+
+def test_joint_torques_without_their_attitude_target_are_an_error():
+    enc = codec.Encoder(2, 191)
+    sp = AttitudeSetpoint(3, AttitudeTarget(3, [1, 0, 0, 0], [0, 0, 0], 0.5), [0.1, 0.2])
+    att_msg, joint_msg = codec.attitude_setpoint_messages(sp)
+    with pytest.raises(codec.BatchMismatchError, match="without SET_ATTITUDE_TARGET"):
+        decode_setpoints(enc.pack([joint_msg]))
+    with pytest.raises(ValueError, match="step 4 in the setpoint of step 3"):
+        AttitudeSetpoint(3, AttitudeTarget(4, [1, 0, 0, 0], [0, 0, 0], 0.5), [])

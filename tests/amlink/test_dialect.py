@@ -16,7 +16,8 @@ from amlink import dialect
 from amlink.types import SetpointFlag, StepFlag
 
 SHIPPED_XML = sorted(dialect.PYMAVLINK_V20_DIR.glob("*.xml"))
-OUR_MESSAGES = ("AM_SIM_STEP", "AM_JOINT_STATE", "AM_WRENCH", "AM_TORQUE_SETPOINT", "AM_SCENARIO")
+OUR_MESSAGES = ("AM_SIM_STEP", "AM_JOINT_STATE", "AM_WRENCH", "AM_TORQUE_SETPOINT", "AM_SCENARIO",
+                "AM_JOINT_TORQUE_SETPOINT")
 REPO = Path(__file__).resolve().parents[2]
 
 

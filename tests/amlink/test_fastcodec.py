@@ -18,16 +18,17 @@ from hypothesis import strategies as st
 
 from amlink import codec, fastcodec, signing
 from amlink.codec import mav
-from amlink.types import AttitudeTarget, ScenarioInfo, SensorFrame, StepFlag, TorqueSetpoint
+from amlink.types import AttitudeSetpoint, AttitudeTarget, ScenarioInfo, SensorFrame, StepFlag, TorqueSetpoint
 from tests.amlink.fuzz import Fuzzer
 from tests.amlink.kit import key_for, make_frame
-from tests.amlink.test_codec import F32, F64, sensor_frames, setpoints, vec
+from tests.amlink.test_codec import F32, F64, attitude_setpoints, sensor_frames, setpoints, vec
 
 KEY, OTHER = key_for(2), key_for(9)
 BAD = (math.nan, math.inf, -math.inf, 1e300, -1e300)
 COUNTERS = ("bad_frames", "unknown_sysid", "unsigned", "bad_signature", "replayed", "ignored")
 ARRAYS = {SensorFrame: ("p_WB", "quat_WB_wxyz", "v_B", "w_B", "q", "qdot", "wrench_E"),
-          TorqueSetpoint: ("tau_B_nm", "tau_q_nm"), AttitudeTarget: ("quat_wxyz", "rates_rad_s")}  # fmt: skip
+          TorqueSetpoint: ("tau_B_nm", "tau_q_nm"), AttitudeTarget: ("quat_wxyz", "rates_rad_s"),
+          AttitudeSetpoint: ("tau_q_nm",)}  # fmt: skip
 
 
 def twins(sysid: int, compid: int, key: bytes | None):
@@ -49,7 +50,7 @@ def summary(item):
             a = getattr(item, name)
             assert a.dtype == np.float64 and a.ndim == 1 and not a.flags.writeable
             arrays.append((name, a.shape, a.tobytes()))
-        scalars = {k: (v, type(v)) for k, v in vars(item).items() if k not in ARRAYS[type(item)]}
+        scalars = {k: (summary(v), type(v)) for k, v in vars(item).items() if k not in ARRAYS[type(item)]}
         return type(item), scalars, arrays
     return item  # None, codec.Shutdown (a dataclass with ==)
 
@@ -89,6 +90,39 @@ def test_setpoint_batch_bytes_are_pymavlinks(key, sp, att, time_boot_ms, target)
         assert str(err.value) == str(exc)
         return
     assert new.pack_payloads(fastcodec.setpoint_payloads(*args)) == expected
+
+
+@pytest.mark.parametrize("key", [None, KEY], ids=["unsigned", "signed"])
+@settings(max_examples=100, deadline=None, database=None)
+@given(sp=attitude_setpoints(), time_boot_ms=st.integers(0, 2**40), target=st.integers(0, 255))
+def test_attitude_setpoint_batch_bytes_are_pymavlinks_and_read_back_alike(key, sp, time_boot_ms, target):
+    old, new = twins(2, 191, key)
+    args = (sp, time_boot_ms, target, 255 - target)
+    data = new.pack_payloads(fastcodec.attitude_setpoint_payloads(*args))
+    assert data == old.pack(codec.attitude_setpoint_messages(*args))
+    assert [m.get_type() for m in stock_messages(data, key)] == ["SET_ATTITUDE_TARGET", "AM_JOINT_TORQUE_SETPOINT"]
+    keys = None if key is None else {2: key}
+    slow_asm, fast_asm = codec.SetpointAssembler(), fastcodec.SetpointAssembler()
+    slow = [slow_asm.push(m) for m in codec.Decoder(keys).feed(data)][-1]
+    fast = [fast_asm.push(mid, body) for mid, _, _, body in
+            codec.Decoder(keys, readers=fastcodec.READERS).feed_records(data)][-1]  # fmt: skip
+    assert isinstance(fast[0], AttitudeSetpoint) and summary(fast) == summary(slow)
+
+
+def test_attitude_setpoint_errors_are_the_same():
+    att = AttitudeTarget(3, [1, 0, 0, 0], [0, 0, 0], 0.5)
+    for sp in (AttitudeSetpoint(3, att, [math.inf]), AttitudeSetpoint(3, AttitudeTarget(3, [1, 0, 0, 0], [0, 0, 0], math.nan), []),
+               AttitudeSetpoint(3, AttitudeTarget(3, [1, 0, 0, 0], [0, 4e38, 0], 0.5), [])):
+        with pytest.raises(codec.EncodeError) as want:
+            codec.Encoder(2, 191).pack(codec.attitude_setpoint_messages(sp))
+        with pytest.raises(codec.EncodeError) as got:
+            fastcodec.attitude_setpoint_payloads(sp)
+        assert str(got.value) == str(want.value)
+    joint_only = codec.Encoder(2, 191).pack(codec.attitude_setpoint_messages(AttitudeSetpoint(3, att, [0.1]))[1:])
+    slow = outcome(lambda: [codec.SetpointAssembler().push(m) for m in codec.Decoder().feed(joint_only)])
+    fast = outcome(lambda: [fastcodec.SetpointAssembler().push(mid, body) for mid, _, _, body in
+                            codec.Decoder(readers=fastcodec.READERS).feed_records(joint_only)])  # fmt: skip
+    assert slow == fast and slow[0] == "error" and "without SET_ATTITUDE_TARGET" in slow[2]
 
 
 def test_sequence_wraps_and_both_paths_share_one_link_state():

@@ -8,7 +8,7 @@ import pytest
 
 from amlink import codec
 from amlink.limits import SensorLimits, SetpointLimits
-from amlink.types import SensorFrame, TorqueSetpoint
+from amlink.types import AttitudeSetpoint, AttitudeTarget, SensorFrame, TorqueSetpoint
 from tests.amlink.kit import answer, linked, make_frame
 
 
@@ -26,6 +26,21 @@ def test_setpoint_limits():
     assert "joint" in lim.violation(sp(tau_q=(0.0, 0.0)))
     with pytest.raises(ValueError):
         SetpointLimits(thrust_max_n=math.inf)
+
+
+def asp(quat=(1.0, 0.0, 0.0, 0.0), rates=(0.0, 0.0, 0.0), thrust=0.4, tau_q=(0.0, 0.0, 0.0)):
+    return AttitudeSetpoint(0, AttitudeTarget(0, quat, rates, thrust), tau_q)
+
+
+def test_attitude_setpoint_limits():
+    lim = SetpointLimits.for_vehicle(thrust_max_n=40.0, joint_torque_max_nm=5.0, n_joints=3)
+    assert lim.violation(asp()) is None
+    assert lim.violation(asp(thrust=-1.0)) is None  # the message's range; the flight controller clamps to [0, 1]
+    assert "thrust_normalized" in lim.violation(asp(thrust=1.5))
+    assert "quaternion norm" in lim.violation(asp(quat=(2.0, 0.0, 0.0, 0.0)))
+    assert "rates" in lim.violation(asp(rates=(0.0, 2e3, 0.0)))
+    assert "tau_q" in lim.violation(asp(tau_q=(0.0, 11.0, 0.0)))
+    assert "joint" in lim.violation(asp(tau_q=(0.0,)))
 
 
 def test_sensor_limits():

@@ -19,7 +19,7 @@ from amlink.errors import (
     SimulatorUnreachableError,
 )
 from amlink.lockstep import CompanionClient, SimServer
-from amlink.types import AttitudeTarget, SensorFrame, StepFlag, TorqueSetpoint
+from amlink.types import AttitudeSetpoint, AttitudeTarget, SensorFrame, StepFlag, TorqueSetpoint
 from tests.amlink.kit import SCENARIO, answer, key_for, linked, make_frame, server_for, url
 
 
@@ -110,6 +110,34 @@ def test_two_companions_200_lockstep_steps_matched_by_sysid_and_step():
     assert ends == {2: (SCENARIO, "done"), 3: (SCENARIO, "done")}
     assert received == {2: list(range(200)), 3: list(range(200))}
     assert server.stats.stale_setpoints == server.stats.unknown_sysid == server.stats.bad_frames == 0
+
+
+def test_attitude_mode_setpoints_travel_as_attitude_target_and_joint_torques():
+    """Attitude mode: SET_ATTITUDE_TARGET + AM_JOINT_TORQUE_SETPOINT in one datagram, read as
+    one AttitudeSetpoint; a joint message alone is rejected and the step keeps waiting."""
+    server = server_for([2, 3], timeout_s=2.0)
+    server.open()
+
+    def attitude_answer(frame, sysid):
+        att = AttitudeTarget(frame.step, [np.cos(0.1 * sysid), 0.0, np.sin(0.1 * sysid), 0.0], [0.1, -0.2, sysid], 0.25)
+        return AttitudeSetpoint(frame.step, att, frame.q * 3.0)
+
+    with _armed_companions(server, lambda c, frame, sysid: c.send_setpoint(attitude_answer(frame, sysid))):
+        for k in range(50):
+            frames = {s: make_frame(s, k) for s in (2, 3)}
+            for s, sp in server.exchange(frames).items():
+                want = attitude_answer(frames[s], s)
+                assert isinstance(sp, AttitudeSetpoint) and sp.step == sp.attitude.step == k
+                np.testing.assert_array_equal(sp.tau_q_nm, want.tau_q_nm)  # float64: exact
+                np.testing.assert_allclose(sp.attitude.quat_wxyz, want.attitude.quat_wxyz, atol=1e-7)  # float32
+                np.testing.assert_allclose(sp.attitude.rates_rad_s, want.attitude.rates_rad_s, rtol=1e-7)
+                assert sp.attitude.thrust_normalized == 0.25 and server.attitude_targets[s] is sp.attitude
+    with linked([2], timeout_s=0.3) as (server, clients):
+        joints_only = mav.MAVLink_am_joint_torque_setpoint_message(0, 2, [0.1, 0.2] + [0.0] * 6, 0)
+        clients[2]._send([joints_only])
+        with pytest.raises(PeerTimeoutError):
+            server.exchange({2: make_frame(2, 0)})
+        assert server.stats.rejected_setpoints == 1 and "without SET_ATTITUDE_TARGET" in server.last_rejection[1]
 
 
 def test_lazy_frames_leave_one_by_one_and_each_setpoint_is_handed_on_as_it_arrives():

@@ -62,3 +62,59 @@ def test_setpoints_applied_on_arrival_give_the_run_of_setpoints_applied_after_th
         digests.append(out["state_digest"])
         assert [e["event"] for e in out["events"]] == ["lost", "rejoined"]
     assert digests[0] == digests[1]
+
+
+def _attitude_spec(spec, control_rate_hz=250.0):
+    import dataclasses
+
+    v = spec.vehicle
+    return dataclasses.replace(spec, control_rate_hz=control_rate_hz, vehicle=dataclasses.replace(
+        v, flight_controller=dataclasses.replace(v.flight_controller, mode="attitude")))
+
+
+def test_attitude_mode_flies_the_target_between_control_steps_and_ignores_torque_setpoints():
+    """Attitude mode at 250 Hz: the emulated autopilot holds a level hover from one
+    SET_ATTITUDE_TARGET per 4 physics steps; ground truth is still sampled at 100 Hz; a torque
+    setpoint (what no stock autopilot takes) is ignored and counted."""
+    import numpy as np
+
+    from amcore.model import generalized_gravity
+    from amlink.types import AttitudeSetpoint, AttitudeTarget, TorqueSetpoint
+    from simulator.core import SitlCore
+
+    spec = _attitude_spec(load_scenario(SCENARIO))
+    truths = []
+    core = SitlCore(spec, on_truth=truths.append)
+    core.connect()
+    try:
+        z0 = {s: core.world.state(s).p_WB[2] for s in core.sysids}
+        q0 = {s: core.world.attitude_and_rate(s)[0] for s in core.sysids}  # level, each at its own heading
+        m = core.model
+        hover = m.mass_kg * m.gravity_mps2 / (spec.vehicle.rotors.count * spec.vehicle.rotors.thrust_max_n)
+        frames_sent = 0
+        for k in range(600):
+            if core.is_control_step(k):
+                frames = core.frames(k)
+                frames_sent += 1
+                sps = {}
+                for s in core.sysids:
+                    g = generalized_gravity(m, m.pin_model.createData(), core.world.state(s))
+                    att = AttitudeTarget(k, q0[s], [0.0, 0.0, 0.0], hover)
+                    sps[s] = AttitudeSetpoint(k, att, g[6:])  # the arm holds itself up
+                if k == 300:
+                    sps[5] = TorqueSetpoint(k, m.mass_kg * m.gravity_mps2, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
+                core.actuate(k, sps)
+            else:
+                core.hold(k)
+            core.step()
+        out = core.finish()
+        for s in core.sysids:
+            x = core.world.state(s)
+            assert abs(x.p_WB[2] - z0[s]) < 0.05 and np.linalg.norm(x.w_B) < 0.05  # hovering, level
+            assert abs(x.R_WB[2, 0]) < 0.02 and abs(x.R_WB[2, 1]) < 0.02
+            assert np.allclose(core.world.attitude_and_rate(s)[0], q0[s], atol=0.02)
+    finally:
+        core.close()
+    assert frames_sent == 150 and out["control_every"] == 4 and out["flight_controller"] == "attitude"
+    assert len(truths) == 60  # every 10 physics steps, control step or not
+    assert out["fc_link"]["5"]["other_mode"] == 1 and out["fc_link"]["4"]["other_mode"] == 0

@@ -86,3 +86,14 @@ def test_baseline_flies_the_approach_through_the_same_runner():
         assert max(abs(e) for e in a["y_err"]) < 5e-3
         assert out["ams"][str(sysid)]["saturated_steps"] == 0
         assert out["ams"][str(sysid)]["base_contacts"] == []
+def test_attitude_mode_in_process_run_is_bit_identical_to_the_multi_process_one(tmp_path):
+    """Attitude mode at 250 Hz: the lockstep exchanges on control steps only, the emulated
+    autopilot flies between them; SET_ATTITUDE_TARGET's float32 rounding is the same in both."""
+    spec = load_scenario(SCENARIOS / "two_am_comp_attitude.toml")
+    ours = run(spec, duration_s=0.4)
+    sitl = am_run("two_am_comp_attitude.toml", tmp_path / "r", "--duration", "0.4", "--no-telemetry", timeout_s=300)
+    assert sitl.code == 0, sitl.stderr
+    assert ours["steps"] == sitl.outcome["steps"] == 400
+    assert ours["flight_controller"] == sitl.outcome["flight_controller"] == "attitude"
+    assert ours["fc_link"]["4"]["sent"] == sitl.outcome["fc_link"]["4"]["sent"] == 100  # one setpoint per 4 steps
+    assert ours["state_digest"] == sitl.outcome["state_digest"]

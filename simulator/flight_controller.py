@@ -1,0 +1,321 @@
+"""Emulated stock autopilot for attitude mode: PX4's multicopter attitude and rate loops and its
+control allocation, fed SET_ATTITUDE_TARGET (pure: numpy for set-up, Python floats per step).
+
+What runs, at [flight_controller].rate_hz, each named after the PX4 code it follows:
+
+1. Attitude P loop (mc_att_control, AttitudeControl::update). With q the vehicle's attitude
+   and q_d the target: the reduced target q_red turns the thrust axis e_z onto e_z,d by the
+   shortest rotation; q_d's remaining yaw about e_z,d is scaled by MC_YAW_WEIGHT (roll and
+   pitch come first); with q_e = q^-1 q_d (w >= 0), the rate setpoint is
+       Omega_sp = sat(P (.) 2 vec(q_e) + Omega_ff),   P = (MC_ROLL_P, MC_PITCH_P, MC_YAW_P / MC_YAW_WEIGHT),
+   saturated at MC_*RATE_MAX; Omega_ff the target's body rates (body_rate_feedforward).
+2. Rate PID (mc_rate_control, RateControl::update), normalized torque per axis:
+       u = K P e + I + K D (-d/dt Omega) + FF Omega_sp,   e = Omega_sp - Omega,
+   Omega through a 2nd-order Butterworth at IMU_GYRO_CUTOFF, its derivative through one at
+   IMU_DGYRO_CUTOFF (PX4's LowPassFilter2p). Anti-windup as PX4: the integral stops growing
+   on an axis the allocation saturated in that direction, is attenuated for large errors
+   (factor 1 - (e / 400 deg/s)^2) and is clamped at MC_*_INT_LIM.
+3. Control allocation (control_allocator, ControlAllocationPseudoInverse with
+   ControlAllocationSequentialDesaturation, MC_AIRMODE = 0): the pseudo-inverse of the
+   rotors' effectiveness, normalized as PX4 normalizes it (roll and pitch together so that
+   a unit command moves the rotors by +-0.707 on an X quad, yaw by its largest entry,
+   thrust by the mean), then desaturated in PX4's order: thrust (only downwards), roll,
+   pitch; yaw is added last with a 15 % margin above full thrust and desaturated, then
+   thrust again (only downwards). Rotor outputs in [thrust_min/thrust_max, 1] become
+   rotor thrusts with the linear thrust curve f = thrust_max_n * output (PX4 THR_MDL_FAC = 0).
+
+Units and the gain mapping to this vehicle: a normalized torque u on an axis is the physical
+torque u * S_axis [N m], S = `Px4Allocation.torque_scale_nm` (for the X quad with arm L and
+rotor thrust f_max: S_roll = S_pitch = 2 L f_max, S_yaw = 4 k f_max, k the yaw moment
+coefficient); thrust 1 is count * f_max. So MC_ROLLRATE_P is S_roll * MC_ROLLRATE_P N m s/rad
+of physical rate damping (docs/flight_controller.md).
+
+Frames: PX4 works in NED/FRD, this module in the simulator's ENU/FLU. The laws are the same
+vectors in other coordinates (the gains are per axis and sign-free), so nothing else changes.
+The emulation reads the simulator's exact attitude and rates (no estimator).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from amcore.config import FlightControllerParams, RotorParams
+
+from .mixer import QuadMixer  # the rotor geometry, defined once
+
+_I_ATTENUATION_RAD_S = math.radians(400.0)  # RateControl::updateIntegral's i_factor scale
+_YAW_MARGIN = 0.15  # ControlAllocationSequentialDesaturation: yaw's room above full output
+_WEAK_EFFECTIVENESS = 0.2  # computeDesaturationGain ignores actuators weaker than this
+_ACHIEVED_TOL = 1e-6  # |unallocated|^2 below which the allocation counts as achieved (normalized)
+
+
+# ----------------------------------------------------------------------------- quaternions
+Quat = tuple[float, float, float, float]  # (w, x, y, z)
+
+
+def quat_mul(a: Quat, b: Quat) -> Quat:
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
+
+
+def quat_inv(q: Quat) -> Quat:
+    """Inverse of a unit quaternion (its conjugate)."""
+    return (q[0], -q[1], -q[2], -q[3])
+
+
+def quat_normalized(q) -> Quat:
+    w, x, y, z = q
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    return (w / n, x / n, y / n, z / n)
+
+
+def quat_canonical(q: Quat) -> Quat:
+    """The representative with w >= 0 (matrix::Quaternion::canonical)."""
+    return q if q[0] >= 0.0 else (-q[0], -q[1], -q[2], -q[3])
+
+
+def quat_z_axis(q: Quat) -> tuple[float, float, float]:
+    """Third column of R(q): the body z axis in the world (matrix::Quaternion::dcm_z)."""
+    w, x, y, z = q
+    return (2.0 * (w * y + x * z), 2.0 * (y * z - w * x), w * w - x * x - y * y + z * z)
+
+
+def quat_between(src, dst, eps: float = 1e-5) -> Quat:
+    """Shortest rotation taking unit vector src onto dst (matrix::Quaternion(src, dst))."""
+    s0, s1, s2 = src
+    d0, d1, d2 = dst
+    c = (s1 * d2 - s2 * d1, s2 * d0 - s0 * d2, s0 * d1 - s1 * d0)
+    dot = s0 * d0 + s1 * d1 + s2 * d2
+    if math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]) < eps and dot < 0.0:  # opposite: any normal axis
+        a = (abs(s0), abs(s1), abs(s2))
+        axis = (1.0, 0.0, 0.0) if a[0] < a[1] and a[0] < a[2] else (0.0, 1.0, 0.0) if a[1] < a[2] else (0.0, 0.0, 1.0)
+        c = (s1 * axis[2] - s2 * axis[1], s2 * axis[0] - s0 * axis[2], s0 * axis[1] - s1 * axis[0])
+        w = 0.0
+    else:
+        w = dot + math.sqrt((s0 * s0 + s1 * s1 + s2 * s2) * (d0 * d0 + d1 * d1 + d2 * d2))
+    return quat_normalized((w, *c))
+
+
+def attitude_error(q: Quat, q_d: Quat, yaw_weight: float) -> tuple[float, float, float]:
+    """2 vec(q_e) of AttitudeControl::update: the rotation from q to the yaw-weighted target,
+    in the body frame, as sin(angle / 2) times the axis, doubled."""
+    e_z, e_z_d = quat_z_axis(q), quat_z_axis(q_d)
+    q_red = quat_between(e_z, e_z_d)
+    if abs(q_red[1]) > 1.0 - 1e-5 or abs(q_red[2]) > 1.0 - 1e-5:  # thrust axes opposite: full attitude
+        q_red = q_d
+    else:
+        q_red = quat_mul(q_red, q)  # the vehicle tilted onto the target's thrust axis, in the world
+    w, _, _, z = quat_canonical(quat_mul(quat_inv(q_red), q_d))  # the yaw left about e_z,d
+    w, z = min(max(w, -1.0), 1.0), min(max(z, -1.0), 1.0)
+    q_target = quat_mul(q_red, (math.cos(yaw_weight * math.acos(w)), 0.0, 0.0, math.sin(yaw_weight * math.asin(z))))
+    _, ex, ey, ez = quat_canonical(quat_mul(quat_inv(q), q_target))
+    return (2.0 * ex, 2.0 * ey, 2.0 * ez)
+
+
+# ----------------------------------------------------------------------------- filters
+class LowPass2p:
+    """2nd-order Butterworth low-pass by the bilinear transform (PX4's math::LowPassFilter2p);
+    cutoff 0 passes the input through. Starts at its first input, as PX4's reset(sample)."""
+
+    def __init__(self, sample_hz: float, cutoff_hz: float) -> None:
+        self.active = cutoff_hz > 0.0
+        if not self.active:
+            return
+        if not cutoff_hz < 0.5 * sample_hz:
+            raise ValueError(f"low-pass cutoff {cutoff_hz} Hz must be below half the loop rate {sample_hz} Hz")
+        ohm = math.tan(math.pi * cutoff_hz / sample_hz)
+        c = 1.0 + 2.0 * math.cos(math.pi / 4.0) * ohm + ohm * ohm
+        self.b0 = ohm * ohm / c
+        self.b1, self.b2 = 2.0 * self.b0, self.b0
+        self.a1 = 2.0 * (ohm * ohm - 1.0) / c
+        self.a2 = (1.0 - 2.0 * math.cos(math.pi / 4.0) * ohm + ohm * ohm) / c
+        self.d1 = self.d2 = None
+
+    def apply(self, x: float) -> float:
+        if not self.active:
+            return x
+        if self.d1 is None:  # reset to a steady state at x
+            self.d1 = self.d2 = x / (self.b0 + self.b1 + self.b2)
+        d0 = x - self.d1 * self.a1 - self.d2 * self.a2
+        y = d0 * self.b0 + self.d1 * self.b1 + self.d2 * self.b2
+        self.d2, self.d1 = self.d1, d0
+        return y
+
+
+# ----------------------------------------------------------------------------- allocation
+@dataclass(frozen=True)
+class AllocationResult:
+    """One allocation: outputs (count,) in [min, max]; allocated and unallocated control in
+    normalized units (roll, pitch, yaw torque, thrust); saturated if the request was not met."""
+
+    outputs: tuple[float, ...]
+    allocated: tuple[float, float, float, float]
+    unallocated: tuple[float, float, float, float]
+    saturated: bool
+
+
+class Px4Allocation:
+    """PX4's pseudo-inverse allocation with sequential desaturation, airmode off (see module doc)."""
+
+    def __init__(self, rotors: RotorParams) -> None:
+        if rotors.count != 4 or rotors.layout != "x":
+            raise ValueError(f"the PX4 allocation here supports the X quad (count 4); got {rotors.count}, {rotors.layout}")
+        m = QuadMixer.from_rotors(rotors)
+        # effectiveness of one unit of output per rotor, rows (tau_x, tau_y, tau_z, T): A reordered, times f_max
+        B = np.vstack([m.A[1:4], m.A[0:1]]) * rotors.thrust_max_n
+        mix = np.linalg.pinv(B)  # (4 rotors, 4 axes)
+        n_rp = [int(np.sum(np.abs(mix[:, k]) > 1e-3)) for k in (0, 1)]
+        rp = max(math.sqrt(float(mix[:, k] @ mix[:, k]) / (n / 2.0)) for k, n in zip((0, 1), n_rp))
+        nz = np.abs(mix[:, 3]) > np.finfo(np.float32).eps
+        scale = np.array([rp, rp, float(mix[:, 2].max()), float(np.abs(mix[nz, 3]).sum() / nz.sum())])
+        self.mix = mix / scale  # normalized: outputs per unit normalized command
+        self.effectiveness_normalized = B * scale[:, None]  # normalized control per unit output
+        self.torque_scale_nm = tuple((1.0 / scale[:3]).tolist())  # physical torque per unit normalized torque
+        self.thrust_scale_n = float(1.0 / scale[3])  # physical thrust per unit normalized thrust
+        self.thrust_max_n = rotors.thrust_max_n
+        self.out_min = rotors.thrust_min_n / rotors.thrust_max_n
+        self.out_max = 1.0
+        cols = self.mix.T.tolist()
+        self._roll, self._pitch, self._yaw, self._thrust = (tuple(c) for c in cols)
+        self._eff = tuple(map(tuple, self.effectiveness_normalized.tolist()))
+
+    def _gain(self, v, out, hi: float) -> float:
+        """computeDesaturationGain: k_min + k_max over the outputs outside [out_min, hi]."""
+        lo = self.out_min
+        k_min = k_max = 0.0
+        for vi, x in zip(v, out):
+            if abs(vi) < _WEAK_EFFECTIVENESS:
+                continue
+            if x < lo:
+                k = (lo - x) / vi
+                k_min, k_max = min(k_min, k), max(k_max, k)
+            if x > hi:
+                k = (hi - x) / vi
+                k_min, k_max = min(k_min, k), max(k_max, k)
+        return k_min + k_max
+
+    def _desaturate(self, out: list, v, hi: float, thrust_down_only: bool = False) -> list:
+        """desaturateActuators along v; with thrust_down_only, a move that would raise the
+        thrust (v is the thrust column, positive here in FLU) is not made."""
+        g = self._gain(v, out, hi)
+        if thrust_down_only and g > 0.0:
+            return out
+        out = [x + g * vi for x, vi in zip(out, v)]
+        g = 0.5 * self._gain(v, out, hi)
+        return [x + g * vi for x, vi in zip(out, v)]
+
+    def allocate(self, roll: float, pitch: float, yaw: float, thrust: float) -> AllocationResult:
+        """Outputs for normalized (roll, pitch, yaw) torque and thrust in [0, 1] (mixAirmodeDisabled)."""
+        r, p, y, t = self._roll, self._pitch, self._yaw, self._thrust
+        lo, hi = self.out_min, self.out_max
+        out = [roll * a + pitch * b + thrust * c for a, b, c in zip(r, p, t)]
+        full = [x + yaw * a for x, a in zip(out, y)]
+        if min(out) >= lo and max(out) <= hi and min(full) >= lo and max(full) <= hi:
+            # inside the limits with and without yaw: every desaturation gain below is zero
+            return AllocationResult(tuple(full), (roll, pitch, yaw, thrust), (0.0, 0.0, 0.0, 0.0), False)
+        out = self._desaturate(out, t, hi, thrust_down_only=True)
+        out = self._desaturate(out, r, hi)
+        out = self._desaturate(out, p, hi)
+        out = [x + yaw * a for x, a in zip(out, y)]  # mixYaw
+        out = self._desaturate(out, y, hi + (hi - self.out_min) * _YAW_MARGIN)
+        out = self._desaturate(out, t, hi, thrust_down_only=True)
+        out = tuple(min(max(x, self.out_min), hi) for x in out)
+        allocated = tuple(sum(e * x for e, x in zip(row, out)) for row in self._eff)
+        unallocated = (roll - allocated[0], pitch - allocated[1], yaw - allocated[2], thrust - allocated[3])
+        return AllocationResult(out, allocated, unallocated, sum(u * u for u in unallocated) > _ACHIEVED_TOL)
+
+
+# ----------------------------------------------------------------------------- the loops
+@dataclass(frozen=True)
+class FcOutput:
+    """One flight-controller period: rotor thrust commands [N], the allocation, and the loops'
+    setpoints (body rates [rad/s], normalized torque) for logging and tests."""
+
+    rotor_thrusts_n: tuple[float, ...]
+    allocation: AllocationResult
+    rates_sp: tuple[float, float, float]
+    torque_sp: tuple[float, float, float]
+    thrust_sp: float
+
+
+class FlightController:
+    """One vehicle's emulated PX4 (see module doc). `step(quat_WB_wxyz, w_B, target)` once per
+    physics step; it runs its loops every `physics rate / rate_hz` steps and holds its output
+    between. `target` is the held SET_ATTITUDE_TARGET (`amlink.types.AttitudeTarget`, ENU/FLU)."""
+
+    def __init__(self, fc: FlightControllerParams, rotors: RotorParams, physics_dt_s: float) -> None:
+        self.params = fc
+        self.every = max(1, round(1.0 / (fc.rate_hz * physics_dt_s)))
+        self.dt_s = self.every * physics_dt_s
+        rate_hz = 1.0 / self.dt_s
+        self.allocation = Px4Allocation(rotors)
+        self.yaw_weight = fc.MC_YAW_WEIGHT
+        w = fc.MC_YAW_WEIGHT
+        # AttitudeControl::setProportionalGain: the yaw gain compensates the yaw weight's scaling
+        self.att_p = (fc.MC_ROLL_P, fc.MC_PITCH_P, fc.MC_YAW_P / w if w > 1e-4 else fc.MC_YAW_P)
+        self.rate_max = tuple(math.radians(x) for x in (fc.MC_ROLLRATE_MAX, fc.MC_PITCHRATE_MAX, fc.MC_YAWRATE_MAX))
+        k = (fc.MC_ROLLRATE_K, fc.MC_PITCHRATE_K, fc.MC_YAWRATE_K)
+        self.gain_p = tuple(a * b for a, b in zip(k, (fc.MC_ROLLRATE_P, fc.MC_PITCHRATE_P, fc.MC_YAWRATE_P)))
+        self.gain_i = tuple(a * b for a, b in zip(k, (fc.MC_ROLLRATE_I, fc.MC_PITCHRATE_I, fc.MC_YAWRATE_I)))
+        self.gain_d = tuple(a * b for a, b in zip(k, (fc.MC_ROLLRATE_D, fc.MC_PITCHRATE_D, fc.MC_YAWRATE_D)))
+        self.gain_ff = (fc.MC_ROLLRATE_FF, fc.MC_PITCHRATE_FF, fc.MC_YAWRATE_FF)
+        self.int_lim = (fc.MC_RR_INT_LIM, fc.MC_PR_INT_LIM, fc.MC_YR_INT_LIM)
+        self.feedforward = fc.body_rate_feedforward
+        self._gyro = [LowPass2p(rate_hz, fc.IMU_GYRO_CUTOFF) for _ in range(3)]
+        self._dgyro = [LowPass2p(rate_hz, fc.IMU_DGYRO_CUTOFF) for _ in range(3)]
+        self.rate_int = [0.0, 0.0, 0.0]
+        self._w_prev: tuple[float, float, float] | None = None
+        self._sat_pos = self._sat_neg = (False, False, False)
+        self._k = 0
+        self.output: FcOutput | None = None
+
+    def step(self, quat_WB_wxyz, w_B, target) -> FcOutput | None:
+        """The output for this physics step (None until a target has arrived)."""
+        k, self._k = self._k, self._k + 1
+        if target is None:
+            return self.output
+        if self.output is not None and k % self.every:
+            return self.output
+        self.output = self._update(quat_normalized(quat_WB_wxyz), tuple(w_B), target)
+        return self.output
+
+    def _update(self, q: Quat, w, target) -> FcOutput:
+        # gyro and its derivative (VehicleAngularVelocity): differentiate the raw rate, then filter
+        w_prev = self._w_prev if self._w_prev is not None else w
+        self._w_prev = w
+        rate = [f.apply(x) for f, x in zip(self._gyro, w)]
+        accel = [f.apply((x - x0) / self.dt_s) for f, x, x0 in zip(self._dgyro, w, w_prev)]
+
+        # 1. attitude P loop
+        q_d = quat_normalized(target.quat_wxyz.tolist())
+        e = attitude_error(q, q_d, self.yaw_weight)
+        ff = target.rates_rad_s.tolist() if self.feedforward else (0.0, 0.0, 0.0)
+        rates_sp = tuple(min(max(p * ei + f, -m), m) for p, ei, f, m in zip(self.att_p, e, ff, self.rate_max))
+
+        # 2. rate PID, the integral updated after the output (RateControl::update)
+        err = [s - r for s, r in zip(rates_sp, rate)]
+        torque = tuple(p * ei + i - d * a + f * s for p, ei, i, d, a, f, s in
+                       zip(self.gain_p, err, self.rate_int, self.gain_d, accel, self.gain_ff, rates_sp))
+        for ax in range(3):
+            ei = err[ax]
+            if self._sat_pos[ax]:
+                ei = min(ei, 0.0)
+            if self._sat_neg[ax]:
+                ei = max(ei, 0.0)
+            i_factor = max(0.0, 1.0 - (ei / _I_ATTENUATION_RAD_S) ** 2)
+            r_i = self.rate_int[ax] + i_factor * self.gain_i[ax] * ei * self.dt_s
+            if math.isfinite(r_i):
+                self.rate_int[ax] = min(max(r_i, -self.int_lim[ax]), self.int_lim[ax])
+
+        # 3. allocation; its saturation steers the next integration (control_allocator_status)
+        thrust = min(max(float(target.thrust_normalized), 0.0), 1.0)
+        a = self.allocation.allocate(*torque, thrust)
+        achieved = not a.saturated
+        self._sat_pos = tuple(not achieved and u > 1.2e-7 for u in a.unallocated[:3])
+        self._sat_neg = tuple(not achieved and u < -1.2e-7 for u in a.unallocated[:3])
+        f_max = self.allocation.thrust_max_n
+        return FcOutput(tuple(f_max * x for x in a.outputs), a, rates_sp, torque, thrust)
