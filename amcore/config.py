@@ -285,6 +285,9 @@ class MissionSpec:
     friction_assumed: float = 0.5  # the lowest pad-object friction coefficient planned for
     friction_margin: float = 1.5
     thrust_fraction_max: float = 0.8  # of the rotors' total maximum, for weight, load share and squeeze
+    # the most normal force the AM may push with [N] (inf: only thrust_fraction_max bounds it): the
+    # squeeze's and the load's moment on the base must leave its pitch authority room to fly
+    squeeze_max_n: float = math.inf
     lift_m: float = 0.3
     join_blend_s: float = 3.0  # a companion started mid-run (a restart) blends into the references over this
     # a companion started mid-run whose wrist sensor reads a push resumes it (amcore.mission.join_blend);
@@ -683,7 +686,7 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     mission = MissionSpec(**_build(MissionSpec, data.get("mission", {}), f"{where}: [mission]"))
     if not (0 < mission.approach_end_s < mission.grasp_end_s < mission.hover_end_s):
         raise ConfigError(f"{where}: [mission]: need 0 < approach_end_s < grasp_end_s < hover_end_s")
-    for key in ("friction_assumed", "friction_margin", "thrust_fraction_max"):
+    for key in ("friction_assumed", "friction_margin", "thrust_fraction_max", "squeeze_max_n"):
         _positive(f"{where}: [mission].{key}", getattr(mission, key))
     if mission.thrust_fraction_max > 1.0:
         raise ConfigError(f"{where}: [mission].thrust_fraction_max: must be <= 1, got {mission.thrust_fraction_max}")

@@ -67,7 +67,8 @@ class SqueezePlan:
 
     required_n: friction_margin * m_obj g / (n_AM mu); feasible_n: the most the AM can push
     while its thrust also carries its weight and its share, within thrust_fraction_max of
-    the maximum: sqrt((k T_max)^2 - (m_AM g + m_obj g / n_AM)^2)."""
+    the maximum: sqrt((k T_max)^2 - (m_AM g + m_obj g / n_AM)^2), and at most
+    [mission].squeeze_max_n."""
 
     force_n: float
     depth_m: float
@@ -84,7 +85,7 @@ def squeeze_plan(spec: ScenarioSpec, model: AmModel) -> SqueezePlan:
     required = ms.friction_margin * share / ms.friction_assumed
     weight = model.mass_kg * g + share
     thrust = ms.thrust_fraction_max * v.rotors.count * v.rotors.thrust_max_n
-    feasible = math.sqrt(max(thrust * thrust - weight * weight, 0.0))
+    feasible = min(math.sqrt(max(thrust * thrust - weight * weight, 0.0)), ms.squeeze_max_n)
     if not ms.squeeze_sizing:
         return SqueezePlan(fixed, ms.squeeze_m, required, feasible)
     force = max(fixed, min(required, feasible))

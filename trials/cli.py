@@ -2,7 +2,7 @@
 mission verdict, on a local process pool or a Dask distributed cluster.
 
     am-trials SCENARIO --trials N --seed S --out DIR [--workers K] [--scheduler ADDRESS]
-              [--randomize FILE] [--controller NAME ...]
+              [--randomize FILE] [--controller NAME ...] [--set TABLE.KEY=VALUE ...]
 
 What varies: --randomize FILE's [randomize] table, else the scenario's own, else
 configs/randomize/default.toml (see trials/randomize.py). Trial i of seed S is the same
@@ -11,7 +11,10 @@ drawn value, the verdict, its failure class and reason, the key figures, the sta
 summary.json (success rate, Wilson 95 % interval, counts per failure class), plots/ and
 scenarios/trial-NNNN.toml: each trial as a scenario file that `am-run` replays through the
 real processes, with its MCAP log. Several --controller options run the same trials with
-each law (DIR/<controller>/...) and write DIR/comparison.md.
+each law (DIR/<controller>/...) and write DIR/comparison.md. --set changes the base
+scenario before the draws (a value in TOML syntax; `am.KEY` sets it on every [[am]]), e.g.
+`--set mission.squeeze_sizing=true --set pad.shape='"crowned"'`: a campaign with and without
+an option on the same trials.
 Exit codes: 0 the campaign ran (whatever its success rate), 2 bad arguments or
 configuration, 1 a trial raised (a bug: failed missions are verdicts, not errors).
 """
@@ -70,9 +73,38 @@ def parse_args(argv):
     ap.add_argument("--randomize", type=Path, default=None, help="TOML file with a [randomize] table")
     ap.add_argument("--controller", action="append", default=None,
                     help="control law for every trial ([options].controller); repeat to compare laws")
+    ap.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE", dest="overrides",
+                    help="change the base scenario before the draws (VALUE in TOML syntax; am.KEY: every [[am]])")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     ap.add_argument("--no-plots", action="store_true", help="no plots")
     return ap.parse_args(argv)
+
+
+def apply_overrides(base: dict, overrides: list[str]) -> dict:
+    """The scenario data with each TABLE.KEY=VALUE of `--set` applied (VALUE parsed as TOML;
+    `am.KEY` on every [[am]] entry). Raises ConfigError naming the malformed one."""
+    import tomllib
+
+    data = copy.deepcopy(base)
+    for text in overrides:
+        name, eq, value = text.partition("=")
+        table, dot, key = name.strip().partition(".")
+        if not (eq and dot and table and key) or "." in key:
+            raise ConfigError(f"--set {text!r}: expected TABLE.KEY=VALUE, e.g. mission.squeeze_sizing=true")
+        try:
+            v = tomllib.loads(f"v = {value.strip()}")["v"]
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"--set {text!r}: VALUE is not a TOML value ({exc}; strings need quotes: "
+                              f"pad.shape='\"crowned\"')") from None
+        if table == "am":
+            for entry in data.get("am", []):
+                entry[key] = v
+        else:
+            t = data.setdefault(table, {})
+            if not isinstance(t, dict):
+                raise ConfigError(f"--set {text!r}: [{table}] is not a table")
+            t[key] = v
+    return data
 
 
 def _randomization(a, base: dict, scenario: Path) -> tuple[RandomizeSpec, str]:
@@ -128,7 +160,9 @@ def main(argv: list[str] | None = None) -> int:
     scenario = a.scenario.resolve()
     try:
         load_scenario(scenario)
-        base = _read_toml(scenario)
+        base = apply_overrides(_read_toml(scenario), a.overrides)
+        if a.overrides:
+            scenario_from_dict(base, scenario)  # an override the scenario cannot take stops here, named
         rand, rand_source = _randomization(a, base, scenario)
     except ConfigError as exc:
         print(f"am-trials: error: {exc}", file=sys.stderr)
@@ -205,9 +239,9 @@ def _campaign(a, tasks: list[TrialTask], out: Path, controller: str | None, work
     report.write_csv(rows, out / "trials.csv")
     params = [k for k in rows[0] if k in tasks[0].params and k != "seed"]
     params += [k for k in ("max_abs_misalignment_deg", "max_start_offset_m") if k in rows[0]]
-    summary = report.summarize(rows, scenario=str(a.scenario), controller=rows[0]["controller"], seed=a.seed,
-                               randomize=rand_source, executor=where, wall_s=wall,
-                               trials_per_minute=60.0 * len(rows) / wall)
+    summary = report.summarize(rows, scenario=str(a.scenario), overrides=a.overrides,
+                               controller=rows[0]["controller"], seed=a.seed, randomize=rand_source,
+                               executor=where, wall_s=wall, trials_per_minute=60.0 * len(rows) / wall)
     report.write_summary(summary, out / "summary.json")
     if not a.no_plots:
         report.plot_parameters(rows, params, out / "plots", f"{a.scenario.stem}, {summary['controller']}, "

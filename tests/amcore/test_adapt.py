@@ -91,3 +91,14 @@ def test_squeeze_sizing_holds_the_share_with_the_margin_within_the_thrust():
     assert squeeze_plan(light, model).force_n == pytest.approx(k_x * spec.mission.squeeze_m)  # never below fixed
     mission = am_mission(on, on.am(4), model)
     assert mission.reference(on.mission.grasp_end_s).y[0] == pytest.approx(-(0.1 - p.depth_m))
+
+
+def test_squeeze_sizing_stops_at_the_missions_cap_but_never_below_the_fixed_squeeze():
+    spec = load_scenario(SCENARIO)
+    model = build_model(spec.vehicle)
+    k_x = spec.vehicle.gains.K_y[0]
+    on = dataclasses.replace(spec, mission=dataclasses.replace(spec.mission, squeeze_sizing=True, squeeze_max_n=12.0))
+    p = squeeze_plan(on, model)
+    assert p.required_n > 12.0 and p.force_n == pytest.approx(12.0) and p.depth_m == pytest.approx(12.0 / k_x)
+    low = dataclasses.replace(on, mission=dataclasses.replace(on.mission, squeeze_max_n=1.0))
+    assert squeeze_plan(low, model).force_n == pytest.approx(k_x * spec.mission.squeeze_m)

@@ -131,3 +131,33 @@ def test_a_trial_that_raises_is_an_error_row_and_the_others_run_on():
         rows = run_all(bad, ex, seen.append)
     assert [r["trial"] for r in rows] == [0, 1, 2] and len(seen) == 3
     assert all(r["verdict"] == "error" and "unknown table [colour]" in r["reason"] for r in rows)
+
+
+def test_set_changes_the_base_scenario_of_every_trial_and_only_what_it_names(tmp_path):
+    base = _read_toml(SHORT)
+    data = cli.apply_overrides(base, ["mission.squeeze_sizing=true", "pad.shape=\"crowned\"",
+                                      "am.misalignment_deg=1.5"])
+    assert data["mission"]["squeeze_sizing"] is True and data["pad"]["shape"] == "crowned"
+    assert [a["misalignment_deg"] for a in data["am"]] == [1.5] * len(base["am"])
+    assert data["object"] == base["object"] and "pad" not in base  # the base is left as it was
+    rand = load_randomize(cli.DEFAULT_RANDOMIZE)
+    plain = cli.build_tasks(base, SHORT, rand, 5, 2, tmp_path / "a", None)
+    changed = cli.build_tasks(data, SHORT, rand, 5, 2, tmp_path / "b", None)
+    for p, c in zip(plain, changed):  # the same draws, the option on
+        assert p.params == c.params
+        spec = load_scenario(c.path)
+        assert spec.mission.squeeze_sizing and spec.vehicle.pad.shape == "crowned"
+        assert not load_scenario(p.path).mission.squeeze_sizing
+
+
+@pytest.mark.parametrize("override,words", [
+    ("mission.squeeze_sizing", "expected TABLE.KEY=VALUE"),
+    ("squeeze_sizing=true", "expected TABLE.KEY=VALUE"),
+    ("pad.shape=crowned", "VALUE is not a TOML value"),
+    ("mission.squeeze_size=true", "[mission]: unknown key 'squeeze_size'"),
+    ("pad.crown_radius_m=-1.0", "crown_radius_m"),
+])
+def test_a_bad_set_exits_2_naming_it(tmp_path, capsys, override, words):
+    assert cli.main([str(SHORT), "--trials", "1", "--seed", "1", "--out", str(tmp_path / "o"),
+                     "--set", override]) == 2
+    assert words in capsys.readouterr().err
