@@ -167,6 +167,12 @@ class FlightControllerParams:
       autopilot (`simulator.flight_controller`) closes attitude and rate loops at `rate_hz`.
       body_rate_feedforward: add the target's body rates to the rate setpoint (false: the
       attitude P loop alone makes it).
+    - failsafe_after_rejected: K. A setpoint the flight controller refuses as implausible
+      (non-finite, or beyond `amlink.limits` of this vehicle) is answered at once: the flight
+      controller keeps flying the last valid command and counts the refusal. After K refused
+      setpoints in a row from one companion, that vehicle goes to its failsafe (hold, then
+      land; `simulator.failsafe`) for the rest of the run: its companion's setpoints are
+      ignored from then on. Both modes; the simulator's --failsafe-after-rejected overrides it.
 
     The upper-case keys are PX4 parameters under their PX4 names and in PX4's units (rad/s
     per rad, normalized torque per rad/s, deg/s, Hz); their defaults are PX4's, the vehicle
@@ -176,6 +182,7 @@ class FlightControllerParams:
     mode: str = "torque"
     rate_hz: float = 1000.0
     body_rate_feedforward: bool = True
+    failsafe_after_rejected: int = 10  # K refused setpoints in a row -> failsafe [control periods]
     MC_ROLL_P: float = 6.5
     MC_PITCH_P: float = 6.5
     MC_YAW_P: float = 2.8
@@ -608,6 +615,8 @@ def _check_flight_controller(fc: FlightControllerParams, where: str) -> None:
     if fc.mode not in FC_MODES:
         raise ConfigError(f"{where}.mode: expected one of {', '.join(FC_MODES)}, got '{fc.mode}'")
     _positive(f"{where}.rate_hz", fc.rate_hz)
+    if not fc.failsafe_after_rejected >= 1:
+        raise ConfigError(f"{where}.failsafe_after_rejected: must be >= 1, got {fc.failsafe_after_rejected!r}")
     for f in dataclasses.fields(fc):
         if f.name.isupper() and not getattr(fc, f.name) >= 0.0:
             raise ConfigError(f"{where}.{f.name}: must be >= 0, got {getattr(fc, f.name)!r}")

@@ -9,6 +9,9 @@ every companion its sensor frame (ODOMETRY, AM_JOINT_STATE, AM_WRENCH, AM_SIM_ST
 all N setpoints answering step k (the N exchanges run concurrently) and applies them through
 the flight controller (torque mode: the rotor mixer; attitude mode: the emulated autopilot)
 and the joint limits (saturation is counted and logged); it steps physics every step.
+A setpoint rejected as implausible is answered at once: the flight controller holds its last
+valid command and counts it, and K rejections in a row send that vehicle to failsafe for the
+rest of the run (--failsafe-after-rejected; simulator.core).
 It also plays each vehicle's flight-controller GCS port (--gcs, simulator.gcs_link), as
 PX4 SITL does. The run folder gets outcome.json (the physical outcome from ground truth, see
 simulator.outcome, and the mission verdict, simulator.verdict) and gcs.tlog. Exit codes: 0
@@ -105,6 +108,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--peer-timeout", type=float, default=60.0, help="seconds to wait for every companion at start")
     ap.add_argument("--step-timeout", type=float, default=5.0,
                     help="seconds a companion may stay silent before its vehicle goes to failsafe")
+    ap.add_argument("--failsafe-after-rejected", type=int, default=None, metavar="K",
+                    help="a vehicle goes to failsafe after K of its setpoints in a row are rejected as implausible "
+                         "(each one is answered at once: the flight controller holds the last valid command); "
+                         "default: the scenario's [flight_controller].failsafe_after_rejected")
     ap.add_argument("--key-file", type=Path, default=None,
                     help="signing master key (64 hex digits); overrides [link].key_file of the scenario")
     ap.add_argument("--progress", choices=("bar", "jsonl", "none"), default=None,
@@ -157,7 +164,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"simulator: {msg}", file=sys.stderr, flush=True)
         sim_tele.fault(core.time_s, msg, level="warning")
 
-    core = SitlCore(spec, log=log, on_truth=sim_tele.truth)
+    core = SitlCore(spec, log=log, on_truth=sim_tele.truth, failsafe_after_rejected=a.failsafe_after_rejected)
     v = spec.vehicle
     limits = SetpointLimits.for_vehicle(v.rotors.count * v.rotors.thrust_max_n, max(v.joint_torque_max_nm), v.n_joints)
     gcs_link = GcsLink(gcs_endpoint, sysids, key=gcs_key, accept_unsigned=keys is None, tlog=run_dir / "gcs.tlog")
@@ -196,7 +203,6 @@ def main(argv: list[str] | None = None) -> int:
                   f"publishing anyway", file=sys.stderr, flush=True)
         progress.t_wall0 = time.perf_counter()
         sim_tele.start(core.time_s)
-        rejected = server.stats.rejected_setpoints
 
         def bookkeeping() -> None:  # while the companions compute step k
             core.observe()
@@ -207,10 +213,8 @@ def main(argv: list[str] | None = None) -> int:
                 # each frame leaves as soon as it is read; each setpoint is applied as it arrives
                 setpoints = server.exchange(core.iter_frames(k), partial=True, while_waiting=bookkeeping,
                                             on_setpoint=core.on_setpoint)
-                if server.stats.rejected_setpoints != rejected:  # the verdict names the first and counts them
-                    for _ in range(server.stats.rejected_setpoints - rejected):
-                        core.note_rejected(*server.last_rejection)
-                    rejected = server.stats.rejected_setpoints
+                for sysid, why in server.last_rejected:  # answered at once: hold, count, failsafe after K
+                    core.note_rejected(sysid, why)
                 core.actuate(k, setpoints, server.lost_peers)
             else:  # between the companions' control steps the flight controllers fly on their own
                 core.hold(k, server.lost_peers)
