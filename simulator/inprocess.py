@@ -12,7 +12,6 @@ Exit codes: 0 mission success, 4 mission failed (the verdict on stderr), 2 bad c
 """
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -20,7 +19,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from amcore.config import ConfigError, ScenarioSpec, load_scenario
+from amcore import cliargs
+from amcore.config import ConfigError, ScenarioSpec, check_duration, load_scenario
 from amlink import fastcodec
 from amlink.limits import SetpointLimits
 from amlink.types import AttitudeSetpoint, SensorFrame, TorqueSetpoint
@@ -107,18 +107,19 @@ def run(spec: ScenarioSpec, duration_s: float | None = None,
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m simulator.inprocess", description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = cliargs.ArgumentParser(prog="python -m simulator.inprocess", description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("scenario")
-    ap.add_argument("--duration", type=float, default=None)
-    ap.add_argument("--failsafe-after-rejected", type=int, default=None, metavar="K",
+    ap.add_argument("--duration", type=cliargs.seconds, default=None)
+    ap.add_argument("--failsafe-after-rejected", type=cliargs.count, default=None, metavar="K",
                     help="failsafe after K setpoints in a row rejected as implausible (default: the scenario's "
                          "[flight_controller].failsafe_after_rejected)")
     a = ap.parse_args(argv)
     try:
         spec = load_scenario(a.scenario)
+        if a.duration is not None:
+            check_duration(spec, a.duration, "--duration")
     except ConfigError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return cliargs.fail(ap.prog, str(exc))
     result = run(spec, a.duration, failsafe_after_rejected=a.failsafe_after_rejected)
     print(json.dumps(result, indent=1, default=str))
     print(result["verdict"]["text"], file=sys.stderr)

@@ -12,7 +12,6 @@ the mission failed, 2 bad configuration, 1 when a process failed.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import select
@@ -24,7 +23,8 @@ import sys
 import time
 from pathlib import Path
 
-from amcore.config import DEFAULT_SCENARIO, ConfigError, load_scenario
+from amcore import cliargs
+from amcore.config import DEFAULT_SCENARIO, ConfigError, check_duration, load_scenario
 from amlink.endpoint import DEFAULT_GCS, EndpointError, parse_endpoint
 
 from .verdict import MISSION_FAILED
@@ -58,13 +58,13 @@ class _Bar:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="am-run", description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = cliargs.ArgumentParser(prog="am-run", description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("scenario", nargs="?", type=Path, default=DEFAULT_SCENARIO, help="scenario TOML")
-    ap.add_argument("--run-dir", type=Path, default=None, help="run folder (default runs/<name>-<time>)")
-    ap.add_argument("--duration", type=float, default=None, help="override the scenario's duration [s]")
+    ap.add_argument("--run-dir", type=cliargs.output_dir, default=None, help="run folder (default runs/<name>-<time>)")
+    ap.add_argument("--duration", type=cliargs.seconds, default=None, help="override the scenario's duration [s]")
     ap.add_argument("--no-progress", action="store_true", help="no progress display")
     ap.add_argument("--no-telemetry", action="store_true", help="no Zenoh telemetry, no MCAP log, no review")
-    ap.add_argument("--startup-timeout", type=float, default=120.0, help="seconds for all processes to connect")
+    ap.add_argument("--startup-timeout", type=cliargs.seconds, default=120.0, help="seconds for all processes to connect")
     ap.add_argument("--gcs", default=DEFAULT_GCS, metavar="ENDPOINT",
                     help=f"the simulator's GCS link (default {DEFAULT_GCS}; mavutil's forms; 'none' for none)")
     ap.add_argument("--tlog-companions", action="store_true",
@@ -78,11 +78,16 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         spec = load_scenario(a.scenario)
+        if a.duration is not None:
+            check_duration(spec, a.duration, "--duration")
+        check_memory(spec)
     except ConfigError as exc:
-        print(f"am-run: error: {exc}", file=sys.stderr)
-        return 2
+        return cliargs.fail("am-run", str(exc))
     run_dir = (a.run_dir or Path("runs") / f"{spec.name}-{time.strftime('%Y%m%d-%H%M%S')}").resolve()
-    run_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        return cliargs.fail("am-run", f"--run-dir {run_dir}: {exc.strerror or exc}")
     cfg = str(Path(a.scenario).resolve())
     key_args = _fresh_key(spec, run_dir)
     sim_cmd = _command("simulator") + key_args + _gcs_key(spec, run_dir) + [
@@ -158,6 +163,42 @@ def main(argv: list[str] | None = None) -> int:
         print(f"am-run: the mission FAILED (verdict in {run_dir / 'outcome.json'})", file=sys.stderr)
         return MISSION_FAILED
     return 0
+
+
+# resident memory of the processes am-run starts [MiB], measured on two_am_comp (a companion
+# holds pinocchio, numpy and zenoh; the simulator PyBullet and the world of every AM)
+COMPANION_MIB = 191
+SIMULATOR_MIB = 250
+SIMULATOR_PER_AM_MIB = 2
+
+
+def memory_needed_mib(n_am: int) -> int:
+    """About how much memory a run of `n_am` AMs takes [MiB]: one companion process per AM,
+    the simulator and the recorder."""
+    return n_am * (COMPANION_MIB + SIMULATOR_PER_AM_MIB) + SIMULATOR_MIB + COMPANION_MIB
+
+
+def available_mib() -> float | None:
+    """MemAvailable of /proc/meminfo [MiB] (None where there is none)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) / 1024.0
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def check_memory(spec, available: float | None = None) -> None:
+    """ConfigError (before anything starts) if the run's processes would not fit in the memory
+    the machine has available: it would swap, or thrash without swap, instead of running."""
+    have = available_mib() if available is None else available
+    need = memory_needed_mib(len(spec.ams))
+    if have is not None and need > have:
+        raise ConfigError(f"{spec.path}: [[am]]: {len(spec.ams)} AMs need about {need / 1024:.1f} GiB "
+                          f"({COMPANION_MIB} MiB per companion process, plus the simulator and the recorder); "
+                          f"this machine has {have / 1024:.1f} GiB available")
 
 
 def _fresh_key(spec, run_dir: Path) -> list[str]:

@@ -26,6 +26,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from amcore.cliargs import seconds_or_zero
+
 from .schema import DEFAULT_PREFIX, Keys
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
@@ -61,6 +63,9 @@ class ZenohOptions:
             raise TelemetryConfigError(f"telemetry role {self.role!r} is not one of {ROLES}")
         if self.mode not in MODES:
             raise TelemetryConfigError(f"zenoh mode {self.mode!r} is not one of {MODES}")
+        for flag, endpoints in (("--zenoh-connect", self.connect), ("--zenoh-listen", self.listen)):
+            for e in endpoints or ():
+                check_zenoh_endpoint(e, flag, listening=flag == "--zenoh-listen")
         Keys(self.prefix)  # validates
 
     @property
@@ -82,6 +87,31 @@ class ZenohOptions:
         if self.config_file is not None:
             return ()
         return (DEFAULT_ENDPOINT,) if self.role == "recorder" else ()
+
+
+# zenoh's link protocols whose address is HOST:PORT, and the others it knows
+_HOST_PORT_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
+_OTHER_PROTOCOLS = ("unixsock-stream", "unixpipe", "serial", "vsock")
+
+
+def check_zenoh_endpoint(text: str, flag: str, listening: bool = False) -> None:
+    """A zenoh locator PROTOCOL/ADDRESS[#CONFIG] that can work (zenoh itself retries a
+    malformed one forever); TelemetryConfigError naming the flag if not."""
+    proto, sep, rest = text.partition("/")
+    address = rest.partition("#")[0].partition("?")[0]
+    known = _HOST_PORT_PROTOCOLS + _OTHER_PROTOCOLS
+    if not sep or proto not in known or not address:
+        raise TelemetryConfigError(f"{flag} {text!r}: expected PROTOCOL/ADDRESS with PROTOCOL one of "
+                                   f"{', '.join(known)}, e.g. {DEFAULT_ENDPOINT}")
+    if proto in _HOST_PORT_PROTOCOLS:
+        if address.startswith("["):
+            host, close, tail = address[1:].partition("]")
+            port = tail[1:] if close and tail.startswith(":") else ""
+        else:
+            host, _, port = address.rpartition(":")
+        lo = 0 if listening else 1
+        if not host or not port.isdigit() or not lo <= int(port) <= 65535:
+            raise TelemetryConfigError(f"{flag} {text!r}: expected {proto}/HOST:PORT with PORT in {lo}..65535")
 
 
 def config_items(opts: ZenohOptions) -> dict[str, Any]:
@@ -140,7 +170,7 @@ def add_zenoh_arguments(parser: argparse.ArgumentParser, role: str = "publisher"
     g.add_argument("--telemetry-prefix", default=DEFAULT_PREFIX, help=f"key prefix (default: {DEFAULT_PREFIX})")
     if role == "publisher":
         g.add_argument("--no-telemetry", action="store_true", help="publish nothing")
-        g.add_argument("--telemetry-wait", type=float, default=0.0, metavar="S",
+        g.add_argument("--telemetry-wait", type=seconds_or_zero, default=0.0, metavar="S",
                        help="at start, wait up to S seconds for a subscriber (the recorder) so that the log "
                             "holds the first samples, then go on without (default 0: do not wait; am-run, "
                             "which starts the recorder first, passes 5)")

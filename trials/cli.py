@@ -26,6 +26,7 @@ import json
 import time
 from pathlib import Path
 
+from amcore import cliargs
 from amcore.config import ConfigError, _read_toml, load_scenario, scenario_from_dict
 
 from . import report
@@ -57,13 +58,13 @@ def _seed(text: str) -> int:
 
 
 def parse_args(argv):
-    ap = argparse.ArgumentParser(prog="am-trials", description=" ".join(__doc__.split("\n\n")[0].split()),
+    ap = cliargs.ArgumentParser(prog="am-trials", description=" ".join(__doc__.split("\n\n")[0].split()),
                                  epilog="Exit codes: 0 the campaign ran, 2 bad arguments or configuration, "
                                         "1 a trial raised.")
     ap.add_argument("scenario", type=Path, help="base scenario TOML")
     ap.add_argument("--trials", type=_positive_int, required=True, help="number of trials")
     ap.add_argument("--seed", type=_seed, required=True, help="campaign seed (0..2**32-1)")
-    ap.add_argument("--out", type=Path, required=True, help="output folder (created; must not hold trials.csv)")
+    ap.add_argument("--out", type=cliargs.output_dir, required=True, help="output folder (created; must not hold trials.csv)")
     ap.add_argument("--workers", type=_positive_int, default=None,
                     help="local worker processes (default: the machine's cores)")
     ap.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://HOST:8786): run there")
