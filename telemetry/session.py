@@ -183,9 +183,16 @@ def _endpoints(values: list[str] | None) -> tuple[str, ...] | None:
 
 
 def options_from_args(args: argparse.Namespace, role: str = "publisher") -> ZenohOptions:
-    """ZenohOptions from a namespace parsed with add_zenoh_arguments(parser, role)."""
-    return ZenohOptions(
+    """ZenohOptions from a namespace parsed with add_zenoh_arguments(parser, role); a config
+    that zenoh cannot take (a bad --zenoh-config file) is a TelemetryConfigError now, before
+    the run, rather than a session that retries in the background forever."""
+    opts = ZenohOptions(
         role=role, mode=args.zenoh_mode, connect=_endpoints(args.zenoh_connect),
         listen=_endpoints(args.zenoh_listen), config_file=args.zenoh_config, prefix=args.telemetry_prefix,
         enabled=not getattr(args, "no_telemetry", False),
     )
+    if opts.enabled and opts.config_file is not None:
+        if not Path(opts.config_file).is_file():
+            raise TelemetryConfigError(f"--zenoh-config {opts.config_file}: not a file")
+        build_config(opts)
+    return opts

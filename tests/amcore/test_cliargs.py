@@ -23,8 +23,8 @@ def paths(tmp_path):
             "RUN": str(tmp_path / "run")}
 
 
-SIM = ("simulator.main", ["--config", SHORT, "--run-dir", "RUN", "--no-telemetry"])
-COMP = ("companion.main", ["--sysid", "4", "--config", SHORT, "--no-telemetry"])
+SIM = ("simulator.main", ["--config", SHORT, "--run-dir", "RUN"])
+COMP = ("companion.main", ["--sysid", "4", "--config", SHORT])
 AMRUN = ("simulator.launch", [SHORT, "--run-dir", "RUN", "--no-telemetry"])
 REC = ("ground_station.cli", ["record", "--out", "RUN.mcap"])
 INPROC = ("simulator.inprocess", [SHORT])
@@ -63,6 +63,10 @@ CASES = [
     (REC, ["--scene-rate", "nan"], "--scene-rate"),
     (REC, ["--out", "DIR"], "--out"),
     (REC, ["--zenoh-listen", "garbage"], "--zenoh-listen"),
+    (REC, ["--zenoh-config", "DIR"], "--zenoh-config"),
+    (SIM, ["--zenoh-config", "FILE"], "zenoh config"),  # not JSON5
+    (SIM, ["--zenoh-connect", "garbage"], "--zenoh-connect"),
+    (COMP, ["--zenoh-connect", "tcp/127.0.0.1"], "--zenoh-connect"),
     (("ground_station.cli", ["review", "FILE"]), ["--plots", "FILE"], "--plots"),
     (INPROC, ["--duration", "inf"], "--duration"),
     (INPROC, ["--failsafe-after-rejected", "-1"], "--failsafe-after-rejected"),
