@@ -138,6 +138,7 @@ class KeyStats:
                     reordered=self.reordered, restarts=self.restarts)
 
 
+_SCENE_SLACK = 1e-3  # of a /scene period: a sample this close before its slot is on it (float time stamps)
 MAX_SIM_TIME_S = 1e7  # a payload claiming a later simulation time (or NaN) is malformed
 
 
@@ -293,8 +294,10 @@ class Translator:
                     pose = _dumps(fg.pose_in_frame(t, "world", p["p_WO"], p["q_WO"]))
                 out = [Out(OBJECT_POSE_TOPIC, "foxglove.PoseInFrame", ns, pose),
                        Out(OBJECT_STATE_TOPIC, _RAW_SCHEMA[ch], ns, raw)]
-                if t >= self._next_scene_t:
-                    self._next_scene_t = t + self.scene_period_s
+                if t >= self._next_scene_t - _SCENE_SLACK * self.scene_period_s:
+                    # the next slot of the fixed grid k * period (t + period would drift: a sample
+                    # a hair before its slot waits for the next one)
+                    self._next_scene_t = (math.floor(t / self.scene_period_s + _SCENE_SLACK) + 1) * self.scene_period_s
                     p = p if p is not None else json.loads(raw)
                     out.append(Out(SCENE_TOPIC, "foxglove.SceneUpdate", ns, _dumps(self._scene_update(t, p))))
                 return out

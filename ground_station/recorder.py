@@ -164,15 +164,17 @@ class Recorder:
                 pass
             self._session = None
         self._drain()
-        summary = self.summary()
-        self.writer.write(self.translator.stats_out(summary.wall_s, self._overflow))
+        self.writer.write(self.translator.stats_out(time.monotonic() - self._t0, self._overflow))
+        self.writer.flush()  # every message is in the file: `written` and `bytes` below count them all
+        summary = self.summary(size=self.writer.size())
         self.writer.add_metadata("recorder_summary", {k: str(v) for k, v in summary.as_dict().items()})
         self.writer.close()
-        return self.summary(final=True)
+        return self.summary(size=self.out_path.stat().st_size if self.out_path.exists() else 0)
 
-    def summary(self, final: bool = False) -> RecorderSummary:
+    def summary(self, size: int = 0) -> RecorderSummary:
+        """written: every MCAP message so far; bytes: `size` (in the log's recorder_summary the
+        file up to that record, every message included; after close, the whole file)."""
         st = self.translator.stats.values()
-        size = self.out_path.stat().st_size if final and self.out_path.exists() else 0
         return RecorderSummary(
             path=str(self.out_path), stop_reason=self._stop_reason or "closed", wall_s=time.monotonic() - self._t0,
             received=self._received, written=self.writer.messages, missing=sum(s.missing for s in st),
