@@ -59,7 +59,7 @@ def _record(a: argparse.Namespace) -> int:
         s = rec.close()
     print(f"stopped ({s.stop_reason}): {s.received} samples from {s.keys} keys, {s.written} messages, "
           f"{s.sim_time_s:.3f} s simulated, {s.bytes / 1e6:.2f} MB; lost: {s.missing} (seq gaps), "
-          f"{s.inbox_overflow} (inbox overflow), {s.malformed} malformed", file=sys.stderr)
+          f"{s.inbox_overflow} (inbox overflow), {s.malformed} malformed, {s.rejected} rejected (unauthenticated)", file=sys.stderr)
     if a.summary_json:
         print(json.dumps(s.as_dict()))
     return 0

@@ -37,6 +37,8 @@ RECORDER_STATS_SCHEMA = {
         "t": {"type": "number"}, "wall_s": {"type": "number"},
         "inbox_overflow": {"type": "integer", "minimum": 0}, "malformed": {"type": "integer", "minimum": 0},
         "unknown": {"type": "integer", "minimum": 0},
+        "rejected": {"type": "integer", "minimum": 0,
+                     "description": "samples dropped unauthenticated (telemetry.auth; optional)"},
         "keys": {"type": "object", "description": "key -> {received, first_seq, last_seq, missing, reordered, restarts}"},
     },
 }
@@ -320,9 +322,9 @@ class Translator:
             self.last_error = f"{key}: {type(exc).__name__}: {exc}"
             return []
 
-    def stats_out(self, wall_s: float, inbox_overflow: int) -> Out:
+    def stats_out(self, wall_s: float, inbox_overflow: int, rejected: int = 0) -> Out:
         body = {"t": self.latest_t, "wall_s": wall_s, "inbox_overflow": inbox_overflow, "malformed": self.malformed,
-                "unknown": self.unknown, "keys": {k: s.as_dict() for k, s in sorted(self.stats.items())}}
+                "unknown": self.unknown, "rejected": rejected, "keys": {k: s.as_dict() for k, s in sorted(self.stats.items())}}
         return Out(STATS_TOPIC, RECORDER_STATS_SCHEMA["title"], _ns(self.latest_t), _dumps(body))
 
     # ------------------------------------------------------------------ scene

@@ -6,7 +6,9 @@ MAVLink/UDP on loopback, with a progress bar and a run folder holding the outcom
 
 The run folder gets outcome.json (simulator ground truth), am<sysid>.json (each
 companion's controller errors per phase), gcs.tlog (the flight controllers' GCS link, for
-stock MAVLink tools), gcs.key (its signing passphrase) and every process's log. Exit code:
+stock MAVLink tools), gcs.key (its signing passphrase), telemetry*.key (the run's telemetry
+keys: the recorder keeps only what the run's simulator and companions sealed, telemetry.auth)
+and every process's log. Exit code:
 0 when every process ended cleanly and the mission succeeded (simulator.verdict), 4 when
 the mission failed, 2 bad configuration, 1 when a process failed.
 """
@@ -26,6 +28,7 @@ from pathlib import Path
 from amcore import cliargs
 from amcore.config import DEFAULT_SCENARIO, ConfigError, check_duration, load_scenario
 from amlink.endpoint import DEFAULT_GCS, EndpointError, parse_endpoint
+from telemetry.auth import publisher_key
 
 from .verdict import MISSION_FAILED
 
@@ -97,6 +100,7 @@ def main(argv: list[str] | None = None) -> int:
         sim_cmd += ["--duration", str(a.duration)]
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     tele_args = ["--no-telemetry"] if a.no_telemetry else []
+    tele_keys = {} if a.no_telemetry else _telemetry_keys(spec, run_dir)
     mcap = run_dir / "run.mcap"
     procs: dict[str, subprocess.Popen] = {}
     logs = []
@@ -111,12 +115,14 @@ def main(argv: list[str] | None = None) -> int:
             rlog = open(run_dir / "recorder.log", "w")
             logs.append(rlog)
             procs["recorder"] = subprocess.Popen(
-                _command("ground-station") + ["record", "--out", str(mcap), "--zenoh-listen", endpoint],
+                _command("ground-station") + ["record", "--out", str(mcap), "--zenoh-listen", endpoint,
+                                              "--telemetry-key-file", tele_keys["recorder"]],
                 stdout=rlog, stderr=subprocess.STDOUT, env=env, preexec_fn=_lower_priority)
             _wait_listening(endpoint, procs["recorder"], time.monotonic() + a.startup_timeout)
         log = open(run_dir / "simulator.log", "w")
         logs.append(log)
-        sim = procs["simulator"] = subprocess.Popen(sim_cmd + tele_args, stdout=subprocess.PIPE, stderr=log, env=env, text=True)
+        sim_tele = tele_args + (["--telemetry-key-file", tele_keys["simulator"]] if tele_keys else [])
+        sim = procs["simulator"] = subprocess.Popen(sim_cmd + sim_tele, stdout=subprocess.PIPE, stderr=log, env=env, text=True)
         bind = None
         deadline = time.monotonic() + a.startup_timeout
         while bind is None:
@@ -133,7 +139,8 @@ def main(argv: list[str] | None = None) -> int:
             procs[f"companion {am.sysid}"] = subprocess.Popen(
                 _command("companion") + key_args + ["--sysid", str(am.sysid), "--sim", bind, "--config", cfg,
                                          "--outcome", str(run_dir / f"am{am.sysid}.json"),
-                                         "--connect-timeout", str(a.startup_timeout)] + tlog + tele_args,
+                                         "--connect-timeout", str(a.startup_timeout)] + tlog + tele_args
+                + (["--telemetry-key-file", tele_keys[f"am{am.sysid}"]] if tele_keys else []),
                 stdout=clog, stderr=subprocess.STDOUT, env=env)
         failed = _follow(sim, procs, bar)
     except KeyboardInterrupt:
@@ -207,6 +214,17 @@ def _fresh_key(spec, run_dir: Path) -> list[str]:
     if not spec.link.signing or spec.link.key_file or any(am.signing_key_hex for am in spec.ams):
         return []
     return ["--key-file", str(_secret_file(run_dir / "link.key", os.urandom(32).hex()))]
+
+
+def _telemetry_keys(spec, run_dir: Path) -> dict[str, str]:
+    """A random telemetry master key for this run for the recorder, and each publisher's own
+    key derived from it (telemetry.auth), each in a 0600 file of the run folder: the recorder
+    keeps only what the run's simulator and companions sealed."""
+    master = os.urandom(32)
+    files = {"recorder": str(_secret_file(run_dir / "telemetry.key", master.hex()))}
+    for name in ["simulator"] + [f"am{am.sysid}" for am in spec.ams]:
+        files[name] = str(_secret_file(run_dir / f"telemetry-{name}.key", publisher_key(master, name).hex()))
+    return files
 
 
 def _gcs_key(spec, run_dir: Path) -> list[str]:

@@ -22,12 +22,13 @@ from __future__ import annotations
 
 import argparse
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from amcore.cliargs import seconds_or_zero
 
+from .auth import parse_key
 from .schema import DEFAULT_PREFIX, Keys
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
@@ -57,6 +58,9 @@ class ZenohOptions:
     enabled: bool = True
     retry_init_ms: int = 250
     retry_max_ms: int = 2000
+    # telemetry.auth: a publisher's own key (it seals every message), or the recorder's run
+    # master key (it keeps only sealed messages); None: nothing is authenticated
+    auth_key: bytes | None = field(default=None, repr=False)
 
     def __post_init__(self):
         if self.role not in ROLES:
@@ -168,6 +172,11 @@ def add_zenoh_arguments(parser: argparse.ArgumentParser, role: str = "publisher"
     g.add_argument("--zenoh-config", type=Path, metavar="FILE",
                    help="zenoh JSON5 config file used as the base (TLS, access control)")
     g.add_argument("--telemetry-prefix", default=DEFAULT_PREFIX, help=f"key prefix (default: {DEFAULT_PREFIX})")
+    g.add_argument("--telemetry-key-file", type=Path, default=None, metavar="FILE",
+                   help=("the run's telemetry master key (64 hex digits): keep only messages its publishers sealed"
+                         if role == "recorder" else
+                         "this publisher's telemetry key (64 hex digits): seal every message with it")
+                        + " (telemetry.auth; am-run writes them to the run folder)")
     if role == "publisher":
         g.add_argument("--no-telemetry", action="store_true", help="publish nothing")
         g.add_argument("--telemetry-wait", type=seconds_or_zero, default=0.0, metavar="S",
@@ -186,10 +195,19 @@ def options_from_args(args: argparse.Namespace, role: str = "publisher") -> Zeno
     """ZenohOptions from a namespace parsed with add_zenoh_arguments(parser, role); a config
     that zenoh cannot take (a bad --zenoh-config file) is a TelemetryConfigError now, before
     the run, rather than a session that retries in the background forever."""
+    key = None
+    if args.telemetry_key_file is not None and not getattr(args, "no_telemetry", False):
+        try:
+            key = parse_key(Path(args.telemetry_key_file).read_text(), f"--telemetry-key-file {args.telemetry_key_file}")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise TelemetryConfigError(f"--telemetry-key-file {args.telemetry_key_file}: cannot read it: "
+                                       f"{getattr(exc, 'strerror', None) or exc}") from None
+        except ValueError as exc:
+            raise TelemetryConfigError(str(exc)) from None
     opts = ZenohOptions(
         role=role, mode=args.zenoh_mode, connect=_endpoints(args.zenoh_connect),
         listen=_endpoints(args.zenoh_listen), config_file=args.zenoh_config, prefix=args.telemetry_prefix,
-        enabled=not getattr(args, "no_telemetry", False),
+        enabled=not getattr(args, "no_telemetry", False), auth_key=key,
     )
     if opts.enabled and opts.config_file is not None:
         if not Path(opts.config_file).is_file():
