@@ -64,7 +64,7 @@ def parse_args(argv):
     ap.add_argument("scenario", type=Path, help="base scenario TOML")
     ap.add_argument("--trials", type=_positive_int, required=True, help="number of trials")
     ap.add_argument("--seed", type=_seed, required=True, help="campaign seed (0..2**32-1)")
-    ap.add_argument("--out", type=cliargs.output_dir, required=True, help="output folder (created; must not hold trials.csv)")
+    ap.add_argument("--out", type=Path, required=True, help="output folder (created; must not hold trials.csv)")
     ap.add_argument("--workers", type=_positive_int, default=None,
                     help="local worker processes (default: the machine's cores)")
     ap.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://HOST:8786): run there")
