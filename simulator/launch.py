@@ -172,8 +172,8 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-# resident memory of the processes am-run starts [MiB], measured on two_am_comp (a companion
-# holds pinocchio, numpy and zenoh; the simulator PyBullet and the world of every AM)
+# resident memory of the processes am-run starts [MiB]: a companion (pinocchio, numpy, zenoh)
+# measured at 191 MiB; the simulator's and recorder's figures are allowances, not measurements
 COMPANION_MIB = 191
 SIMULATOR_MIB = 250
 SIMULATOR_PER_AM_MIB = 2
