@@ -11,6 +11,7 @@ import math
 import tomllib
 import types
 import typing
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -167,6 +168,12 @@ class FlightControllerParams:
       autopilot (`simulator.flight_controller`) closes attitude and rate loops at `rate_hz`.
       body_rate_feedforward: add the target's body rates to the rate setpoint (false: the
       attitude P loop alone makes it).
+    - failsafe_after_rejected: K. A setpoint the flight controller refuses as implausible
+      (non-finite, or beyond `amlink.limits` of this vehicle) is answered at once: the flight
+      controller keeps flying the last valid command and counts the refusal. After K refused
+      setpoints in a row from one companion, that vehicle goes to its failsafe (hold, then
+      land; `simulator.failsafe`) for the rest of the run: its companion's setpoints are
+      ignored from then on. Both modes; the simulator's --failsafe-after-rejected overrides it.
 
     The upper-case keys are PX4 parameters under their PX4 names and in PX4's units (rad/s
     per rad, normalized torque per rad/s, deg/s, Hz); their defaults are PX4's, the vehicle
@@ -176,6 +183,7 @@ class FlightControllerParams:
     mode: str = "torque"
     rate_hz: float = 1000.0
     body_rate_feedforward: bool = True
+    failsafe_after_rejected: int = 10  # K refused setpoints in a row -> failsafe [control periods]
     MC_ROLL_P: float = 6.5
     MC_PITCH_P: float = 6.5
     MC_YAW_P: float = 2.8
@@ -502,6 +510,12 @@ def _read_toml(path: Path) -> dict:
             return tomllib.load(fh)
     except FileNotFoundError:
         raise ConfigError(f"{path}: file not found") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{path}: is a directory, not a TOML file") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot be read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}); TOML files are UTF-8") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
 
@@ -510,6 +524,20 @@ def _positive(where: str, values) -> None:
     for i, v in enumerate(values if isinstance(values, tuple) else (values,)):
         if not v > 0.0:
             raise ConfigError(f"{where}: must be > 0, got {v!r}" + (f" (entry {i})" if isinstance(values, tuple) else ""))
+
+
+def _in_range(where: str, value, lo: float, hi: float, unit: str = "") -> None:
+    """lo <= value <= hi (both finite)."""
+    if not lo <= value <= hi:
+        raise ConfigError(f"{where}: must be in [{lo:g}, {hi:g}]{unit}, got {value!r}")
+
+
+# physics rates a scenario may ask for [Hz]: below, the contact and the control laws cannot hold
+# (PyBullet's own default is 240 Hz); above, a second of flight takes hours
+RATE_HZ_RANGE = (100.0, 100_000.0)
+SEED_MAX = 2**32 - 1  # the seed is a uint32 (numpy's SeedSequence entropy; AM_SCENARIO.seed)
+SCENARIO_NAME_MAX_BYTES = 32  # AM_SCENARIO.name is char[32]
+ROTOR_LAYOUTS = ("x",)  # what simulator.mixer mixes (four rotors)
 
 
 def _is_key_hex(text: str) -> bool:
@@ -541,6 +569,18 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     v = VehicleParams(urdf=urdf, **kw, **sub)
     n = v.n_joints
     g = v.gains
+    _check_urdf(v, where)
+    _in_range(f"{where}: [vehicle].gravity_mps2", v.gravity_mps2, 0.1, 100.0, " m/s^2")
+    r = v.rotors
+    if r.count != 4:
+        raise ConfigError(f"{where}: [rotors].count: the flight controller mixes 4 rotors, got {r.count}")
+    if r.layout not in ROTOR_LAYOUTS:
+        raise ConfigError(f"{where}: [rotors].layout: expected one of {', '.join(ROTOR_LAYOUTS)}, got '{r.layout}'")
+    if not 0.0 <= r.thrust_min_n < r.thrust_max_n:
+        raise ConfigError(f"{where}: [rotors].thrust_min_n: need 0 <= thrust_min_n < thrust_max_n, got "
+                          f"{r.thrust_min_n!r} and {r.thrust_max_n!r}")
+    if not r.yaw_moment_coeff_m > 0.0:
+        raise ConfigError(f"{where}: [rotors].yaw_moment_coeff_m: must be > 0, got {r.yaw_moment_coeff_m!r}")
     for key, seq in (("q_nominal_rad", v.q_nominal_rad), ("joint_torque_max_nm", v.joint_torque_max_nm)):
         if len(seq) != n:
             raise ConfigError(f"{where}: [vehicle].{key}: expected {n} entries (one per arm joint), got {len(seq)}")
@@ -560,6 +600,11 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     _positive(f"{where}: [rotors].arm_length_m", v.rotors.arm_length_m)
     _positive(f"{where}: [vehicle].joint_torque_max_nm", v.joint_torque_max_nm)
     _positive(f"{where}: [options].force_filter_hz", v.options.force_filter_hz)
+    _positive(f"{where}: [options].force_filter_zeta", v.options.force_filter_zeta)
+    for key in ("com_err_max_m", "sigma_damping", "damping_max"):
+        _positive(f"{where}: [safety].{key}", getattr(v.safety, key))
+    if v.safety.y_err_max:
+        _positive(f"{where}: [safety].y_err_max", v.safety.y_err_max)
     if v.options.heading_admittance_hz < 0.0 or not v.options.heading_admittance_zeta > 0.0:
         raise ConfigError(f"{where}: [options].heading_admittance_hz must be >= 0 (0: off) and "
                           f"heading_admittance_zeta > 0")
@@ -591,6 +636,75 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     return v
 
 
+def _urdf_tree(urdf: Path, where: str) -> ET.Element:
+    try:
+        root = ET.parse(urdf).getroot()
+    except (ET.ParseError, OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{where}: [vehicle].urdf: {urdf} is not a readable URDF: {exc}") from None
+    if root.tag != "robot":
+        raise ConfigError(f"{where}: [vehicle].urdf: {urdf}: the root element is <{root.tag}>, not <robot>")
+    return root
+
+
+def _check_urdf(v: VehicleParams, where: str) -> None:
+    """The names the vehicle file gives exist in its URDF, and the URDF's movable joints are
+    exactly arm_joints, in the order of the chain from base_link (as pinocchio numbers them)."""
+    root = _urdf_tree(v.urdf, where)
+    links = [e.get("name") for e in root.findall("link")]
+    joints = root.findall("joint")
+    names = {j.get("name") for j in joints}
+    if v.base_link not in links:
+        raise ConfigError(f"{where}: [vehicle].base_link: no link '{v.base_link}' in {v.urdf} (links: "
+                          f"{', '.join(map(str, links)) or 'none'})")
+    for key in ("ee_frame", "ft_frame"):
+        if getattr(v, key) not in set(links) | names:
+            raise ConfigError(f"{where}: [vehicle].{key}: no link or joint '{getattr(v, key)}' in {v.urdf}")
+    children: dict[str, list] = {}
+    for j in joints:
+        parent, child = j.find("parent"), j.find("child")
+        if parent is None or child is None:
+            raise ConfigError(f"{where}: [vehicle].urdf: joint '{j.get('name')}' of {v.urdf} lacks <parent> or <child>")
+        children.setdefault(parent.get("link"), []).append(j)
+    stack, seen = [v.base_link], set()
+    while stack:  # a tree (no link reached twice), so that _chain_joints ends
+        link = stack.pop()
+        if link in seen:
+            raise ConfigError(f"{where}: [vehicle].urdf: {v.urdf} has a loop at link '{link}'")
+        seen.add(link)
+        stack += [j.find("child").get("link") for j in children.get(link, [])]
+    movable = _chain_joints(v.base_link, children)  # depth first from the base, children in file order
+    if tuple(movable) != tuple(v.arm_joints):
+        missing = [q for q in v.arm_joints if q not in names]
+        what = f"no joint {', '.join(map(repr, missing))} in {v.urdf}" if missing else \
+            f"the movable joints of {v.urdf} from '{v.base_link}' are {movable}"
+        raise ConfigError(f"{where}: [vehicle].arm_joints: {what}; the vehicle file lists {list(v.arm_joints)}")
+    if not urdf_mass_kg(v.urdf, where) > 0.0:
+        raise ConfigError(f"{where}: [vehicle].urdf: {v.urdf}: the links' <inertial> masses sum to 0")
+
+
+def _chain_joints(link: str, children: dict[str, list]) -> list[str]:
+    out = []
+    for j in children.get(link, []):
+        if j.get("type") != "fixed":
+            out.append(j.get("name"))
+        out += _chain_joints(j.find("child").get("link"), children)
+    return out
+
+
+def urdf_mass_kg(urdf: Path, where: str = "") -> float:
+    """The sum of the URDF's link masses [kg] (pinocchio's total mass of the model)."""
+    total = 0.0
+    for m in _urdf_tree(urdf, where or str(urdf)).findall("link/inertial/mass"):
+        try:
+            value = float(m.get("value", "nan"))
+        except ValueError:
+            value = math.nan
+        if not (value >= 0.0 and math.isfinite(value)):
+            raise ConfigError(f"{where or urdf}: [vehicle].urdf: {urdf}: a link mass is {m.get('value')!r}")
+        total += value
+    return total
+
+
 def _check_baseline(b: BaselineGains, n: int, where: str) -> None:
     for key in ("K_q", "D_q"):
         if len(getattr(b, key)) != n:
@@ -611,6 +725,8 @@ def _check_flight_controller(fc: FlightControllerParams, where: str) -> None:
     if fc.mode not in FC_MODES:
         raise ConfigError(f"{where}.mode: expected one of {', '.join(FC_MODES)}, got '{fc.mode}'")
     _positive(f"{where}.rate_hz", fc.rate_hz)
+    if not fc.failsafe_after_rejected >= 1:
+        raise ConfigError(f"{where}.failsafe_after_rejected: must be >= 1, got {fc.failsafe_after_rejected!r}")
     for f in dataclasses.fields(fc):
         if f.name.isupper() and not getattr(fc, f.name) >= 0.0:
             raise ConfigError(f"{where}.{f.name}: must be >= 0, got {getattr(fc, f.name)!r}")
@@ -650,9 +766,13 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
         raise ConfigError(f"{where}: unknown table [{sorted(extra)[0]}]")
     if "scenario" not in data:
         raise ConfigError(f"{where}: missing table [scenario]")
+    if not isinstance(data["scenario"], dict):
+        raise ConfigError(f"{where}: [scenario] must be a table")
     sc = dict(data["scenario"])
     if "vehicle" not in sc:
         raise ConfigError(f"{where}: [scenario]: missing key 'vehicle'")
+    if not isinstance(sc["vehicle"], str) or not sc["vehicle"]:
+        raise ConfigError(f"{where}: [scenario].vehicle: expected the path of a vehicle TOML, got {sc['vehicle']!r}")
     vpath = (path.parent / sc.pop("vehicle")).resolve()
     vdata = _read_toml(vpath)
     for tbl in _VEHICLE_OVERRIDES:
@@ -683,11 +803,18 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
         _positive(f"{where}: [object].height_m", obj.height_m)
     else:
         _positive(f"{where}: [object].size_m", obj.size_m)
+    if obj.position_m[2] - obj.half_height_m < -1e-9:
+        raise ConfigError(f"{where}: [object].position_m: the object's bottom is {obj.position_m[2] - obj.half_height_m:.3g} m, "
+                          f"below the ground (z = 0)")
     mission = MissionSpec(**_build(MissionSpec, data.get("mission", {}), f"{where}: [mission]"))
     if not (0 < mission.approach_end_s < mission.grasp_end_s < mission.hover_end_s):
         raise ConfigError(f"{where}: [mission]: need 0 < approach_end_s < grasp_end_s < hover_end_s")
-    for key in ("friction_assumed", "friction_margin", "thrust_fraction_max", "squeeze_max_n"):
+    for key in ("friction_assumed", "friction_margin", "thrust_fraction_max", "squeeze_max_n", "approach_move_s",
+                "grasp_move_s", "lift_move_s", "lift_m"):
         _positive(f"{where}: [mission].{key}", getattr(mission, key))
+    for key in ("standoff_m", "start_height_m", "pre_gap_m", "squeeze_m"):
+        if not getattr(mission, key) >= 0.0:
+            raise ConfigError(f"{where}: [mission].{key}: must be >= 0, got {getattr(mission, key)!r}")
     if mission.thrust_fraction_max > 1.0:
         raise ConfigError(f"{where}: [mission].thrust_fraction_max: must be <= 1, got {mission.thrust_fraction_max}")
     if not mission.join_blend_s > 0:
@@ -740,15 +867,49 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
             raise ConfigError(f"{where}: [success].{f.name}: must be >= 0, got {getattr(success, f.name)!r}")
     spec = ScenarioSpec(vehicle=vehicle, object=obj, mission=mission, ams=ams, path=path, link=link,
                         sensors=sensors, success=success, **kw)
-    _positive(f"{where}: [scenario].rate_hz", spec.rate_hz)
-    _positive(f"{where}: [scenario].duration_s", spec.duration_s)
+    _check_name(spec.name, f"{where}: [scenario].name")
+    if not 0 <= spec.seed <= SEED_MAX:
+        raise ConfigError(f"{where}: [scenario].seed: must be in 0..{SEED_MAX} (uint32), got {spec.seed}")
+    _in_range(f"{where}: [scenario].rate_hz", spec.rate_hz, *RATE_HZ_RANGE, " Hz")
     if spec.control_rate_hz is not None:
         c = _check_type(spec.control_rate_hz, float, f"{where}: [scenario].control_rate_hz")
         _positive(f"{where}: [scenario].control_rate_hz", c)
         spec = dataclasses.replace(spec, control_rate_hz=c)
         _check_divides(spec.rate_hz, c, f"{where}: [scenario].control_rate_hz")
     _check_divides(spec.rate_hz, vehicle.flight_controller.rate_hz, f"{where}: [flight_controller].rate_hz")
+    check_duration(spec, spec.duration_s, f"{where}: [scenario].duration_s")
+    _check_lift(spec, where)
     return spec
+
+
+def check_duration(spec: ScenarioSpec, duration_s: float, where: str) -> None:
+    """A run of `duration_s` [s] is finite and holds at least one control period of `spec`."""
+    if not (math.isfinite(duration_s) and duration_s >= spec.control_dt_s * (1.0 - 1e-9)):
+        raise ConfigError(f"{where}: must be finite and at least one control period ({spec.control_dt_s:g} s), "
+                          f"got {duration_s!r}")
+
+
+def _check_name(name: str, where: str) -> None:
+    raw = name.encode("utf-8")
+    if not name or not name.isascii() or not name.isprintable() or len(raw) > SCENARIO_NAME_MAX_BYTES:
+        raise ConfigError(f"{where}: must be 1 to {SCENARIO_NAME_MAX_BYTES} printable ASCII characters "
+                          f"(AM_SCENARIO.name), got {name!r}")
+
+
+def _check_lift(spec: ScenarioSpec, where: str) -> None:
+    """The team's rotors can carry the team and the object within [mission].thrust_fraction_max
+    of their maximum (the margin the mission plans with), as a whole."""
+    v, m = spec.vehicle, spec.mission
+    n = len(spec.ams)
+    m_am = urdf_mass_kg(v.urdf, where)
+    need_n = (n * m_am + spec.object.mass_kg) * v.gravity_mps2
+    have_n = m.thrust_fraction_max * n * v.rotors.count * v.rotors.thrust_max_n
+    if need_n > have_n:
+        most = have_n / v.gravity_mps2 - n * m_am
+        raise ConfigError(f"{where}: [object].mass_kg: {spec.object.mass_kg:g} kg is more than {n} AMs can lift with "
+                          f"margin: they and the object weigh {need_n:.1f} N, {m.thrust_fraction_max:g} of their rotors' "
+                          f"{n * v.rotors.count * v.rotors.thrust_max_n:g} N is {have_n:.1f} N (at most "
+                          f"{max(0.0, most):.2f} kg)")
 
 
 def _table(data: dict, name: str, where: str) -> dict:

@@ -7,7 +7,7 @@ from collections import deque
 
 from amlink import codec, fastcodec
 from amlink.codec import mav
-from amlink.endpoint import UDP_IN, UDP_OUT, Endpoint, parse_endpoint
+from amlink.endpoint import UDP_IN, UDP_OUT, Endpoint, as_destination, parse_endpoint
 from amlink.errors import CommandRejectedError, SimulatorTimeoutError, SimulatorUnreachableError
 from amlink.limits import DEFAULT_SENSOR_LIMITS, SensorLimits
 from amlink.transport import open_transport
@@ -83,7 +83,7 @@ class CompanionClient:
         self.compid = compid
         ep = sim if isinstance(sim, Endpoint) else parse_endpoint(sim)
         if ep.alias == "udp":  # the companion's --sim udp: has always meant "send to"
-            ep = Endpoint(UDP_OUT, ep.host, ep.port, alias="udp")
+            ep = as_destination(ep)
         self.endpoint = ep
         self.sim = sim.strip() if isinstance(sim, str) else str(ep)  # as written, for messages
         self._tlog = tlog

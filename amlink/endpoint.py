@@ -95,9 +95,8 @@ def parse_endpoint(text: str) -> Endpoint:
     if sep and scheme.lower() in _SCHEMES:
         kind = _SCHEMES[scheme.lower()]
         host, port = _host_port(text, rest)
-        if port == 0 and kind in (UDP_OUT, TCP_OUT):
-            raise EndpointError(text, "port 0 only makes sense for a listening endpoint")
-        return Endpoint(kind, host, port, alias=scheme.lower() if scheme.lower() != kind else "")
+        ep = Endpoint(kind, host, port, alias=scheme.lower() if scheme.lower() != kind else "")
+        return as_destination(ep, text) if kind in (UDP_OUT, TCP_OUT) else ep
     m = _DEVICE.match(text)
     if m is None:
         if sep and scheme.isalpha():
@@ -107,6 +106,26 @@ def parse_endpoint(text: str) -> Endpoint:
     if baud not in BAUD_RATES:
         raise EndpointError(text, f"baud rate {baud} is not one of {', '.join(map(str, BAUD_RATES))}")
     return Endpoint(SERIAL, device=m["dev"], baud=baud)
+
+
+def as_destination(ep: Endpoint, text: str | None = None) -> Endpoint:
+    """``ep`` as a sending endpoint (udpout, or a ``udp:`` read as udpout): EndpointError if its
+    port is 0 or its host cannot be one peer (unspecified 0.0.0.0 / ::, broadcast, multicast)."""
+    import ipaddress
+
+    text = str(ep) if text is None else text
+    if ep.port == 0:
+        raise EndpointError(text, "port 0 only makes sense for a listening endpoint")
+    try:
+        ip = ipaddress.ip_address(ep.host)
+    except ValueError:  # a host name: resolved when opened
+        ip = None
+    if ip is not None and (ip.is_unspecified or ip.is_multicast or ip == ipaddress.IPv4Address("255.255.255.255")):
+        raise EndpointError(text, f"{ep.host} is not one host (unspecified, broadcast or multicast); "
+                                  f"send to the peer's own address")
+    if ep.kind in (UDP_OUT, TCP_OUT):
+        return ep
+    return Endpoint(UDP_OUT, ep.host, ep.port, alias=ep.alias or ep.kind)
 
 
 def _host_port(text: str, rest: str) -> tuple[str, int]:

@@ -76,9 +76,12 @@ class SimServer:
         on_heartbeat: called with ``(sysid, compid, message)`` for every admitted
             companion HEARTBEAT (the simulator forwards them to its GCS link).
 
-    Addresses.  A peer's address is learned from its packets.  Signing on: any
-    authentic packet of sysid ``s`` moves ``s`` to the packet's source address
-    (rejoin, NAT rebinding); nothing else can.  Signing off: only a HEARTBEAT
+    Addresses.  A peer's address is learned from its packets.  Signing on: an
+    authentic HEARTBEAT or COMMAND_LONG of sysid ``s``, or an authentic setpoint that
+    passes the plausibility check, moves ``s`` to the packet's source address
+    (rejoin, NAT rebinding); nothing else can: a rejected setpoint from another
+    address is dropped and counted (``rejected_setpoints``, ``wrong_address``) and
+    answers no step, so it neither diverts the peer's frames nor stands in for its answer.  Signing off: only a HEARTBEAT
     moves it (a companion says HEARTBEAT when it (re)connects), and only once
     ``s`` has been silent for ``REJOIN_QUIET_S`` (1 s) or is lost; any other
     packet claiming ``s`` from another address is dropped (``wrong_address``).
@@ -115,6 +118,7 @@ class SimServer:
         self.attitude_targets: dict[int, AttitudeTarget] = {}  # latest, informational
         self.last_missing: tuple[int, ...] = ()  # sysids without a setpoint in the last exchange
         self.last_rejection: tuple[int, str] | None = None  # (sysid, reason) of the last rejected setpoint
+        self.last_rejected: tuple[tuple[int, str], ...] = ()  # rejected answers of the last exchange (see there)
         self.on_heartbeat = on_heartbeat
         self._keys = signing_keys
         self._shim = shim
@@ -288,9 +292,18 @@ class SimServer:
         All batches go out before any answer is awaited, so the companions
         compute concurrently.  A batch still unanswered after ``retry_s`` is
         re-sent (backing off), so a lost datagram in either direction costs a
-        retry interval, not the run.  Stale, duplicate, wrong-step, invalid and
+        retry interval, not the run.  Stale, duplicate, wrong-step and
         unauthenticated setpoints are dropped and counted in :attr:`stats`; the
         step keeps waiting for a valid one.
+
+        Rejected answers.  A setpoint for the awaited step, from the peer's own
+        address, that is non-finite, malformed or outside :attr:`limits` answers
+        that step at once: it is not returned, and :attr:`last_rejected` lists
+        ``(sysid, reason)`` of every such answer of this exchange in the order of
+        ``frames`` (so the caller's bookkeeping does not depend on arrival order).
+        The caller applies its policy (``simulator.core``: hold the last valid
+        command, failsafe after K in a row); the step never waits for a timeout
+        because an answer was refused.
 
         ``partial=False``: raises PeerTimeoutError(sysid, step) if a companion does
         not answer within ``timeout_s`` (default: the constructor's), and
@@ -324,12 +337,13 @@ class SimServer:
         if while_waiting is not None:
             while_waiting()
         results: dict[int, TorqueSetpoint | AttitudeSetpoint] = {}
+        refused: dict[int, str] = {}  # sysid -> why its answer to this step was rejected
         start = time.monotonic()
         deadline, interval = start + timeout, self.retry_s
         next_retry = start + interval
         polled = False  # read the socket at least once, even with timeout 0
         while True:
-            awaited = self._awaited(expected, partial)
+            awaited = self._awaited(expected, partial).difference(refused)
             if awaited.issubset(results):
                 break
             now = time.monotonic()
@@ -352,14 +366,16 @@ class SimServer:
                 next_retry = now + interval
             polled = True
             for data, addr in link.recv(min(deadline, next_retry) - now):
-                for sysid, sp, att in self._handle(data, addr):
+                for sysid, sp_step, sp, att in self._handle(data, addr):
                     step = expected.get(sysid)
-                    if step is None or sp.step < step:
+                    if step is None or sp_step < step:
                         self.stats.stale_setpoints += 1
-                    elif sp.step > step:
+                    elif sp_step > step:
                         self.stats.wrong_step_setpoints += 1
-                    elif sysid in results:
+                    elif sysid in results or sysid in refused:
                         self.stats.duplicate_setpoints += 1
+                    elif sp is None:  # a rejected answer (att: the reason)
+                        refused[sysid] = att
                     else:
                         results[sysid] = sp
                         if att is not None:
@@ -368,6 +384,7 @@ class SimServer:
                             on_setpoint(sysid, sp)
         for peer in self._peers.values():
             peer.batch = None
+        self.last_rejected = tuple((s, refused[s]) for s in expected if s in refused)
         self.last_missing = tuple(sorted(set(expected).difference(results)))
         return results
 
@@ -383,9 +400,10 @@ class SimServer:
         return {s for s in expected if not self._peers[s].lost and self._peers[s].addr is not None}
 
     # -- receive path ----------------------------------------------------------
-    def _handle(self, data: bytes, addr: tuple[str, int]
-                ) -> list[tuple[int, TorqueSetpoint | AttitudeSetpoint, AttitudeTarget | None]]:  # fmt: skip
-        """Decode one datagram; answer control messages; return its valid setpoints."""
+    def _handle(self, data: bytes, addr: tuple[str, int]) -> list[tuple]:
+        """Decode one datagram; answer control messages; return its setpoints as
+        ``(sysid, step, setpoint, attitude target or None)``, and its rejected setpoints
+        from the peer's own address as ``(sysid, step, None, reason)``."""
         out = []
         # SET_ATTITUDE_TARGET pairs with the setpoint of its datagram; on a stream, with the next setpoint
         stream = type(addr) is StreamPeer
@@ -396,7 +414,29 @@ class SimServer:
             if peer is None:
                 self.stats.unknown_sysid += 1
                 continue
-            if not self._admit(peer, addr, mid):
+            if mid in (_SETPOINT, _JOINT_SETPOINT):  # the address may move only for a valid setpoint
+                if stream:
+                    att, peer.attitude = peer.attitude, None
+                else:
+                    att = attitude.pop(peer.sysid, None)
+                if not self._admit(peer, addr, mid, move=False):
+                    continue
+                got, reason = self._setpoint(mid, body, att)
+                if got is None:
+                    self.stats.rejected_setpoints += 1
+                    self.last_rejection = (peer.sysid, reason)
+                    if peer.addr != addr:  # a refused packet never moves a peer nor answers for it
+                        self.stats.wrong_address += 1
+                        continue
+                    peer.lost = False  # it answered: alive, if not well
+                    out.append((peer.sysid, body[0], None, reason))
+                    continue
+                if peer.addr != addr:
+                    self._move(peer, addr, mid)
+                peer.lost = False  # it is alive
+                out.append((peer.sysid, body[0], *got))
+                continue
+            if not self._admit(peer, addr, mid, move=mid != _ATTITUDE):
                 continue
             if mid == _HEARTBEAT:
                 self._link.send(addr, peer.encoder.pack([codec.scenario_message(self.scenario)]))
@@ -404,26 +444,19 @@ class SimServer:
                     self.on_heartbeat(sysid, compid, body)
             elif mid == _COMMAND_LONG:
                 self._on_command(peer, body)
-            elif mid == _ATTITUDE:
+            elif mid == _ATTITUDE:  # paired with the setpoint, which decides on the address
                 if stream:
                     peer.attitude = body
                 else:
                     attitude[peer.sysid] = body
-            elif mid in (_SETPOINT, _JOINT_SETPOINT):
-                if stream:
-                    att, peer.attitude = peer.attitude, None
-                else:
-                    att = attitude.pop(peer.sysid, None)
-                got = self._setpoint(peer, mid, body, att)
-                if got is not None:
-                    peer.lost = False  # it is alive
-                    out.append((peer.sysid, *got))
             else:  # pragma: no cover - the decoder only lets _ACCEPT through
                 self.stats.ignored += 1
         return out
 
-    def _admit(self, peer: _Peer, addr: tuple[str, int], mid: int) -> bool:
-        """Address policy (see the class docstring); True if the packet may be used."""
+    def _admit(self, peer: _Peer, addr: tuple[str, int], mid: int, move: bool = True) -> bool:
+        """Address policy (see the class docstring); True if the packet may be used.
+        ``move=False``: a packet from another address that may move the peer only once it
+        proves valid (a setpoint, a SET_ATTITUDE_TARGET) is admitted without moving it."""
         now = time.monotonic()
         if peer.addr == addr:
             peer.last_heard = now
@@ -433,16 +466,21 @@ class SimServer:
         ):
             self.stats.wrong_address += 1
             return False
-        peer.last_heard = now
+        if move:
+            self._move(peer, addr, mid)
+        return True
+
+    def _move(self, peer: _Peer, addr: tuple[str, int], mid: int) -> None:
+        peer.last_heard = time.monotonic()
         if peer.addr is not None:
             self.stats.address_changes += 1
             if mid == _HEARTBEAT:
                 self.stats.rejoins += 1
                 peer.armed = False
         peer.addr = addr
-        return True
 
-    def _setpoint(self, peer: _Peer, mid: int, fields: tuple, att_fields: tuple | None):
+    def _setpoint(self, mid: int, fields: tuple, att_fields: tuple | None) -> tuple[tuple | None, str | None]:
+        """((setpoint, attitude target or None), None) for a valid setpoint, else (None, why)."""
         try:
             if mid == _JOINT_SETPOINT:  # attitude mode: the target is part of the setpoint
                 if att_fields is None:
@@ -460,10 +498,8 @@ class SimServer:
         except ValueError as exc:  # CodecError is one
             reason = str(exc)
         if reason is None:
-            return sp, att
-        self.stats.rejected_setpoints += 1
-        self.last_rejection = (peer.sysid, reason)
-        return None
+            return (sp, att), None
+        return None, reason
 
     def _on_command(self, peer: _Peer, msg) -> None:
         if msg.target_system not in (0, SIM_SYSID):

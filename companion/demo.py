@@ -8,13 +8,13 @@ This is the process-free use of the public API: load, build, step.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from amcore import cliargs
 from amcore.config import DEFAULT_SCENARIO, ConfigError, load_scenario
 from amcore.control import ControllerParams
 from amcore.ideal import run_closed_loop
@@ -25,17 +25,16 @@ from amcore.so3 import exp_so3
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = cliargs.ArgumentParser(prog="am-demo", description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--config", type=Path, default=DEFAULT_SCENARIO)
-    ap.add_argument("--sysid", type=int, default=None)
-    ap.add_argument("--duration", type=float, default=5.0)
+    ap.add_argument("--sysid", type=cliargs.number(2, 255, integer=True), default=None)
+    ap.add_argument("--duration", type=cliargs.number(0.0, 3600.0, lo_open=True, unit=" s"), default=5.0)
     a = ap.parse_args(argv)
     try:
         spec = load_scenario(a.config)
         am = spec.am(a.sysid) if a.sysid is not None else spec.ams[0]
     except ConfigError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return cliargs.fail("am-demo", str(exc))
     model = build_model(spec.vehicle)
     mission = am_mission(spec, am, model)
     params = ControllerParams.from_vehicle(spec.vehicle, mission.frame)

@@ -16,16 +16,16 @@ when the simulator ends the run or on SIGINT/SIGTERM. Exit codes: 2 bad configur
 """
 from __future__ import annotations
 
-import argparse
 import json
 import signal
 import sys
 import time
 from pathlib import Path
 
+from amcore import cliargs
 from amcore.config import DEFAULT_SCENARIO, ConfigError, load_scenario, scenario_id
 from amlink import signing
-from amlink.endpoint import COMPANION_SIM, EndpointError, parse_endpoint
+from amlink.endpoint import COMPANION_SIM, EndpointError, as_destination, parse_endpoint
 from amlink.errors import LinkError, SimulatorUnreachableError
 from amlink.lockstep import CompanionClient
 from amlink.tlog import TlogWriter
@@ -47,26 +47,28 @@ def _on_signal(signum, _frame):
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="companion", description=" ".join(__doc__.split("\n\n")[0].split()))
-    ap.add_argument("--sysid", type=int, required=True, help="this AM's MAVLink system id (its [[am]] entry)")
+    ap = cliargs.ArgumentParser(prog="companion", description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap.add_argument("--sysid", type=cliargs.number(2, 255, integer=True), required=True, help="this AM's MAVLink system id (its [[am]] entry)")
     ap.add_argument("--sim", default=COMPANION_SIM, metavar="ENDPOINT",
                     help=f"the flight controller (simulator) endpoint (default {COMPANION_SIM}); mavutil's forms: "
                          f"udpout:, udpin:, tcp:, tcpin:HOST:PORT or a serial DEVICE[:BAUD]; udp:HOST:PORT is "
                          f"read as udpout: (as before) with a warning")
     ap.add_argument("--config", type=Path, default=DEFAULT_SCENARIO, help="scenario TOML")
-    ap.add_argument("--connect-timeout", type=float, default=30.0, help="seconds to wait for the simulator")
-    ap.add_argument("--frame-timeout", type=float, default=10.0, help="seconds without a sensor frame = link lost")
+    ap.add_argument("--connect-timeout", type=cliargs.seconds, default=30.0, help="seconds to wait for the simulator")
+    ap.add_argument("--frame-timeout", type=cliargs.seconds, default=10.0, help="seconds without a sensor frame = link lost")
     ap.add_argument("--key-file", type=Path, default=None,
                     help="signing master key (64 hex digits); overrides [link].key_file of the scenario")
-    ap.add_argument("--outcome", type=Path, default=None, help="write a per-phase error summary (JSON) here")
-    ap.add_argument("--telemetry-every", type=int, default=1, help="publish the controller state every N steps")
-    ap.add_argument("--tlog", type=Path, default=None,
+    ap.add_argument("--outcome", type=cliargs.output_file, default=None, help="write a per-phase error summary (JSON) here")
+    ap.add_argument("--telemetry-every", type=cliargs.count, default=1, help="publish the controller state every N steps")
+    ap.add_argument("--tlog", type=cliargs.output_file, default=None,
                     help="write every MAVLink frame of the link to this .tlog (stock tools read it)")
     add_zenoh_arguments(ap, role="publisher")
     a = ap.parse_args(argv)
     tag = f"companion[{a.sysid}]"
     try:
         sim = parse_endpoint(a.sim)
+        if sim.alias == "udp":  # read as udpout: a destination
+            sim = as_destination(sim, a.sim)
     except EndpointError as exc:
         print(f"{tag}: error: --sim: {exc}", file=sys.stderr)
         return 2
@@ -96,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGINT, _on_signal)
     tlog = TlogWriter(a.tlog) if a.tlog is not None else None
     try:
-        client = CompanionClient(a.sysid, a.sim, signing_key=None if keys is None else keys[a.sysid], tlog=tlog)
+        client = CompanionClient(a.sysid, sim, signing_key=None if keys is None else keys[a.sysid], tlog=tlog)
     except ValueError as exc:
         print(f"{tag}: error: --sim: {exc}", file=sys.stderr)
         return 2

@@ -17,6 +17,7 @@ import sys
 import threading
 from pathlib import Path
 
+from amcore import cliargs
 from telemetry.session import TelemetryConfigError, add_zenoh_arguments, options_from_args
 
 
@@ -32,8 +33,8 @@ def _record(a: argparse.Namespace) -> int:
     except TelemetryConfigError as exc:
         _err(str(exc))
         return 2
-    if a.out.parent and not a.out.parent.exists():
-        _err(f"{a.out.parent}: no such directory")
+    if not a.out.parent.is_dir():
+        _err(f"--out {a.out}: {a.out.parent}: no such directory")
         return 2
     rec = Recorder(a.out, opts, scene_rate_hz=a.scene_rate, flush_period_s=a.flush_period,
                    compression=a.compression, linger_s=a.linger)
@@ -58,7 +59,7 @@ def _record(a: argparse.Namespace) -> int:
         s = rec.close()
     print(f"stopped ({s.stop_reason}): {s.received} samples from {s.keys} keys, {s.written} messages, "
           f"{s.sim_time_s:.3f} s simulated, {s.bytes / 1e6:.2f} MB; lost: {s.missing} (seq gaps), "
-          f"{s.inbox_overflow} (inbox overflow), {s.malformed} malformed", file=sys.stderr)
+          f"{s.inbox_overflow} (inbox overflow), {s.malformed} malformed, {s.rejected} rejected (unauthenticated)", file=sys.stderr)
     if a.summary_json:
         print(json.dumps(s.as_dict()))
     return 0
@@ -94,21 +95,21 @@ def _review(a: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="ground-station", description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = cliargs.ArgumentParser(prog="ground-station", description=" ".join(__doc__.split("\n\n")[0].split()))
     sub = ap.add_subparsers(dest="command", required=True)
     r = sub.add_parser("record", help="subscribe to the telemetry and write an MCAP log")
-    r.add_argument("--out", type=Path, required=True, help="MCAP file to write")
-    r.add_argument("--duration", type=float, default=None, help="stop after S seconds of wall time")
-    r.add_argument("--linger", type=float, default=0.5, help="keep recording S seconds after run_end (default 0.5)")
-    r.add_argument("--scene-rate", type=float, default=20.0, help="/scene updates per simulated second (0: none)")
-    r.add_argument("--flush-period", type=float, default=1.0, help="flush the file every S seconds (default 1)")
+    r.add_argument("--out", type=cliargs.output_file, required=True, help="MCAP file to write")
+    r.add_argument("--duration", type=cliargs.seconds, default=None, help="stop after S seconds of wall time")
+    r.add_argument("--linger", type=cliargs.seconds_or_zero, default=0.5, help="keep recording S seconds after run_end (default 0.5)")
+    r.add_argument("--scene-rate", type=cliargs.number(0.0, 1000.0, unit=" Hz"), default=20.0, help="/scene updates per simulated second (0: none)")
+    r.add_argument("--flush-period", type=cliargs.seconds, default=1.0, help="flush the file every S seconds (default 1)")
     r.add_argument("--compression", choices=("zstd", "lz4", "none"), default="zstd")
     r.add_argument("--summary-json", action="store_true", help="print the final summary as JSON on stdout")
     add_zenoh_arguments(r, role="recorder")
     v = sub.add_parser("review", help="summarize a recorded run per phase, optionally plot it")
     v.add_argument("log", type=Path, help="MCAP file (a truncated one is salvaged)")
     v.add_argument("--json", action="store_true", help="print the summary as JSON")
-    v.add_argument("--plots", type=Path, default=None, metavar="DIR", help="write PNG plots into DIR")
+    v.add_argument("--plots", type=cliargs.output_dir, default=None, metavar="DIR", help="write PNG plots into DIR")
     return ap
 
 

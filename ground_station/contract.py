@@ -37,6 +37,8 @@ RECORDER_STATS_SCHEMA = {
         "t": {"type": "number"}, "wall_s": {"type": "number"},
         "inbox_overflow": {"type": "integer", "minimum": 0}, "malformed": {"type": "integer", "minimum": 0},
         "unknown": {"type": "integer", "minimum": 0},
+        "rejected": {"type": "integer", "minimum": 0,
+                     "description": "samples dropped unauthenticated (telemetry.auth; optional)"},
         "keys": {"type": "object", "description": "key -> {received, first_seq, last_seq, missing, reordered, restarts}"},
     },
 }
@@ -138,6 +140,7 @@ class KeyStats:
                     reordered=self.reordered, restarts=self.restarts)
 
 
+_SCENE_SLACK = 1e-3  # of a /scene period: a sample this close before its slot is on it (float time stamps)
 MAX_SIM_TIME_S = 1e7  # a payload claiming a later simulation time (or NaN) is malformed
 
 
@@ -293,8 +296,10 @@ class Translator:
                     pose = _dumps(fg.pose_in_frame(t, "world", p["p_WO"], p["q_WO"]))
                 out = [Out(OBJECT_POSE_TOPIC, "foxglove.PoseInFrame", ns, pose),
                        Out(OBJECT_STATE_TOPIC, _RAW_SCHEMA[ch], ns, raw)]
-                if t >= self._next_scene_t:
-                    self._next_scene_t = t + self.scene_period_s
+                if t >= self._next_scene_t - _SCENE_SLACK * self.scene_period_s:
+                    # the next slot of the fixed grid k * period (t + period would drift: a sample
+                    # a hair before its slot waits for the next one)
+                    self._next_scene_t = (math.floor(t / self.scene_period_s + _SCENE_SLACK) + 1) * self.scene_period_s
                     p = p if p is not None else json.loads(raw)
                     out.append(Out(SCENE_TOPIC, "foxglove.SceneUpdate", ns, _dumps(self._scene_update(t, p))))
                 return out
@@ -317,9 +322,9 @@ class Translator:
             self.last_error = f"{key}: {type(exc).__name__}: {exc}"
             return []
 
-    def stats_out(self, wall_s: float, inbox_overflow: int) -> Out:
+    def stats_out(self, wall_s: float, inbox_overflow: int, rejected: int = 0) -> Out:
         body = {"t": self.latest_t, "wall_s": wall_s, "inbox_overflow": inbox_overflow, "malformed": self.malformed,
-                "unknown": self.unknown, "keys": {k: s.as_dict() for k, s in sorted(self.stats.items())}}
+                "unknown": self.unknown, "rejected": rejected, "keys": {k: s.as_dict() for k, s in sorted(self.stats.items())}}
         return Out(STATS_TOPIC, RECORDER_STATS_SCHEMA["title"], _ns(self.latest_t), _dumps(body))
 
     # ------------------------------------------------------------------ scene

@@ -77,6 +77,10 @@ class McapLogWriter:
         no fsync: a power cut may still lose the page cache)."""
         self._writer.flush()
 
+    def size(self) -> int:
+        """Bytes in the file so far (after `flush`: every message written)."""
+        return self._file.tell() if self._file is not None else 0
+
     def close(self) -> None:
         if self._writer is not None:
             self._writer.finish()

@@ -21,6 +21,7 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from telemetry.auth import TAG, unseal
 from telemetry.schema import samples_of
 from telemetry.session import ZenohOptions, build_config
 
@@ -42,6 +43,7 @@ class RecorderSummary:
     missing: int  # seq gaps summed over keys
     reordered: int
     inbox_overflow: int
+    rejected: int  # samples dropped unauthenticated (telemetry.auth: no tag, a wrong one, a key nobody may write)
     malformed: int
     unknown: int
     keys: int
@@ -67,6 +69,8 @@ class Recorder:
         self._inbox: collections.deque = collections.deque()
         self._overflow = 0
         self._received = 0
+        self._rejected = 0
+        self._master = options.auth_key  # telemetry.auth: keep only what the run's publishers sealed
         self._session = None
         self._subscriber = None
         self._t0 = 0.0
@@ -128,7 +132,15 @@ class Recorder:
         while self._inbox and (max_items is None or n < max_items):
             key, message = pop()
             n += 1
-            for data in samples_of(message):  # one or more samples, one JSON text per line
+            if self._master is not None:
+                body = unseal(self._master, self.keys, key, message)
+                if body is None:  # forged, or not of this run: counted, never written
+                    self._rejected += sum(1 for line in samples_of(message) if not line.startswith(TAG))
+                    continue
+                message = body
+            for data in samples_of(message):
+                if data.startswith(TAG):  # a sealed message, and this recorder has no key: not a sample
+                    continue  # one or more samples, one JSON text per line
                 samples += 1
                 try:
                     outs = translate(key, data)
@@ -145,7 +157,7 @@ class Recorder:
         return n
 
     def _flush(self) -> None:
-        self.writer.write(self.translator.stats_out(time.monotonic() - self._t0, self._overflow))
+        self.writer.write(self.translator.stats_out(time.monotonic() - self._t0, self._overflow, self._rejected))
         self.writer.flush()
 
     def close(self) -> RecorderSummary:
@@ -164,18 +176,20 @@ class Recorder:
                 pass
             self._session = None
         self._drain()
-        summary = self.summary()
-        self.writer.write(self.translator.stats_out(summary.wall_s, self._overflow))
+        self.writer.write(self.translator.stats_out(time.monotonic() - self._t0, self._overflow, self._rejected))
+        self.writer.flush()  # every message is in the file: `written` and `bytes` below count them all
+        summary = self.summary(size=self.writer.size())
         self.writer.add_metadata("recorder_summary", {k: str(v) for k, v in summary.as_dict().items()})
         self.writer.close()
-        return self.summary(final=True)
+        return self.summary(size=self.out_path.stat().st_size if self.out_path.exists() else 0)
 
-    def summary(self, final: bool = False) -> RecorderSummary:
+    def summary(self, size: int = 0) -> RecorderSummary:
+        """written: every MCAP message so far; bytes: `size` (in the log's recorder_summary the
+        file up to that record, every message included; after close, the whole file)."""
         st = self.translator.stats.values()
-        size = self.out_path.stat().st_size if final and self.out_path.exists() else 0
         return RecorderSummary(
             path=str(self.out_path), stop_reason=self._stop_reason or "closed", wall_s=time.monotonic() - self._t0,
             received=self._received, written=self.writer.messages, missing=sum(s.missing for s in st),
-            reordered=sum(s.reordered for s in st), inbox_overflow=self._overflow,
+            reordered=sum(s.reordered for s in st), inbox_overflow=self._overflow, rejected=self._rejected,
             malformed=self.translator.malformed, unknown=self.translator.unknown, keys=len(self.translator.stats),
             sim_time_s=self.translator.latest_t, bytes=size)

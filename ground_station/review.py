@@ -223,6 +223,7 @@ def summarize(log: LogData, run: RunData | None = None) -> dict:
         "loss": None if last_stats is None else {
             "missing": sum(k["missing"] for k in last_stats["keys"].values()),
             "inbox_overflow": last_stats["inbox_overflow"], "malformed": last_stats["malformed"],
+            "rejected": last_stats.get("rejected", 0),  # unauthenticated samples, dropped (telemetry.auth)
             "per_key_missing": {k: v["missing"] for k, v in last_stats["keys"].items() if v["missing"]},
             "as_of_sim_time_s": last_stats["t"]},
         "phases": phases,
@@ -247,6 +248,9 @@ def format_summary(s: dict) -> str:
     if s["loss"] is not None:
         lines.append(f"lost in transit: {s['loss']['missing']} (seq gaps and publishers' final counts), "
                      f"inbox overflow {s['loss']['inbox_overflow']}")
+        if s["loss"]["rejected"]:
+            lines.append(f"REJECTED: {s['loss']['rejected']} unauthenticated samples (forged, or not of this run) "
+                         f"were dropped, not recorded")
     lines.append(f"phases from {s['phase_source']}: ends {s['phase_ends_s']}")
     for name, p in s["phases"].items():
         lines.append(f"\n== {name} {p['window_s'][0]:.2f}..{p['window_s'][1]:.2f} s: object lift "

@@ -17,6 +17,12 @@ in-process runner (`simulator.inprocess`) both drive it, once per physics step k
         core.hold(k, lost)                   # flight controllers fly on what they hold
     core.step()
 
+A setpoint refused as implausible is answered at once, by one policy for every runner:
+the caller reports it with `core.note_rejected(sysid, why)` before `actuate`, and leaves it
+out of `setpoints`; the flight controller keeps flying its last valid command (zero-order
+hold), and after K refusals in a row ([flight_controller].failsafe_after_rejected) the
+vehicle goes to its failsafe for the rest of the run (its companion is no longer trusted).
+
 Beyond the companions, a GCS can command each flight controller between steps (`arm`,
 `disarm`, `land`; `simulator.commands`), and `snapshot` says what each one reports.
 """
@@ -63,8 +69,16 @@ def initial_state(spec: ScenarioSpec, am: AmSpec, model) -> AmState:
 
 class SitlCore:
     def __init__(self, spec: ScenarioSpec, log: Callable[[str], None] = lambda _msg: None,
-                 on_truth: Callable[[object], None] | None = None) -> None:
+                 on_truth: Callable[[object], None] | None = None,
+                 failsafe_after_rejected: int | None = None) -> None:
+        """failsafe_after_rejected: K of the rejection policy (module docstring); None: the
+        scenario's [flight_controller].failsafe_after_rejected."""
         self.spec, self.log, self.on_truth = spec, log, on_truth
+        K = spec.vehicle.flight_controller.failsafe_after_rejected if failsafe_after_rejected is None \
+            else failsafe_after_rejected
+        if not (isinstance(K, int) and K >= 1):
+            raise ValueError(f"failsafe_after_rejected must be an integer >= 1, got {K!r}")
+        self.failsafe_after_rejected = K
         self.model = build_model(spec.vehicle)
         self.sysids = [am.sysid for am in spec.ams]
         self.world = World(spec, {am.sysid: initial_state(spec, am, self.model) for am in spec.ams})
@@ -90,6 +104,8 @@ class SitlCore:
         self.wrong_kind: dict[int, int] = {s: 0 for s in self.sysids}  # setpoints of the other mode, ignored
         self.events: list[dict] = []
         self.rejected: list[tuple[float, int, str]] = []  # (t, sysid, why) of setpoints refused as implausible
+        self.rejected_in_a_row: dict[int, int] = {s: 0 for s in self.sysids}
+        self.distrusted: set[int] = set()  # in failsafe after K rejected setpoints in a row, for good
         self.controller_errors: list[tuple[float, int, str]] = []  # (t, sysid, what): controllers that raised
         self.digest = hashlib.sha256()
         self._unobserved: tuple | None = None  # (k, values, frames) of `frames` awaiting `observe`
@@ -163,7 +179,7 @@ class SitlCore:
         """A setpoint answering the last frames, as it arrives: its flight controller applies
         it now, while the other companions still compute (`actuate` then skips this AM).
         One of a vehicle in failsafe is left to `actuate`, which ends the failsafe."""
-        if sysid in self.failsafes or sysid in self._actuated or sysid in self._overridden:
+        if sysid in self.failsafes or sysid in self._actuated or sysid in self._overridden or sysid in self.distrusted:
             return
         self._actuated.add(sysid)
         self._apply(self._k, sysid, setpoint)
@@ -184,11 +200,12 @@ class SitlCore:
                     c = self.landing[s].command(t, w.state(s))
                     w.apply(s, c.thrust_n, c.tau_B_nm, c.tau_q_nm)
                 continue
-            if s in lost or (s in self.failsafes and s not in setpoints):
+            if s in lost or s in self.distrusted or (s in self.failsafes and s not in setpoints):
                 if s not in self.failsafes:
                     self.failsafes[s] = Failsafe(self.model, w.state(s), t)
-                    self.events.append({"t": t, "sysid": s, "event": "lost", "failsafe": "hold, then land"})
-                    self.log(f"t={t:.3f} s sysid {s}: companion silent; flight controller failsafe: hold, then land")
+                    if s not in self.distrusted:  # distrusted: said by note_rejected
+                        self.events.append({"t": t, "sysid": s, "event": "lost", "failsafe": "hold, then land"})
+                        self.log(f"t={t:.3f} s sysid {s}: companion silent; flight controller failsafe: hold, then land")
                 c = self.failsafes[s].command(t, w.state(s))
                 w.apply(s, c.thrust_n, c.tau_B_nm, c.tau_q_nm)
                 continue
@@ -211,6 +228,8 @@ class SitlCore:
                 self.log(f"t={self.world.time_s:.3f} s sysid {s}: ignored a {type(setpoint).__name__} in "
                          f"{self.mode} mode; counted in outcome.json, further ones not printed")
             setpoint = None
+        if setpoint is not None:
+            self.rejected_in_a_row[s] = 0
         sp = self.fc_links[s].step(k, setpoint)
         if sp is None:  # nothing has reached this flight controller yet: keep the last command
             return
@@ -229,11 +248,23 @@ class SitlCore:
                          f"further ones not printed")
 
     def note_rejected(self, sysid: int, why: str) -> None:
-        """A setpoint of `sysid` answering the current step was refused as implausible."""
+        """A setpoint of `sysid` answering the current step was refused as implausible: counted;
+        its flight controller holds the last valid command (the caller leaves the setpoint out
+        of `actuate`), or, the K-th refusal in a row, goes to failsafe for the rest of the run."""
+        t = self.time_s
         if len(self.rejected) < 1000:
-            self.rejected.append((self.time_s, sysid, why))
+            self.rejected.append((t, sysid, why))
         else:  # keep the count, not every reason
             self.rejected.append(self.rejected[-1])
+        self.rejected_in_a_row[sysid] += 1
+        if self.rejected_in_a_row[sysid] < self.failsafe_after_rejected or sysid in self.distrusted:
+            return
+        self.distrusted.add(sysid)  # `actuate` engages the failsafe (unless a GCS command rules)
+        K = self.failsafe_after_rejected
+        self.events.append({"t": t, "sysid": sysid, "event": "rejected", "in_a_row": K,
+                            "failsafe": "hold, then land"})
+        self.log(f"t={t:.3f} s sysid {sysid}: {K} setpoints in a row rejected as implausible (last: {why}); "
+                 f"flight controller failsafe: hold, then land, for the rest of the run")
 
     def note_controller_error(self, sysid: int, what: str) -> None:
         """The controller of `sysid` raised instead of answering (in-process runs)."""
@@ -306,7 +337,8 @@ class SitlCore:
         self.outcome.add(w.ground_truth(), {s: w.wrench_ee(s) for s in self.sysids})
         v = judge(self.outcome, self.spec.success, w.step_index, self.failsafes, self.rejected, self.controller_errors)
         return {"state_digest": self.digest.hexdigest(), "verdict": v.to_dict(), "events": self.events,
-                "rejected_setpoints": len(self.rejected),
+                "rejected_setpoints": len(self.rejected), "failsafe_after_rejected": self.failsafe_after_rejected,
+                "distrusted": sorted(self.distrusted),
                 "flight_controller": self.mode, "control_every": self.control_every,
                 "failsafe_at_end": sorted(self.failsafes),
                 "fc_link": {str(s): {**vars(link.channel.stats), "stale": link.hold.stale,

@@ -12,7 +12,6 @@ Exit codes: 0 mission success, 4 mission failed (the verdict on stderr), 2 bad c
 """
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -20,7 +19,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from amcore.config import ConfigError, ScenarioSpec, load_scenario
+from amcore import cliargs
+from amcore.config import ConfigError, ScenarioSpec, check_duration, load_scenario
 from amlink import fastcodec
 from amlink.limits import SetpointLimits
 from amlink.types import AttitudeSetpoint, SensorFrame, TorqueSetpoint
@@ -50,15 +50,18 @@ def setpoint_as_on_the_wire(sp: TorqueSetpoint | AttitudeSetpoint) -> TorqueSetp
 
 def run(spec: ScenarioSpec, duration_s: float | None = None,
         lost: Callable[[float], set[int]] = lambda _t: set(),
-        progress: Callable[[float], None] | None = None) -> dict:  # fmt: skip
+        progress: Callable[[float], None] | None = None,
+        failsafe_after_rejected: int | None = None) -> dict:  # fmt: skip
     """Run a scenario in-process; `lost(t)` -> sysids whose companion is silent at t (tests).
 
     As the UDP simulator does, a setpoint outside the plausibility bounds (`amlink.limits`)
-    is refused (its flight controller holds the last command) and counted; a controller
+    is refused at once (its flight controller holds the last command) and counted, and
+    `failsafe_after_rejected` (None: the scenario's) refusals in a row send that vehicle to
+    failsafe for good (`simulator.core`); a controller
     that raises is treated as a companion that died (failsafe) and reported. The result's
     "verdict" judges the mission (`simulator.verdict`). `progress(t)`, if given, is called
     about every simulated second."""
-    core = SitlCore(spec)
+    core = SitlCore(spec, failsafe_after_rejected=failsafe_after_rejected)
     pilots = {s: Pilot(spec, s, model=core.model) for s in core.sysids}
     v = spec.vehicle
     limits = SetpointLimits.for_vehicle(v.rotors.count * v.rotors.thrust_max_n, max(v.joint_torque_max_nm), v.n_joints)
@@ -104,16 +107,20 @@ def run(spec: ScenarioSpec, duration_s: float | None = None,
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m simulator.inprocess", description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = cliargs.ArgumentParser(prog="python -m simulator.inprocess", description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("scenario")
-    ap.add_argument("--duration", type=float, default=None)
+    ap.add_argument("--duration", type=cliargs.seconds, default=None)
+    ap.add_argument("--failsafe-after-rejected", type=cliargs.count, default=None, metavar="K",
+                    help="failsafe after K setpoints in a row rejected as implausible (default: the scenario's "
+                         "[flight_controller].failsafe_after_rejected)")
     a = ap.parse_args(argv)
     try:
         spec = load_scenario(a.scenario)
+        if a.duration is not None:
+            check_duration(spec, a.duration, "--duration")
     except ConfigError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    result = run(spec, a.duration)
+        return cliargs.fail(ap.prog, str(exc))
+    result = run(spec, a.duration, failsafe_after_rejected=a.failsafe_after_rejected)
     print(json.dumps(result, indent=1, default=str))
     print(result["verdict"]["text"], file=sys.stderr)
     return MISSION_FAILED if result["verdict"]["status"] == "failed" else 0

@@ -6,13 +6,14 @@ MAVLink/UDP on loopback, with a progress bar and a run folder holding the outcom
 
 The run folder gets outcome.json (simulator ground truth), am<sysid>.json (each
 companion's controller errors per phase), gcs.tlog (the flight controllers' GCS link, for
-stock MAVLink tools), gcs.key (its signing passphrase) and every process's log. Exit code:
+stock MAVLink tools), gcs.key (its signing passphrase), telemetry*.key (the run's telemetry
+keys: the recorder keeps only what the run's simulator and companions sealed, telemetry.auth)
+and every process's log. Exit code:
 0 when every process ended cleanly and the mission succeeded (simulator.verdict), 4 when
 the mission failed, 2 bad configuration, 1 when a process failed.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import select
@@ -24,8 +25,10 @@ import sys
 import time
 from pathlib import Path
 
-from amcore.config import DEFAULT_SCENARIO, ConfigError, load_scenario
+from amcore import cliargs
+from amcore.config import DEFAULT_SCENARIO, ConfigError, check_duration, load_scenario
 from amlink.endpoint import DEFAULT_GCS, EndpointError, parse_endpoint
+from telemetry.auth import publisher_key
 
 from .verdict import MISSION_FAILED
 
@@ -58,13 +61,13 @@ class _Bar:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="am-run", description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = cliargs.ArgumentParser(prog="am-run", description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("scenario", nargs="?", type=Path, default=DEFAULT_SCENARIO, help="scenario TOML")
-    ap.add_argument("--run-dir", type=Path, default=None, help="run folder (default runs/<name>-<time>)")
-    ap.add_argument("--duration", type=float, default=None, help="override the scenario's duration [s]")
+    ap.add_argument("--run-dir", type=cliargs.output_dir, default=None, help="run folder (default runs/<name>-<time>)")
+    ap.add_argument("--duration", type=cliargs.seconds, default=None, help="override the scenario's duration [s]")
     ap.add_argument("--no-progress", action="store_true", help="no progress display")
     ap.add_argument("--no-telemetry", action="store_true", help="no Zenoh telemetry, no MCAP log, no review")
-    ap.add_argument("--startup-timeout", type=float, default=120.0, help="seconds for all processes to connect")
+    ap.add_argument("--startup-timeout", type=cliargs.seconds, default=120.0, help="seconds for all processes to connect")
     ap.add_argument("--gcs", default=DEFAULT_GCS, metavar="ENDPOINT",
                     help=f"the simulator's GCS link (default {DEFAULT_GCS}; mavutil's forms; 'none' for none)")
     ap.add_argument("--tlog-companions", action="store_true",
@@ -78,11 +81,16 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         spec = load_scenario(a.scenario)
+        if a.duration is not None:
+            check_duration(spec, a.duration, "--duration")
+        check_memory(spec)
     except ConfigError as exc:
-        print(f"am-run: error: {exc}", file=sys.stderr)
-        return 2
+        return cliargs.fail("am-run", str(exc))
     run_dir = (a.run_dir or Path("runs") / f"{spec.name}-{time.strftime('%Y%m%d-%H%M%S')}").resolve()
-    run_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        return cliargs.fail("am-run", f"--run-dir {run_dir}: {exc.strerror or exc}")
     cfg = str(Path(a.scenario).resolve())
     key_args = _fresh_key(spec, run_dir)
     sim_cmd = _command("simulator") + key_args + _gcs_key(spec, run_dir) + [
@@ -92,6 +100,7 @@ def main(argv: list[str] | None = None) -> int:
         sim_cmd += ["--duration", str(a.duration)]
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     tele_args = ["--no-telemetry"] if a.no_telemetry else []
+    tele_keys = {} if a.no_telemetry else _telemetry_keys(spec, run_dir)
     mcap = run_dir / "run.mcap"
     procs: dict[str, subprocess.Popen] = {}
     logs = []
@@ -106,12 +115,14 @@ def main(argv: list[str] | None = None) -> int:
             rlog = open(run_dir / "recorder.log", "w")
             logs.append(rlog)
             procs["recorder"] = subprocess.Popen(
-                _command("ground-station") + ["record", "--out", str(mcap), "--zenoh-listen", endpoint],
+                _command("ground-station") + ["record", "--out", str(mcap), "--zenoh-listen", endpoint,
+                                              "--telemetry-key-file", tele_keys["recorder"]],
                 stdout=rlog, stderr=subprocess.STDOUT, env=env, preexec_fn=_lower_priority)
             _wait_listening(endpoint, procs["recorder"], time.monotonic() + a.startup_timeout)
         log = open(run_dir / "simulator.log", "w")
         logs.append(log)
-        sim = procs["simulator"] = subprocess.Popen(sim_cmd + tele_args, stdout=subprocess.PIPE, stderr=log, env=env, text=True)
+        sim_tele = tele_args + (["--telemetry-key-file", tele_keys["simulator"]] if tele_keys else [])
+        sim = procs["simulator"] = subprocess.Popen(sim_cmd + sim_tele, stdout=subprocess.PIPE, stderr=log, env=env, text=True)
         bind = None
         deadline = time.monotonic() + a.startup_timeout
         while bind is None:
@@ -128,7 +139,8 @@ def main(argv: list[str] | None = None) -> int:
             procs[f"companion {am.sysid}"] = subprocess.Popen(
                 _command("companion") + key_args + ["--sysid", str(am.sysid), "--sim", bind, "--config", cfg,
                                          "--outcome", str(run_dir / f"am{am.sysid}.json"),
-                                         "--connect-timeout", str(a.startup_timeout)] + tlog + tele_args,
+                                         "--connect-timeout", str(a.startup_timeout)] + tlog + tele_args
+                + (["--telemetry-key-file", tele_keys[f"am{am.sysid}"]] if tele_keys else []),
                 stdout=clog, stderr=subprocess.STDOUT, env=env)
         failed = _follow(sim, procs, bar)
     except KeyboardInterrupt:
@@ -160,12 +172,59 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+# resident memory of the processes am-run starts [MiB]: a companion (pinocchio, numpy, zenoh)
+# measured at 191 MiB; the simulator's and recorder's figures are allowances, not measurements
+COMPANION_MIB = 191
+SIMULATOR_MIB = 250
+SIMULATOR_PER_AM_MIB = 2
+
+
+def memory_needed_mib(n_am: int) -> int:
+    """About how much memory a run of `n_am` AMs takes [MiB]: one companion process per AM,
+    the simulator and the recorder."""
+    return n_am * (COMPANION_MIB + SIMULATOR_PER_AM_MIB) + SIMULATOR_MIB + COMPANION_MIB
+
+
+def available_mib() -> float | None:
+    """MemAvailable of /proc/meminfo [MiB] (None where there is none)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) / 1024.0
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def check_memory(spec, available: float | None = None) -> None:
+    """ConfigError (before anything starts) if the run's processes would not fit in the memory
+    the machine has available: it would swap, or thrash without swap, instead of running."""
+    have = available_mib() if available is None else available
+    need = memory_needed_mib(len(spec.ams))
+    if have is not None and need > have:
+        raise ConfigError(f"{spec.path}: [[am]]: {len(spec.ams)} AMs need about {need / 1024:.1f} GiB "
+                          f"({COMPANION_MIB} MiB per companion process, plus the simulator and the recorder); "
+                          f"this machine has {have / 1024:.1f} GiB available")
+
+
 def _fresh_key(spec, run_dir: Path) -> list[str]:
     """A random signing master key for this run (mode 0600 in the run folder), unless the
     scenario names its own keys or turns signing off."""
     if not spec.link.signing or spec.link.key_file or any(am.signing_key_hex for am in spec.ams):
         return []
     return ["--key-file", str(_secret_file(run_dir / "link.key", os.urandom(32).hex()))]
+
+
+def _telemetry_keys(spec, run_dir: Path) -> dict[str, str]:
+    """A random telemetry master key for this run for the recorder, and each publisher's own
+    key derived from it (telemetry.auth), each in a 0600 file of the run folder: the recorder
+    keeps only what the run's simulator and companions sealed."""
+    master = os.urandom(32)
+    files = {"recorder": str(_secret_file(run_dir / "telemetry.key", master.hex()))}
+    for name in ["simulator"] + [f"am{am.sysid}" for am in spec.ams]:
+        files[name] = str(_secret_file(run_dir / f"telemetry-{name}.key", publisher_key(master, name).hex()))
+    return files
 
 
 def _gcs_key(spec, run_dir: Path) -> list[str]:

@@ -9,6 +9,9 @@ every companion its sensor frame (ODOMETRY, AM_JOINT_STATE, AM_WRENCH, AM_SIM_ST
 all N setpoints answering step k (the N exchanges run concurrently) and applies them through
 the flight controller (torque mode: the rotor mixer; attitude mode: the emulated autopilot)
 and the joint limits (saturation is counted and logged); it steps physics every step.
+A setpoint rejected as implausible is answered at once: the flight controller holds its last
+valid command and counts it, and K rejections in a row send that vehicle to failsafe for the
+rest of the run (--failsafe-after-rejected; simulator.core).
 It also plays each vehicle's flight-controller GCS port (--gcs, simulator.gcs_link), as
 PX4 SITL does. The run folder gets outcome.json (the physical outcome from ground truth, see
 simulator.outcome, and the mission verdict, simulator.verdict) and gcs.tlog. Exit codes: 0
@@ -18,7 +21,6 @@ configuration, 1 link failure (a missing or silent companion, named), 130 interr
 """
 from __future__ import annotations
 
-import argparse
 import json
 import signal
 import sys
@@ -26,7 +28,8 @@ import time
 from pathlib import Path
 
 
-from amcore.config import DEFAULT_SCENARIO, ConfigError, load_scenario, scenario_id
+from amcore import cliargs
+from amcore.config import DEFAULT_SCENARIO, ConfigError, check_duration, load_scenario, scenario_id
 from amlink import signing
 from amlink.endpoint import DEFAULT_GCS, SIM_BIND, EndpointError, parse_endpoint
 from amlink.errors import LinkError
@@ -88,7 +91,7 @@ class Progress:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="simulator", description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = cliargs.ArgumentParser(prog="simulator", description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--config", type=Path, default=DEFAULT_SCENARIO, help="scenario TOML")
     ap.add_argument("--bind", action="append", metavar="ENDPOINT",
                     help=f"where the companions reach their flight controllers, repeatable (default "
@@ -100,11 +103,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--gcs-key-file", type=Path, default=None,
                     help="GCS signing passphrase file (key = SHA-256 of the passphrase, as MAVProxy's 'signing "
                          "key'); with signing on, GCS commands are executed only if signed with it")
-    ap.add_argument("--run-dir", type=Path, default=None, help="folder for outcome.json (default runs/<name>-<time>)")
-    ap.add_argument("--duration", type=float, default=None, help="override [scenario].duration_s")
-    ap.add_argument("--peer-timeout", type=float, default=60.0, help="seconds to wait for every companion at start")
-    ap.add_argument("--step-timeout", type=float, default=5.0,
+    ap.add_argument("--run-dir", type=cliargs.output_dir, default=None, help="folder for outcome.json (default runs/<name>-<time>)")
+    ap.add_argument("--duration", type=cliargs.seconds, default=None, help="override [scenario].duration_s")
+    ap.add_argument("--peer-timeout", type=cliargs.seconds, default=60.0, help="seconds to wait for every companion at start")
+    ap.add_argument("--step-timeout", type=cliargs.seconds, default=5.0,
                     help="seconds a companion may stay silent before its vehicle goes to failsafe")
+    ap.add_argument("--failsafe-after-rejected", type=cliargs.count, default=None, metavar="K",
+                    help="a vehicle goes to failsafe after K of its setpoints in a row are rejected as implausible "
+                         "(each one is answered at once: the flight controller holds the last valid command); "
+                         "default: the scenario's [flight_controller].failsafe_after_rejected")
     ap.add_argument("--key-file", type=Path, default=None,
                     help="signing master key (64 hex digits); overrides [link].key_file of the scenario")
     ap.add_argument("--progress", choices=("bar", "jsonl", "none"), default=None,
@@ -134,11 +141,18 @@ def main(argv: list[str] | None = None) -> int:
         print("simulator: warning: no --gcs-key-file: the GCS link sends telemetry but executes no command "
               "(am-run writes a GCS key to the run folder)", file=sys.stderr)
     duration = spec.duration_s if a.duration is None else a.duration
-    if not duration > 0:
-        print(f"simulator: error: --duration must be > 0, got {duration}", file=sys.stderr)
-        return 2
+    try:
+        check_duration(spec, duration, "--duration")
+    except ConfigError as exc:
+        return cliargs.fail("simulator", str(exc))
     mode = a.progress or ("bar" if sys.stderr.isatty() else "none")
     run_dir = a.run_dir or Path("runs") / f"{spec.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    try:  # before the run: a run folder that cannot be written must not lose the outcome afterwards
+        run_dir.mkdir(parents=True, exist_ok=True)
+        (run_dir / ".write-check").touch()
+        (run_dir / ".write-check").unlink()
+    except OSError as exc:
+        return cliargs.fail("simulator", f"--run-dir {run_dir}: cannot write there: {exc.strerror or exc}")
     sysids = [am.sysid for am in spec.ams]
     info = ScenarioInfo(scenario_id=scenario_id(spec), n_am=len(sysids), name=spec.name, seed=spec.seed,
                         rate_hz=spec.rate_hz)
@@ -157,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"simulator: {msg}", file=sys.stderr, flush=True)
         sim_tele.fault(core.time_s, msg, level="warning")
 
-    core = SitlCore(spec, log=log, on_truth=sim_tele.truth)
+    core = SitlCore(spec, log=log, on_truth=sim_tele.truth, failsafe_after_rejected=a.failsafe_after_rejected)
     v = spec.vehicle
     limits = SetpointLimits.for_vehicle(v.rotors.count * v.rotors.thrust_max_n, max(v.joint_torque_max_nm), v.n_joints)
     gcs_link = GcsLink(gcs_endpoint, sysids, key=gcs_key, accept_unsigned=keys is None, tlog=run_dir / "gcs.tlog")
@@ -196,7 +210,6 @@ def main(argv: list[str] | None = None) -> int:
                   f"publishing anyway", file=sys.stderr, flush=True)
         progress.t_wall0 = time.perf_counter()
         sim_tele.start(core.time_s)
-        rejected = server.stats.rejected_setpoints
 
         def bookkeeping() -> None:  # while the companions compute step k
             core.observe()
@@ -207,10 +220,8 @@ def main(argv: list[str] | None = None) -> int:
                 # each frame leaves as soon as it is read; each setpoint is applied as it arrives
                 setpoints = server.exchange(core.iter_frames(k), partial=True, while_waiting=bookkeeping,
                                             on_setpoint=core.on_setpoint)
-                if server.stats.rejected_setpoints != rejected:  # the verdict names the first and counts them
-                    for _ in range(server.stats.rejected_setpoints - rejected):
-                        core.note_rejected(*server.last_rejection)
-                    rejected = server.stats.rejected_setpoints
+                for sysid, why in server.last_rejected:  # answered at once: hold, count, failsafe after K
+                    core.note_rejected(sysid, why)
                 core.actuate(k, setpoints, server.lost_peers)
             else:  # between the companions' control steps the flight controllers fly on their own
                 core.hold(k, server.lost_peers)

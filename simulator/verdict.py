@@ -20,8 +20,10 @@ from .outcome import RunOutcome
 
 MISSION_FAILED = 4  # exit code of every runner (simulator, am-run, in-process) whose mission failed
 
-FAILURE_CLASSES = ("diverged", "base contact", "never lifted", "dropped", "slipped", "failsafe",
-                   "rejected setpoints", "saturated")
+# "rejected setpoints" before "failsafe": K refused setpoints in a row send a vehicle to its
+# failsafe (amcore.config.FlightControllerParams), and the refusals are then the cause
+FAILURE_CLASSES = ("diverged", "base contact", "never lifted", "dropped", "slipped", "rejected setpoints",
+                   "failsafe", "saturated")
 
 
 @dataclass(frozen=True)

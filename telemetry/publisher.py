@@ -38,6 +38,7 @@ import time
 from dataclasses import dataclass
 from typing import Iterable, Mapping
 
+from .auth import seal
 from .schema import encode, publisher_stats_sample
 from .session import ZenohOptions, build_config
 
@@ -85,6 +86,7 @@ class TelemetryPublisher:
             raise ValueError("queue_size must be positive")
         self.options = options or ZenohOptions()
         self.keys = self.options.keys
+        self._key = self.options.auth_key  # telemetry.auth: seal every message
         self.name = name or re.sub(r"[^A-Za-z0-9_\-]", "-", f"{socket.gethostname()}-{os.getpid()}")
         self._stats_key = self.keys.publisher(self.name)  # validates the name
         self._stats_period_s = stats_period_s
@@ -275,7 +277,8 @@ class TelemetryPublisher:
                 pub = self._publishers.get(key)
                 if pub is None:
                     pub = self._publishers[key] = self._session.declare_publisher(key, congestion_control=self._cc)
-                pub.put(b"\n".join(texts))
+                body = b"\n".join(texts)
+                pub.put(body if self._key is None else seal(self._key, key, body))
                 counts["sent"] += len(texts)
             except Exception as exc:
                 counts["send_errors"] += len(texts)
@@ -298,7 +301,8 @@ class TelemetryPublisher:
             pub = self._publishers.get(k)
             if pub is None:
                 pub = self._publishers[k] = self._session.declare_publisher(k, congestion_control=self._cc)
-            pub.put(encode(payload)[0])
+            body = encode(payload)[0]
+            pub.put(body if self._key is None else seal(self._key, k, body))
         except Exception as exc:
             self._last_error = f"{k}: put: {exc}"
 

@@ -22,10 +22,13 @@ from __future__ import annotations
 
 import argparse
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from amcore.cliargs import seconds_or_zero
+
+from .auth import parse_key
 from .schema import DEFAULT_PREFIX, Keys
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
@@ -55,12 +58,18 @@ class ZenohOptions:
     enabled: bool = True
     retry_init_ms: int = 250
     retry_max_ms: int = 2000
+    # telemetry.auth: a publisher's own key (it seals every message), or the recorder's run
+    # master key (it keeps only sealed messages); None: nothing is authenticated
+    auth_key: bytes | None = field(default=None, repr=False)
 
     def __post_init__(self):
         if self.role not in ROLES:
             raise TelemetryConfigError(f"telemetry role {self.role!r} is not one of {ROLES}")
         if self.mode not in MODES:
             raise TelemetryConfigError(f"zenoh mode {self.mode!r} is not one of {MODES}")
+        for flag, endpoints in (("--zenoh-connect", self.connect), ("--zenoh-listen", self.listen)):
+            for e in endpoints or ():
+                check_zenoh_endpoint(e, flag, listening=flag == "--zenoh-listen")
         Keys(self.prefix)  # validates
 
     @property
@@ -82,6 +91,31 @@ class ZenohOptions:
         if self.config_file is not None:
             return ()
         return (DEFAULT_ENDPOINT,) if self.role == "recorder" else ()
+
+
+# zenoh's link protocols whose address is HOST:PORT, and the others it knows
+_HOST_PORT_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
+_OTHER_PROTOCOLS = ("unixsock-stream", "unixpipe", "serial", "vsock")
+
+
+def check_zenoh_endpoint(text: str, flag: str, listening: bool = False) -> None:
+    """A zenoh locator PROTOCOL/ADDRESS[#CONFIG] that can work (zenoh itself retries a
+    malformed one forever); TelemetryConfigError naming the flag if not."""
+    proto, sep, rest = text.partition("/")
+    address = rest.partition("#")[0].partition("?")[0]
+    known = _HOST_PORT_PROTOCOLS + _OTHER_PROTOCOLS
+    if not sep or proto not in known or not address:
+        raise TelemetryConfigError(f"{flag} {text!r}: expected PROTOCOL/ADDRESS with PROTOCOL one of "
+                                   f"{', '.join(known)}, e.g. {DEFAULT_ENDPOINT}")
+    if proto in _HOST_PORT_PROTOCOLS:
+        if address.startswith("["):
+            host, close, tail = address[1:].partition("]")
+            port = tail[1:] if close and tail.startswith(":") else ""
+        else:
+            host, _, port = address.rpartition(":")
+        lo = 0 if listening else 1
+        if not host or not port.isdigit() or not lo <= int(port) <= 65535:
+            raise TelemetryConfigError(f"{flag} {text!r}: expected {proto}/HOST:PORT with PORT in {lo}..65535")
 
 
 def config_items(opts: ZenohOptions) -> dict[str, Any]:
@@ -138,9 +172,14 @@ def add_zenoh_arguments(parser: argparse.ArgumentParser, role: str = "publisher"
     g.add_argument("--zenoh-config", type=Path, metavar="FILE",
                    help="zenoh JSON5 config file used as the base (TLS, access control)")
     g.add_argument("--telemetry-prefix", default=DEFAULT_PREFIX, help=f"key prefix (default: {DEFAULT_PREFIX})")
+    g.add_argument("--telemetry-key-file", type=Path, default=None, metavar="FILE",
+                   help=("the run's telemetry master key (64 hex digits): keep only messages its publishers sealed"
+                         if role == "recorder" else
+                         "this publisher's telemetry key (64 hex digits): seal every message with it")
+                        + " (telemetry.auth; am-run writes them to the run folder)")
     if role == "publisher":
         g.add_argument("--no-telemetry", action="store_true", help="publish nothing")
-        g.add_argument("--telemetry-wait", type=float, default=0.0, metavar="S",
+        g.add_argument("--telemetry-wait", type=seconds_or_zero, default=0.0, metavar="S",
                        help="at start, wait up to S seconds for a subscriber (the recorder) so that the log "
                             "holds the first samples, then go on without (default 0: do not wait; am-run, "
                             "which starts the recorder first, passes 5)")
@@ -153,9 +192,25 @@ def _endpoints(values: list[str] | None) -> tuple[str, ...] | None:
 
 
 def options_from_args(args: argparse.Namespace, role: str = "publisher") -> ZenohOptions:
-    """ZenohOptions from a namespace parsed with add_zenoh_arguments(parser, role)."""
-    return ZenohOptions(
+    """ZenohOptions from a namespace parsed with add_zenoh_arguments(parser, role); a config
+    that zenoh cannot take (a bad --zenoh-config file) is a TelemetryConfigError now, before
+    the run, rather than a session that retries in the background forever."""
+    key = None
+    if args.telemetry_key_file is not None and not getattr(args, "no_telemetry", False):
+        try:
+            key = parse_key(Path(args.telemetry_key_file).read_text(), f"--telemetry-key-file {args.telemetry_key_file}")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise TelemetryConfigError(f"--telemetry-key-file {args.telemetry_key_file}: cannot read it: "
+                                       f"{getattr(exc, 'strerror', None) or exc}") from None
+        except ValueError as exc:
+            raise TelemetryConfigError(str(exc)) from None
+    opts = ZenohOptions(
         role=role, mode=args.zenoh_mode, connect=_endpoints(args.zenoh_connect),
         listen=_endpoints(args.zenoh_listen), config_file=args.zenoh_config, prefix=args.telemetry_prefix,
-        enabled=not getattr(args, "no_telemetry", False),
+        enabled=not getattr(args, "no_telemetry", False), auth_key=key,
     )
+    if opts.enabled and opts.config_file is not None:
+        if not Path(opts.config_file).is_file():
+            raise TelemetryConfigError(f"--zenoh-config {opts.config_file}: not a file")
+        build_config(opts)
+    return opts

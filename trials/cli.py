@@ -29,6 +29,7 @@ import json
 import time
 from pathlib import Path
 
+from amcore import cliargs
 from amcore.config import ConfigError, _read_toml, load_scenario, scenario_from_dict
 
 from . import report
@@ -60,7 +61,7 @@ def _seed(text: str) -> int:
 
 
 def parse_args(argv):
-    ap = argparse.ArgumentParser(prog="am-trials", description=" ".join(__doc__.split("\n\n")[0].split()),
+    ap = cliargs.ArgumentParser(prog="am-trials", description=" ".join(__doc__.split("\n\n")[0].split()),
                                  epilog="Exit codes: 0 the campaign ran, 2 bad arguments or configuration, "
                                         "1 a trial raised.")
     ap.add_argument("scenario", type=Path, help="base scenario TOML")

@@ -158,3 +158,17 @@ def test_malformed_and_unknown_payloads_are_counted_not_lost_silently():
     assert tr.unknown == 1
     stats = json.loads(tr.stats_out(1.0, inbox_overflow=3).data)
     assert errors(stats, c.RECORDER_STATS_SCHEMA) == [] and stats["inbox_overflow"] == 3 and stats["malformed"] == 2
+
+
+def test_scene_keeps_its_rate_on_a_fixed_grid():
+    """Object samples every 10 ms of simulated time (k * dt in floating point, as the simulator
+    stamps them): /scene comes at exactly 20 Hz, one per 50 ms slot, without drifting."""
+    tr = Translator(KEYS, scene_rate_hz=20.0)
+    dt, scenes = 1e-3, []
+    for seq, k in enumerate(range(0, 10_001, 10)):
+        t = k * dt
+        raw = schema.encode({"t": t, "seq": seq, "p_WO": [0.0, 0.0, 0.6], "q_WO": [1.0, 0.0, 0.0, 0.0],
+                             "v_WO": [0.0, 0.0, 0.0]})[0]
+        scenes += [t for o in tr.translate(KEYS.object, raw) if o.topic == c.SCENE_TOPIC]
+    assert len(scenes) == 201  # t = 0, 0.05, ..., 10
+    np.testing.assert_allclose(np.diff(scenes), 0.05, atol=1e-9)

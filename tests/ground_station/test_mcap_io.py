@@ -94,3 +94,27 @@ def test_not_an_mcap_and_missing(tmp_path):
         read_log(bad)
     with pytest.raises(FileNotFoundError):
         read_log(tmp_path / "nope.mcap")
+
+
+def test_recorder_summary_counts_every_message_and_the_bytes_before_it(tmp_path):
+    """The log's recorder_summary metadata: `written` is every message in the file (the final
+    /recorder/stats included) and `bytes` the file up to the summary, not 0."""
+    import time
+
+    from ground_station.recorder import Recorder
+    from telemetry import schema
+    from telemetry.session import ZenohOptions
+
+    rec = Recorder(tmp_path / "r.mcap", ZenohOptions(role="recorder"))
+    rec.writer.open()  # no zenoh session: samples go straight into the inbox
+    rec._t0 = time.monotonic()
+    for seq in range(50):
+        raw = schema.encode({"t": seq * 0.01, "seq": seq, "p_WO": [0.0, 0.0, 0.6], "q_WO": [1.0, 0.0, 0.0, 0.0],
+                             "v_WO": [0.0, 0.0, 0.0]})[0]
+        rec._inbox.append((rec.keys.object, raw))
+    rec._drain()
+    final = rec.close()
+    log = read_log(tmp_path / "r.mcap")
+    meta = log.metadata["recorder_summary"]
+    assert int(meta["written"]) == log.message_count == final.written
+    assert 0 < int(meta["bytes"]) < final.bytes == (tmp_path / "r.mcap").stat().st_size

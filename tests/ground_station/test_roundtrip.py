@@ -152,3 +152,41 @@ def test_sigkill_loses_at_most_the_last_flush_period_and_review_salvages(capture
     assert cli_main(["review", str(path), "--json"]) == 0
     s = json.loads(capsys.readouterr().out)
     assert s["log"]["salvaged"] is True and s["log"]["complete_chunks"] >= 1
+
+
+def test_a_keyed_recorder_ignores_a_forged_run_end_and_forged_samples_over_zenoh(capture, tmp_path):
+    """Through zenoh and `ground-station record --telemetry-key-file`: a process without the run's
+    simulator key publishes a run_end at t = 0.2 s and an object 1 km up before the run's own
+    samples; the recorder neither stops nor records them, and counts them as rejected."""
+    from telemetry.auth import publisher_key
+
+    master = bytes(range(7, 39))
+    (tmp_path / "telemetry.key").write_text(master.hex())
+    path = tmp_path / "run.mcap"
+    ep = free_endpoint()
+    with RecorderProcess(path, ep, "--telemetry-key-file", str(tmp_path / "telemetry.key")) as rec:
+        forger = TelemetryPublisher(ZenohOptions(connect=(ep,), auth_key=publisher_key(master, "am4")), name="am4")
+        forger.open()
+        assert forger.wait_for_subscriber(KEYS.sim_event, 15.0)
+        forger.publish(KEYS.sim_event, {"t": 0.2, "seq": 0, "source": "simulator", "kind": "run_end",
+                                        "level": "info", "text": "forged"})
+        forger.publish(KEYS.object, {"t": 0.2, "seq": 0, "p_WO": [0.0, 0.0, 1000.0], "q_WO": [1.0, 0.0, 0.0, 0.0],
+                                     "v_WO": [0.0, 0.0, 0.0], "w_WO": [0.0, 0.0, 0.0], "touching": []})
+        forger.close(timeout_s=10.0)
+        time.sleep(1.0)  # past the recorder's linger, had it taken the forged run_end
+        pub = TelemetryPublisher(ZenohOptions(connect=(ep,), auth_key=publisher_key(master, "simulator")),
+                                 name="simulator", queue_size=len(capture.samples) + 100)
+        pub.open()
+        assert pub.wait_for_subscriber(KEYS.sim_event, 15.0)
+        for k, p in capture.samples:
+            if k.startswith(f"{KEYS.prefix}/sim/"):  # the simulator's own keys
+                pub.publish(k, dict(p))
+        pub.close(timeout_s=20.0)
+        code, out = rec.wait(timeout_s=30.0)
+    assert code == 0, rec.stderr_lines
+    summary = json.loads(out)
+    assert summary["stop_reason"] == "run_end" and summary["rejected"] >= 2  # the two forged samples (+ am4's stats)
+    log = read_log(path)
+    ends = [p["t"] for _, p in log.decoded(c.SIM_EVENT_TOPIC) if p["kind"] == "run_end"]
+    assert len(ends) == 1 and ends[0] > 1.0  # the run's own, at the end of the 1.3 s capture
+    assert max(p["p_WO"][2] for _, p in log.decoded(c.OBJECT_STATE_TOPIC)) < 2.0

@@ -118,3 +118,60 @@ def test_attitude_mode_flies_the_target_between_control_steps_and_ignores_torque
     assert frames_sent == 150 and out["control_every"] == 4 and out["flight_controller"] == "attitude"
     assert len(truths) == 60  # every 10 physics steps, control step or not
     assert out["fc_link"]["5"]["other_mode"] == 1 and out["fc_link"]["4"]["other_mode"] == 0
+
+
+def _hover(core, k):
+    import numpy as np
+
+    from amlink.types import TorqueSetpoint
+
+    m = core.model
+    return TorqueSetpoint(step=k, thrust_n=m.mass_kg * m.gravity_mps2, tau_B_nm=np.zeros(3),
+                          tau_q_nm=[0.2, 0.1, 0.01])
+
+
+def test_a_rejected_setpoint_holds_the_last_command_and_k_in_a_row_send_the_vehicle_to_failsafe_for_good():
+    """The rejection policy of every runner (simulator.core): a refusal holds the last valid
+    command (the same physics as a missed setpoint, not a failsafe); K - 1 refusals in a row
+    and a valid setpoint keep the vehicle flying; the K-th in a row engages the failsafe,
+    which later valid setpoints do not end."""
+    from simulator.core import SitlCore
+
+    spec = load_scenario(SCENARIO)
+    K = 4
+    core = SitlCore(spec, failsafe_after_rejected=K)
+    core.connect()
+    try:
+        refuse = {5: set(range(10, 10 + K - 1)) | set(range(20, 20 + K))}  # K-1 in a row, then K in a row
+        for k in range(40):
+            core.frames(k)
+            sps = {s: _hover(core, k) for s in core.sysids}
+            for s, steps in refuse.items():
+                if k in steps:
+                    core.note_rejected(s, "test")
+                    del sps[s]
+            core.actuate(k, sps)
+            if k == 10 + K - 1:
+                assert not core.failsafes, "K - 1 refusals in a row must not engage the failsafe"
+            if k == 20 + K - 2:
+                assert 5 not in core.failsafes
+            core.step()
+        assert core.failsafes.keys() == {5} and core.distrusted == {5}  # still, 16 valid steps later
+        out = core.finish()
+    finally:
+        core.close()
+    assert out["rejected_setpoints"] == 2 * K - 1 and out["failsafe_after_rejected"] == K
+    assert [(e["sysid"], e["event"], e["t"]) for e in out["events"]] == [(5, "rejected", 0.001 * (20 + K - 1))]
+    assert out["verdict"]["failure_class"] == "rejected setpoints"
+
+
+def test_failsafe_after_rejected_is_taken_from_the_scenario_and_checked():
+    import pytest
+
+    from simulator.core import SitlCore
+
+    spec = load_scenario(SCENARIO)
+    assert SitlCore(spec).failsafe_after_rejected == spec.vehicle.flight_controller.failsafe_after_rejected == 10
+    for bad in (0, -1, 2.5):
+        with pytest.raises(ValueError, match="failsafe_after_rejected"):
+            SitlCore(spec, failsafe_after_rejected=bad)

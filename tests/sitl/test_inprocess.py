@@ -97,3 +97,30 @@ def test_attitude_mode_in_process_run_is_bit_identical_to_the_multi_process_one(
     assert ours["flight_controller"] == sitl.outcome["flight_controller"] == "attitude"
     assert ours["fc_link"]["4"]["sent"] == sitl.outcome["fc_link"]["4"]["sent"] == 100  # one setpoint per 4 steps
     assert ours["state_digest"] == sitl.outcome["state_digest"]
+
+
+def test_rejected_setpoints_are_answered_at_once_and_the_run_stays_deterministic(tmp_path):
+    """8 ms of sensor latency makes the controllers' joint torques implausible from t = 0.16 s:
+    each refusal is answered at once (the flight controller holds the last valid command), K in
+    a row send the vehicle to failsafe, and no step waits for --step-timeout (5 s). Two am-run
+    runs and the in-process run agree on digest, events and verdict."""
+    text = (SCENARIOS / "two_am_short.toml").read_text().replace(
+        'vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{SCENARIOS.parent / "vehicles" / "am3dof.toml"}"')
+    path = tmp_path / "late.toml"
+    path.write_text(text + "\n[sensors]\nlatency_s = 0.008\n")
+    ours = run(load_scenario(path), duration_s=0.6)
+    assert ours["rejected_setpoints"] > 10 and ours["verdict"]["failure_class"] == "rejected setpoints"
+    K = ours["failsafe_after_rejected"]
+    assert [(e["event"], e["in_a_row"]) for e in ours["events"]] == [("rejected", K)] * 2
+    outcomes = []
+    for i in range(2):
+        r = am_run(str(path), tmp_path / f"r{i}", "--duration", "0.6", "--no-telemetry", timeout_s=300)
+        assert r.code == 4, r.stderr
+        o = r.outcome
+        assert o["link"]["peers_lost"] == 0 and o["link"]["rejected_setpoints"] == o["rejected_setpoints"]
+        assert o["wall_s"] < 5.0, o["wall_s"]  # one stall for the step timeout would take 5 s
+        outcomes.append(o)
+    for o in outcomes:
+        assert o["state_digest"] == ours["state_digest"]
+        assert o["verdict"] == ours["verdict"] and o["events"] == ours["events"]
+        assert o["rejected_setpoints"] == ours["rejected_setpoints"] and o["distrusted"] == ours["distrusted"] == [4, 5]

@@ -1,0 +1,74 @@
+"""The recorder with a run key: forged samples and a forged run_end change nothing in the MCAP
+(and are counted); without a key the same attack does (the test's control)."""
+from __future__ import annotations
+
+import time
+
+from ground_station import contract as c
+from ground_station.mcap_io import read_log
+from ground_station.recorder import Recorder
+from telemetry.auth import publisher_key, publisher_of, seal
+from telemetry.schema import Keys, encode, event, run_end_event
+from telemetry.session import ZenohOptions
+
+from .conftest import stamped
+
+KEYS = Keys()
+MASTER = bytes(range(1, 33))
+STATS = "/recorder/stats"
+
+
+def _authentic(capture):
+    """The capture's samples as the run's publishers send them: each sealed with its own key."""
+    return [(k, seal(publisher_key(MASTER, publisher_of(KEYS, k)), k, encode(p)[0])) for k, p in stamped(capture.samples)]
+
+
+def _forged():
+    """What a local process without the run's simulator key sends: a run_end at t = 0.5 s (unsealed,
+    sealed with a companion's key, or with another run's key), and an object 1 km up."""
+    end = encode(run_end_event(0.5))[0]
+    obj = encode({"t": 0.6, "seq": 999, "p_WO": [0.0, 0.0, 1000.0], "q_WO": [1.0, 0.0, 0.0, 0.0],
+                  "v_WO": [0.0, 0.0, 0.0], "w_WO": [0.0, 0.0, 0.0], "touching": []})[0]
+    note = encode(event(0.7, "fault", "forged", "simulator", level="fatal"))[0]
+    return [(KEYS.sim_event, end),
+            (KEYS.sim_event, seal(publisher_key(MASTER, "am4"), KEYS.sim_event, end)),
+            (KEYS.object, seal(publisher_key(bytes(32), "simulator"), KEYS.object, obj)),
+            (KEYS.object, obj + b"\n" + obj),
+            (KEYS.sim_event, note)]
+
+
+def _record(path, messages, master):
+    rec = Recorder(path, ZenohOptions(role="recorder", auth_key=master))
+    rec.writer.open()  # no zenoh session: the messages go straight into the inbox, as its callback puts them
+    rec._t0 = time.monotonic()
+    rec._inbox.extend(messages)
+    rec._drain()
+    run_end = rec.translator.run_end
+    summary = rec.close()
+    log = read_log(path)
+    return {t: m for t, m in log.messages.items() if t != STATS}, run_end, summary, log
+
+
+def test_forged_samples_and_run_end_change_nothing_in_the_log(capture, tmp_path):
+    authentic = _authentic(capture)
+    half = len(authentic) // 2
+    attacked = authentic[:half] + _forged() + authentic[half:]
+    clean, end0, s0, _ = _record(tmp_path / "clean.mcap", authentic, MASTER)
+    got, end1, s1, log = _record(tmp_path / "attacked.mcap", attacked, MASTER)
+    assert got == clean  # every topic, message for message
+    assert end1 == end0 and end1["t"] > 1.0  # the simulator's own run_end, at the end of the 1.3 s run
+    assert s0.rejected == 0 and s1.rejected == 6  # every forged sample, counted
+    assert log.metadata["recorder_summary"]["rejected"] == "6"
+    assert log.decoded(STATS)[-1][1]["rejected"] == 6
+
+
+def test_without_a_key_the_same_attack_lands(capture, tmp_path):
+    """The control: a recorder without the run key (or a run without one) takes the forgeries."""
+    authentic = _authentic(capture)
+    half = len(authentic) // 2
+    got, _, summary, log = _record(tmp_path / "open.mcap", authentic[:half] + _forged() + authentic[half:], None)
+    clean, _, _, _ = _record(tmp_path / "clean.mcap", authentic, MASTER)
+    assert got != clean and summary.rejected == 0
+    ends = [p["t"] for _, p in log.decoded(c.SIM_EVENT_TOPIC) if p["kind"] == "run_end"]
+    assert 0.5 in ends  # the forged run_end is in the log (the live recorder would stop on it)
+    assert max(p["p_WO"][2] for _, p in log.decoded(c.OBJECT_STATE_TOPIC)) == 1000.0
