@@ -301,6 +301,14 @@ class MissionSpec:
     # a companion started mid-run whose wrist sensor reads a push resumes it (amcore.mission.join_blend);
     # false: it starts from zero squeeze and, restarted in the hover, lets the object fall
     resume_contact_force: bool = True
+    # Touch, align, squeeze (0: off, the paper's one move to the squeeze): the grasp move first
+    # presses with touch_force_n only (through K_y,x), holds it touch_hold_s while the heading
+    # admittance turns the AM to the face, then moves on to the squeeze; both moves take
+    # grasp_move_s. A pad pushing at an angle delta puts N sin(delta) sideways on the pad,
+    # ~0.3 m ahead of the CoM: at 12 N and 5 deg that is 0.3 N m of yaw, this vehicle's whole
+    # yaw authority (docs/robust_grasp.md).
+    touch_force_n: float = 0.0
+    touch_hold_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -817,6 +825,16 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
             raise ConfigError(f"{where}: [mission].{key}: must be >= 0, got {getattr(mission, key)!r}")
     if mission.thrust_fraction_max > 1.0:
         raise ConfigError(f"{where}: [mission].thrust_fraction_max: must be <= 1, got {mission.thrust_fraction_max}")
+    for key in ("touch_force_n", "touch_hold_s"):
+        if not (getattr(mission, key) >= 0.0 and math.isfinite(getattr(mission, key))):
+            raise ConfigError(f"{where}: [mission].{key}: must be >= 0 (0: off), got {getattr(mission, key)!r}")
+    if (mission.touch_force_n > 0.0) != (mission.touch_hold_s > 0.0):
+        raise ConfigError(f"{where}: [mission]: touch_force_n and touch_hold_s go together (both 0: off)")
+    if mission.touch_hold_s > 0.0 and (mission.approach_end_s + 2.0 * mission.grasp_move_s + mission.touch_hold_s
+                                       > mission.grasp_end_s + 1e-9):
+        raise ConfigError(f"{where}: [mission]: touch, hold and squeeze (2 grasp_move_s + touch_hold_s = "
+                          f"{2.0 * mission.grasp_move_s + mission.touch_hold_s:g} s) must fit in the grasp phase "
+                          f"({mission.grasp_end_s - mission.approach_end_s:g} s)")
     if not mission.join_blend_s > 0:
         raise ConfigError(f"{where}: [mission].join_blend_s must be > 0 s, got {mission.join_blend_s}")
     am_tables = data.get("am", [])

@@ -155,7 +155,13 @@ def am_mission(spec: ScenarioSpec, am: AmSpec, model: AmModel) -> AmMission:
     t_a, t_g = ms.approach_end_s, ms.grasp_end_s
     if ms.approach_move_s > t_a or t_a + ms.grasp_move_s > t_g or t_g + ms.lift_move_s > ms.hover_end_s:
         raise ValueError("mission moves do not fit in their phases")
-    y_path = path_through(y0, [(0.0, ms.approach_move_s, y_app), (t_a, t_a + ms.grasp_move_s, y_grasp),
+    grasp_moves = [(t_a, t_a + ms.grasp_move_s, y_grasp)]
+    if ms.touch_hold_s > 0.0:  # touch, align, squeeze: the first move presses touch_force_n only
+        k_x = spec.vehicle.gains.K_y[spec.vehicle.task.components.index("x")]
+        y_touch = np.array([-(half - ms.touch_force_n / k_x), 0.0, pitch])
+        t_s = t_a + ms.grasp_move_s + ms.touch_hold_s
+        grasp_moves = [(t_a, t_a + ms.grasp_move_s, y_touch), (t_s, t_s + ms.grasp_move_s, y_grasp)]
+    y_path = path_through(y0, [(0.0, ms.approach_move_s, y_app), *grasp_moves,
                                (t_g, t_g + ms.lift_move_s, y_lift)])
 
     def com_of(y_xz):

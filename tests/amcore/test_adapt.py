@@ -102,3 +102,37 @@ def test_squeeze_sizing_stops_at_the_missions_cap_but_never_below_the_fixed_sque
     assert p.required_n > 12.0 and p.force_n == pytest.approx(12.0) and p.depth_m == pytest.approx(12.0 / k_x)
     low = dataclasses.replace(on, mission=dataclasses.replace(on.mission, squeeze_max_n=1.0))
     assert squeeze_plan(low, model).force_n == pytest.approx(k_x * spec.mission.squeeze_m)
+
+
+def test_touch_align_squeeze_presses_the_touch_force_holds_it_then_squeezes():
+    spec = load_scenario(SCENARIO)
+    model = build_model(spec.vehicle)
+    ms = dataclasses.replace(spec.mission, touch_force_n=2.0, touch_hold_s=1.0, grasp_move_s=1.5)
+    touch = dataclasses.replace(spec, mission=ms)
+    k_x = spec.vehicle.gains.K_y[0]
+    plain = am_mission(dataclasses.replace(spec, mission=dataclasses.replace(ms, touch_force_n=0.0, touch_hold_s=0.0)),
+                       spec.am(4), model)
+    m = am_mission(touch, touch.am(4), model)
+    t_a = ms.approach_end_s
+    squeezed = plain.reference(t_a + ms.grasp_move_s).y[0]  # one move to the squeeze
+    face = squeezed - squeeze_plan(spec, model).depth_m  # the face's x in {t}
+    for t in (t_a + ms.grasp_move_s, t_a + ms.grasp_move_s + ms.touch_hold_s):  # touching, held
+        assert m.reference(t).y[0] == pytest.approx(face + 2.0 / k_x)  # 2 N through K_y,x
+        assert np.allclose(m.reference(t).y_d1, 0.0)
+    end = t_a + 2 * ms.grasp_move_s + ms.touch_hold_s
+    assert m.reference(end).y[0] == pytest.approx(squeezed)  # then the full squeeze
+    assert m.reference(t_a + 0.5 * ms.grasp_move_s).r_c == pytest.approx(plain.reference(t_a + 0.5 * ms.grasp_move_s).r_c)
+
+
+@pytest.mark.parametrize("mission,words", [
+    ({"touch_force_n": 2.0}, "touch_force_n and touch_hold_s go together"),
+    ({"touch_force_n": -1.0, "touch_hold_s": 1.0}, "touch_force_n: must be >= 0"),
+    ({"touch_force_n": 2.0, "touch_hold_s": 2.0}, "must fit in the grasp phase"),
+])
+def test_touch_options_are_checked_naming_the_key(tmp_path, mission, words):
+    from amcore.config import ConfigError, _read_toml, scenario_from_dict
+
+    data = _read_toml(SCENARIO)
+    data["mission"].update(mission)
+    with pytest.raises(ConfigError, match=words):
+        scenario_from_dict(data, SCENARIO)
