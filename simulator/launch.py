@@ -30,6 +30,7 @@ from amcore.config import DEFAULT_SCENARIO, ConfigError, check_duration, load_sc
 from amlink.endpoint import DEFAULT_GCS, EndpointError, parse_endpoint
 from telemetry.auth import publisher_key
 
+from .progress import SimBar
 from .verdict import MISSION_FAILED
 
 
@@ -37,27 +38,6 @@ def _command(name: str) -> list[str]:
     """The console script next to this interpreter, else `python -m <package>`."""
     exe = shutil.which(name, path=str(Path(sys.executable).parent))
     return [exe] if exe else [sys.executable, "-m", name]
-
-
-class _Bar:
-    def __init__(self, enabled: bool) -> None:
-        self.enabled, self.tty = enabled, sys.stderr.isatty()
-        self._last_decile = -1
-
-    def show(self, t: float, duration: float, rtf: float) -> None:
-        if not self.enabled:
-            return
-        frac = min(1.0, t / duration) if duration else 1.0
-        if self.tty:
-            bar = "#" * int(30 * frac) + "." * (30 - int(30 * frac))
-            print(f"\r[{bar}] sim {t:6.2f}/{duration:.1f} s  {rtf:5.2f}x real time", end="", file=sys.stderr, flush=True)
-        elif int(10 * frac) > self._last_decile:
-            self._last_decile = int(10 * frac)
-            print(f"sim {t:6.2f}/{duration:.1f} s  {rtf:5.2f}x real time", file=sys.stderr, flush=True)
-
-    def end(self) -> None:
-        if self.enabled and self.tty:
-            print(file=sys.stderr)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -104,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     mcap = run_dir / "run.mcap"
     procs: dict[str, subprocess.Popen] = {}
     logs = []
-    bar = _Bar(not a.no_progress)
+    bar = SimBar(spec.duration_s if a.duration is None else a.duration, disabled=a.no_progress)
     print(f"am-run: scenario '{spec.name}' with {len(spec.ams)} AMs; run folder {run_dir}; GCS link {a.gcs}",
           file=sys.stderr)
     try:
@@ -149,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"am-run: error: {exc}", file=sys.stderr)
         failed = ["start-up"]
     finally:
-        bar.end()
+        bar.close()
         _stop_all(procs)
         for f in logs:
             f.close()
@@ -266,7 +246,7 @@ def _readable(stream, deadline: float) -> bool:
     return bool(select.select([stream], [], [], max(0.0, deadline - time.monotonic()))[0])
 
 
-def _follow(sim: subprocess.Popen, procs: dict[str, subprocess.Popen], bar: _Bar) -> list[str]:
+def _follow(sim: subprocess.Popen, procs: dict[str, subprocess.Popen], bar: SimBar) -> list[str]:
     """Show progress until the simulator exits. A process that fails before the run starts
     stops everything (the simulator would only wait for it); once the run is under way, a
     companion that dies is reported and its vehicle flies on under the flight controller's
@@ -282,7 +262,7 @@ def _follow(sim: subprocess.Popen, procs: dict[str, subprocess.Popen], bar: _Bar
             ev = json.loads(line)
             if ev.get("event") == "progress":
                 started = True
-                bar.show(ev["t"], ev["duration"], ev["rtf"])
+                bar.show(ev["t"], ev["rtf"])
         for name, p in procs.items():
             code = p.poll()
             if code in (None, 0) or p is sim or name in reported:

@@ -44,6 +44,7 @@ from telemetry.wiring import SimulatorTelemetry
 from .core import SitlCore
 from .gcs import GcsSession, snapshot_every
 from .gcs_link import GcsLink
+from .progress import SimBar
 from .verdict import MISSION_FAILED
 
 
@@ -61,12 +62,13 @@ def _on_signal(signum, _frame):
 
 
 class Progress:
-    """Progress to stderr as a bar (tty) or to stdout as JSON lines (for am-run)."""
+    """Progress to stderr as a bar (`simulator.progress`) or to stdout as JSON lines (for am-run)."""
 
     def __init__(self, mode: str, duration_s: float) -> None:
         self.mode, self.duration = mode, duration_s
         self.t_wall0 = time.perf_counter()
         self._next = 0.0
+        self._bar = SimBar(duration_s, disabled=mode != "bar")
 
     def event(self, **kw) -> None:
         if self.mode == "jsonl":
@@ -81,13 +83,10 @@ class Progress:
         rtf = t / wall if wall > 0 else 0.0
         if self.mode == "jsonl":
             self.event(event="progress", t=round(t, 3), duration=self.duration, rtf=round(rtf, 3))
-        elif self.mode == "bar":
-            frac = min(1.0, t / self.duration)
-            bar = "#" * int(30 * frac) + "." * (30 - int(30 * frac))
-            print(f"\r[{bar}] sim {t:6.2f}/{self.duration:.1f} s  {rtf:5.2f}x real time", end="", file=sys.stderr,
-                  flush=True)
+        else:
+            self._bar.show(t, rtf)
             if force:
-                print(file=sys.stderr)
+                self._bar.close()
 
 
 def main(argv: list[str] | None = None) -> int:
