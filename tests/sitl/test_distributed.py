@@ -32,7 +32,7 @@ def test_two_am_grasp_across_four_hosts(tmp_path):
                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         procs.append(rec)
         # started by hand: each publisher waits for the recorder's subscription before its first
-        # sample, as the README says (zenoh drops what is put before the route exists)
+        # sample, as docs/telemetry.md says (zenoh drops what is put before the route exists)
         tele = ["--zenoh-connect", gs_endpoint, "--telemetry-wait", "30"]
         sim = lan.popen("sim", [script("simulator"), "--config", cfg, "--bind", "udp:0.0.0.0:14550", "--key-file",
                                 str(key), "--run-dir", str(tmp_path), "--peer-timeout", "60", *tele],

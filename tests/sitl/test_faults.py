@@ -5,7 +5,7 @@ flight controller goes to failsafe and lets go (`simulator.failsafe`), and the n
 each still under its own decentralized law, must carry the object between them. Runs the
 whole ten_am mission in-process (`simulator.inprocess`, the SITL minus sockets); about a
 minute. With the wrench filter at 8 Hz (the earlier default) the ring collapsed within
-~2.5 s of the loss (README, "Measured").
+~2.5 s of the loss (docs/physics.md, "Measured").
 """
 from __future__ import annotations
 
