@@ -163,17 +163,25 @@ def setpoint_messages(
     return out
 
 
-def attitude_setpoint_messages(
-    sp: AttitudeSetpoint, time_boot_ms: int = 0, target_system: int = 1, target_component: int = 1,
-) -> list:  # fmt: skip
-    """The messages of an attitude-mode setpoint batch: SET_ATTITUDE_TARGET, then
-    AM_JOINT_TORQUE_SETPOINT (last: it carries the step)."""
+def attitude_setpoint_values(sp: AttitudeSetpoint) -> tuple[list[float], list[float], list[float]]:
+    """(quaternion wxyz, body rates, joint torques) of an attitude-mode setpoint as floats;
+    EncodeError if any value (or the normalized thrust) is not finite."""
     att = sp.attitude
     quat, r, tau_q = att.quat_wxyz.tolist(), att.rates_rad_s.tolist(), sp.tau_q_nm.tolist()
     if not all_finite([*quat, *r, att.thrust_normalized]):
         raise EncodeError(f"non-finite value in AttitudeTarget step {att.step}")
     if not all_finite(tau_q):
         raise EncodeError(f"non-finite value in AttitudeSetpoint step {sp.step}")
+    return quat, r, tau_q
+
+
+def attitude_setpoint_messages(
+    sp: AttitudeSetpoint, time_boot_ms: int = 0, target_system: int = 1, target_component: int = 1,
+) -> list:  # fmt: skip
+    """The messages of an attitude-mode setpoint batch: SET_ATTITUDE_TARGET, then
+    AM_JOINT_TORQUE_SETPOINT (last: it carries the step)."""
+    att = sp.attitude
+    quat, r, tau_q = attitude_setpoint_values(sp)
     return [
         mav.MAVLink_set_attitude_target_message(
             time_boot_ms & 0xFFFFFFFF, target_system, target_component, 0,

@@ -38,6 +38,7 @@ from amlink.codec import (
     NonFiniteValueError,
     Shutdown,
     _usec,
+    attitude_setpoint_values,
     all_finite,
     enu_flu_to_ned_frd,
     mav,
@@ -164,11 +165,7 @@ def attitude_setpoint_payloads(
 ) -> tuple[tuple[int, bytes], ...]:  # fmt: skip
     """``(msgid, payload)`` of an attitude-mode batch (as :func:`amlink.codec.attitude_setpoint_messages`)."""
     att = sp.attitude
-    quat, r, tau_q = att.quat_wxyz.tolist(), att.rates_rad_s.tolist(), sp.tau_q_nm.tolist()
-    if not all_finite([*quat, *r, att.thrust_normalized]):
-        raise EncodeError(f"non-finite value in AttitudeTarget step {att.step}")
-    if not all_finite(tau_q):
-        raise EncodeError(f"non-finite value in AttitudeSetpoint step {sp.step}")
+    quat, r, tau_q = attitude_setpoint_values(sp)
     try:  # FLU -> FRD body rates: (p, q, r) -> (p, -q, -r)
         payload = _pack_attitude(time_boot_ms & 0xFFFFFFFF, *enu_flu_to_ned_frd(quat), r[0], -r[1], -r[2],
                                  att.thrust_normalized, target_system, target_component)  # fmt: skip
