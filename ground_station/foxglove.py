@@ -2,8 +2,9 @@
 and builders for the messages the recorder writes. Pure.
 
 Field names follow Foxglove's published message definitions (foxglove.PoseInFrame,
-FrameTransforms, Log, SceneUpdate); the schemas below are written out here and hold
-only what we use (unused SceneEntity primitive lists are typed as plain arrays).
+FrameTransforms, Log, SceneUpdate); the schemas below are written out here, every field
+of Foxglove's definitions included, also those the recorder leaves empty (bytes as base64
+strings, as Foxglove's JSON schemas have them).
 """
 from __future__ import annotations
 
@@ -65,17 +66,31 @@ _LINE = _message("foxglove.LinePrimitive", {
     "pose": _POSE, "thickness": {"type": "number"}, "scale_invariant": {"type": "boolean"},
     "points": {"type": "array", "items": _POINT3}, "color": _COLOR,
     "colors": {"type": "array", "items": _COLOR}, "indices": {"type": "array", "items": {"type": "integer"}}})
+_SPHERE = _message("foxglove.SpherePrimitive", {"pose": _POSE, "size": _VECTOR3, "color": _COLOR})
+_TRIANGLES = _message("foxglove.TriangleListPrimitive", {
+    "pose": _POSE, "points": {"type": "array", "items": _POINT3}, "color": _COLOR,
+    "colors": {"type": "array", "items": _COLOR}, "indices": {"type": "array", "items": {"type": "integer", "minimum": 0}}})
+_MODEL = _message("foxglove.ModelPrimitive", {
+    "pose": _POSE, "scale": _VECTOR3, "color": _COLOR, "override_color": {"type": "boolean"},
+    "url": {"type": "string"}, "media_type": {"type": "string"},
+    "data": {"type": "string", "contentEncoding": "base64"}})
+_KEY_VALUE = _message("foxglove.KeyValuePair", {"key": {"type": "string"}, "value": {"type": "string"}})
+_DELETION = _message("foxglove.SceneEntityDeletion", {
+    "timestamp": _TIME,
+    "type": {"title": "foxglove.SceneEntityDeletionType", "oneOf": [{"title": n, "const": i} for i, n in enumerate(
+        ("MATCHING_ID", "ALL"))]},
+    "id": {"type": "string"}})
 _TEXT = _message("foxglove.TextPrimitive", {
     "pose": _POSE, "billboard": {"type": "boolean"}, "font_size": {"type": "number"},
     "scale_invariant": {"type": "boolean"}, "color": _COLOR, "text": {"type": "string"}})
 _ENTITY = _message("foxglove.SceneEntity", {
     "timestamp": _TIME, "frame_id": {"type": "string"}, "id": {"type": "string"}, "lifetime": _DURATION,
-    "frame_locked": {"type": "boolean"}, "metadata": {"type": "array"},
+    "frame_locked": {"type": "boolean"}, "metadata": {"type": "array", "items": _KEY_VALUE},
     "arrows": {"type": "array", "items": _ARROW}, "cubes": {"type": "array", "items": _CUBE},
-    "spheres": {"type": "array"}, "cylinders": {"type": "array", "items": _CYLINDER},
-    "lines": {"type": "array", "items": _LINE}, "triangles": {"type": "array"},
-    "texts": {"type": "array", "items": _TEXT}, "models": {"type": "array"}})
-SCENE_UPDATE = _message("foxglove.SceneUpdate", {"deletions": {"type": "array"},
+    "spheres": {"type": "array", "items": _SPHERE}, "cylinders": {"type": "array", "items": _CYLINDER},
+    "lines": {"type": "array", "items": _LINE}, "triangles": {"type": "array", "items": _TRIANGLES},
+    "texts": {"type": "array", "items": _TEXT}, "models": {"type": "array", "items": _MODEL}})
+SCENE_UPDATE = _message("foxglove.SceneUpdate", {"deletions": {"type": "array", "items": _DELETION},
                                                  "entities": {"type": "array", "items": _ENTITY}},
                         "An update to the entities displayed in a 3D scene")
 

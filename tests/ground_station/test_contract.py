@@ -172,3 +172,54 @@ def test_scene_keeps_its_rate_on_a_fixed_grid():
         scenes += [t for o in tr.translate(KEYS.object, raw) if o.topic == c.SCENE_TOPIC]
     assert len(scenes) == 201  # t = 0, 0.05, ..., 10
     np.testing.assert_allclose(np.diff(scenes), 0.05, atol=1e-9)
+
+
+# Foxglove's published message definitions (docs.foxglove.dev, "Message schemas"): every
+# field of SceneUpdate and of what it nests, by type name
+FOXGLOVE_FIELDS = {
+    "foxglove.SceneUpdate": {"deletions", "entities"},
+    "foxglove.SceneEntityDeletion": {"timestamp", "type", "id"},
+    "foxglove.SceneEntity": {"timestamp", "frame_id", "id", "lifetime", "frame_locked", "metadata", "arrows", "cubes",
+                             "spheres", "cylinders", "lines", "triangles", "texts", "models"},
+    "foxglove.KeyValuePair": {"key", "value"},
+    "foxglove.ArrowPrimitive": {"pose", "shaft_length", "shaft_diameter", "head_length", "head_diameter", "color"},
+    "foxglove.CubePrimitive": {"pose", "size", "color"},
+    "foxglove.SpherePrimitive": {"pose", "size", "color"},
+    "foxglove.CylinderPrimitive": {"pose", "size", "bottom_scale", "top_scale", "color"},
+    "foxglove.LinePrimitive": {"type", "pose", "thickness", "scale_invariant", "points", "color", "colors", "indices"},
+    "foxglove.TriangleListPrimitive": {"pose", "points", "color", "colors", "indices"},
+    "foxglove.TextPrimitive": {"pose", "billboard", "font_size", "scale_invariant", "color", "text"},
+    "foxglove.ModelPrimitive": {"pose", "scale", "color", "override_color", "url", "media_type", "data"},
+    "foxglove.Pose": {"position", "orientation"},
+    "foxglove.Vector3": {"x", "y", "z"},
+    "foxglove.Point3": {"x", "y", "z"},
+    "foxglove.Quaternion": {"x", "y", "z", "w"},
+    "foxglove.Color": {"r", "g", "b", "a"},
+}
+
+
+def _typed_nodes(schema: dict):
+    """Every (sub)schema with a foxglove title, through properties and array items."""
+    if str(schema.get("title", "")).startswith("foxglove.") and "properties" in schema:
+        yield schema
+    for sub in schema.get("properties", {}).values():
+        yield from _typed_nodes(sub)
+    if isinstance(schema.get("items"), dict):
+        yield from _typed_nodes(schema["items"])
+
+
+def test_the_scene_update_schema_has_every_field_of_foxglove_s_definitions():
+    from ground_station.foxglove import SCENE_UPDATE
+
+    seen = {}
+    for node in _typed_nodes(SCENE_UPDATE):
+        seen.setdefault(node["title"], set(node["properties"]))
+    assert seen == FOXGLOVE_FIELDS
+    entity = SCENE_UPDATE["properties"]["entities"]["items"]
+    for name, sub in entity["properties"].items():  # no list left untyped
+        if sub.get("type") == "array":
+            assert "items" in sub, name
+    assert not errors({"deletions": [{"timestamp": {"sec": 1, "nsec": 0}, "type": 1, "id": ""}], "entities": []},
+                      SCENE_UPDATE)
+    assert errors({"deletions": [{"timestamp": {"sec": 1, "nsec": 0}, "type": 2, "id": ""}], "entities": []},
+                  SCENE_UPDATE)  # no such deletion type
