@@ -23,7 +23,8 @@ def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, floa
     d = 1.0 + z * z / n
     centre = (p + z * z / (2 * n)) / d
     half = z * math.sqrt(p * (1.0 - p) / n + z * z / (4 * n * n)) / d
-    return (max(0.0, centre - half), min(1.0, centre + half))
+    # the interval contains p exactly: the bounds' round-off must not put p outside it
+    return (min(p, max(0.0, centre - half)), max(p, min(1.0, centre + half)))
 
 
 def add_derived(rows: list[dict]) -> None:

@@ -161,3 +161,19 @@ def test_a_bad_set_exits_2_naming_it(tmp_path, capsys, override, words):
     assert cli.main([str(SHORT), "--trials", "1", "--seed", "1", "--out", str(tmp_path / "o"),
                      "--set", override]) == 2
     assert words in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("n", range(1, 120))
+def test_the_wilson_interval_contains_the_observed_rate_exactly(n):
+    for k in {0, 1, n // 2, n - 1, n}:
+        if 0 <= k <= n:
+            lo, hi = wilson_interval(k, n)
+            assert 0.0 <= lo <= k / n <= hi <= 1.0
+
+
+def test_plots_of_a_campaign_with_no_success_are_drawn(tmp_path):
+    from trials.report import plot_parameters
+
+    rows = [{"verdict": "failed", "object_mass_kg": 0.5 + 0.05 * i} for i in range(30)]
+    paths = plot_parameters(rows, ["object_mass_kg"], tmp_path, "no success")
+    assert [p.name for p in paths] == ["success_vs_object_mass_kg.png"] and paths[0].stat().st_size > 0
