@@ -820,14 +820,11 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     for key in ("friction_assumed", "friction_margin", "thrust_fraction_max", "squeeze_max_n", "approach_move_s",
                 "grasp_move_s", "lift_move_s", "lift_m"):
         _positive(f"{where}: [mission].{key}", getattr(mission, key))
-    for key in ("standoff_m", "start_height_m", "pre_gap_m", "squeeze_m"):
-        if not getattr(mission, key) >= 0.0:
+    for key in ("standoff_m", "start_height_m", "pre_gap_m", "squeeze_m", "touch_force_n", "touch_hold_s"):
+        if not getattr(mission, key) >= 0.0:  # (values are finite: _check_type)
             raise ConfigError(f"{where}: [mission].{key}: must be >= 0, got {getattr(mission, key)!r}")
     if mission.thrust_fraction_max > 1.0:
         raise ConfigError(f"{where}: [mission].thrust_fraction_max: must be <= 1, got {mission.thrust_fraction_max}")
-    for key in ("touch_force_n", "touch_hold_s"):
-        if not (getattr(mission, key) >= 0.0 and math.isfinite(getattr(mission, key))):
-            raise ConfigError(f"{where}: [mission].{key}: must be >= 0 (0: off), got {getattr(mission, key)!r}")
     if (mission.touch_force_n > 0.0) != (mission.touch_hold_s > 0.0):
         raise ConfigError(f"{where}: [mission]: touch_force_n and touch_hold_s go together (both 0: off)")
     if mission.touch_hold_s > 0.0 and (mission.approach_end_s + 2.0 * mission.grasp_move_s + mission.touch_hold_s

@@ -102,11 +102,12 @@ class Pilot:
         if self.attitude_mode:  # the autopilot flies the attitude; the arm law is amcore.offboard's
             out = offboard_step(*args, task_frame)
             self.memory, res = out.memory, out.result
-            self._wrench_E_f, self._t_last = res.diagnostics.wrench_E_filtered, t
-            return attitude_setpoint_from_result(frame.step, res, self.thrust_max_n), None, res
-        res = self.law(*args) if task_frame is None else self.law(*args, task_frame)
-        self.memory = res.memory
+        else:
+            res = self.law(*args) if task_frame is None else self.law(*args, task_frame)
+            self.memory = res.memory
         self._wrench_E_f, self._t_last = res.diagnostics.wrench_E_filtered, t
+        if self.attitude_mode:
+            return attitude_setpoint_from_result(frame.step, res, self.thrust_max_n), None, res
         sp, att = setpoint_from_result(frame.step, res, self.thrust_max_n)
         return sp, att, res
 
