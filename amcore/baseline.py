@@ -59,8 +59,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import linalg3
-from . import vec3 as v3
-from .attitude import desired_attitude_cols
+from .attitude import desired_attitude
 from .config import VehicleParams
 from .control import Command, Diagnostics, Reference, StepResult
 from .filters import FilterState, LowPass2, lowpass_update_floats
@@ -235,13 +234,10 @@ def step(model: AmModel, data: pin.Data, params: BaselineParams, state: AmState,
     b1 = (c, sn, 0.0)
     b1_d = (pd1 * -sn, pd1 * c, 0.0)
     b1_dd = (pd2 * -sn - pd1**2 * c, pd2 * c - pd1**2 * sn, 0.0)
-    cols, Om_d, Omd_d = desired_attitude_cols(F_d.tolist(), v3.scale(m, p_d3.tolist()), v3.scale(m, p_d4.tolist()),
-                                              b1, b1_d, b1_dd)
-    R_d = np.array(cols).T
+    R_d, Omega_d, Omegadot_d = desired_attitude(F_d, m * p_d3, m * p_d4, b1, b1_d, b1_dd)
     Q = R.T.dot(R_d)  # R^T R_d
     S = Q.T - Q  # R_d^T R - R^T R_d
     e_R = 0.5 * np.array([S[2, 1], S[0, 2], S[1, 0]])
-    Omega_d, Omegadot_d = np.array(Om_d), np.array(Omd_d)
     w_bd = Q.dot(Omega_d)
     e_w = w - w_bd
     wdot_bd = Q.dot(Omegadot_d) - cross(w, w_bd)

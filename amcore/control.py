@@ -8,6 +8,10 @@ One call of `step` evaluates, at one measured state:
       Lambda_y y~dd + D_y y~d + K_y y~ = F_y          (eq. desired_task_behavior);
 - tau = T^T u, whose first two entries vanish (thrust acts along body z only).
 
+The equations are in amcore.law, one compiled function each. `step` asks pinocchio for the
+rigid-body terms, calls law.control_law once and names what it returns (Command,
+Diagnostics, ControllerMemory).
+
 Details the paper leaves implicit, as implemented here:
 - Gamma_xi uses pinocchio's skew-consistent C (see amcore.model).
 - w_b,d = R_b^T R_d Omega_d, so d/dt w_b,d = -hat(w_b) w_b,d + R_b^T R_d Omegadot_d.
@@ -18,33 +22,29 @@ Details the paper leaves implicit, as implemented here:
   influence the command at all. The CoM acceleration is then unknown under contact (the
   free-flight model's prediction is off by F_e/m; in PyBullet that made Omega_d spurious
   by D_t F_e / (m |f_d|) ~ 6 rad/s and the grasp fell), so f_d's derivatives keep only
-  what is measured or known: f_d' = m r_d''' - K_t e', f_d'' = m r_d''''.
+  what is measured or known: f_d' = m r_d^(3) - K_t e', f_d'' = m r_d^(4).
 - Singularity guard (beyond the paper): the CoM error entering f_d's spring is saturated at
   safety.com_err_max_m, each task error at safety.y_err_max, and Jbar_3 is inverted by
   damped least squares once its smallest singular value drops below safety.sigma_damping.
   Away from those limits the law is exactly the paper's.
 - Option compensate_Lambda_y_dot adds 1/2 dLambda_y/dt y~d to the damping, which the
-  paper's storage argument (Theorem 2) drops; with it the storage balance is exact.
+  paper's storage argument (Theorem 2) drops; with it the storage balance is exact. That
+  term is evaluated with the numpy model terms (amcore.model and amcore.task with
+  full=True), outside the compiled law; no shipped scenario turns it on.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
 import pinocchio as pin
 
-from . import linalg3
-from . import vec3 as v3
-from .attitude import desired_attitude_cols
+from . import law
 from .config import VehicleParams
-from .filters import FilterState, LowPass2, lowpass_update_floats
-from .model import AmModel, AmState, DecoupledTerms, decoupled_terms
-from .task import TaskFrame, TaskTerms, task_terms
-
-E3 = np.array([0.0, 0.0, 1.0])
-_ZERO3 = np.zeros(3)
+from .filters import FilterState, LowPass2
+from .model import AmModel, AmState, decoupled_terms, pin_configuration
+from .task import TaskFrame, component_axes, task_terms
 
 
 @dataclass(frozen=True)
@@ -108,24 +108,13 @@ class ControllerParams:
         )
 
     @cached_property
-    def DK_y(self) -> np.ndarray:
-        """[D_y, K_y] side by side (eq. u3 applies both in one product)."""
-        return np.hstack((self.D_y, self.K_y))
+    def axes(self) -> np.ndarray:
+        """The task components as law.task reads them (amcore.task.component_axes)."""
+        return component_axes(tuple(self.components))
 
     @cached_property
-    def float_gains(self) -> "_FloatGains":
-        """The constant 3x3 gains and the task error limits as Python floats (amcore.vec3),
-        converted once per instance rather than every step."""
-        return _FloatGains(self.gains_K_t.tolist(), self.gains_D_t.tolist(), self.Lambda_wb_d_inv.tolist(),
-                           self.y_err_max.tolist())
-
-
-@dataclass(frozen=True)
-class _FloatGains:
-    K_t: list  # nested lists (rows)
-    D_t: list
-    Lambda_wb_d_inv: list
-    y_err_max: list
+    def zero_task(self) -> np.ndarray:
+        return np.zeros(len(self.components))
 
 
 @dataclass(frozen=True)
@@ -145,39 +134,78 @@ class Command:
     tau_q_nm: np.ndarray
 
 
-@dataclass
+@dataclass(frozen=True)
+class StepTerms:
+    """The model and task terms a step evaluated, for laws built on it (amcore.offboard)."""
+
+    M_inv: np.ndarray  # M^-1 (eq. dynamics)
+    T_inv: np.ndarray  # T^-1 (eq. new_coord)
+    Lambda_w: np.ndarray  # Lambda_xi's middle block (eq. new_dynamics)
+    Gamma_xi_xi: np.ndarray  # Gamma_xi xi
+    J_y: np.ndarray  # (n, n+6): ydot = J_y V
+    J_e_xi: np.ndarray  # (6, n+6): J_e T^-1
+
+
+_DIAGNOSTICS_REQUIRED = (
+    "r_c",  # CoM in {w} [m]
+    "r_c_d",  # its reference [m]
+    "r_c_err",  # r~_c = r_c - r_c,d [m]
+    "rdot_c",  # CoM velocity [m/s]
+    "e_R", "e_w",  # eq. ori_error, ori_vel_error
+    "R_WB", "R_d",  # measured and desired attitude (eq. Rd)
+    "w_bd", "wdot_bd", "Omega_d",  # w_b,d and its rate, Omega_d [rad/s, rad/s^2]
+    "f_d",  # eq. Com_controller [N]
+    "y", "y_d", "y_err", "ydot",  # task variable, its reference, error and rate
+    "F_y",  # task-space force of eq. desired_task_behavior
+    "F_rc",  # filtered end-effector force in {w} [N]
+    "wrench_E_filtered",  # filtered F/T reading [f; m] in {e} [N, N m]
+    "sigma_min_J3", "damping",  # the singularity guard of eq. u3
+    "com_err_saturated", "y_err_saturated",  # whether an error saturation acted
+    "u", "tau", "Lambda_y",  # u (eq. new_dynamics), tau = T^T u, Lambda_y (eq. u3)
+)
+_DIAGNOSTICS_OPTIONAL = (
+    "Lambda_y_dot",  # with options.compensate_Lambda_y_dot
+    "wrench_W_filtered",  # filtered [f; m] of F_e in W axes, moment about {e} [N, N m]
+    "terms",  # StepTerms
+)
+
+
 class Diagnostics:
-    r_c: np.ndarray
-    r_c_d: np.ndarray
-    r_c_err: np.ndarray  # r~_c = r_c - r_c,d [m]
-    rdot_c: np.ndarray
-    e_R: np.ndarray
-    e_w: np.ndarray
-    R_WB: np.ndarray
-    R_d: np.ndarray
-    w_bd: np.ndarray
-    wdot_bd: np.ndarray
-    Omega_d: np.ndarray
-    f_d: np.ndarray
-    y: np.ndarray
-    y_d: np.ndarray
-    y_err: np.ndarray
-    ydot: np.ndarray
-    F_y: np.ndarray
-    F_rc: np.ndarray  # filtered end-effector force in {w} [N]
-    wrench_E_filtered: np.ndarray
-    sigma_min_J3: float
-    damping: float
-    com_err_saturated: bool
-    y_err_saturated: bool
-    u: np.ndarray
-    tau: np.ndarray
-    Lambda_y: np.ndarray
-    Lambda_y_dot: np.ndarray | None = None
-    wrench_W_filtered: np.ndarray | None = None  # filtered [f; m] of F_e in W axes, moment about {e} [N, N m]
-    # the model and task terms this step evaluated, for laws built on it (amcore.offboard)
-    decoupled: DecoupledTerms | None = None
-    task: TaskTerms | None = None
+    """What one control step evaluated, by name: the fields listed in FIELDS (the optional
+    ones are None unless given). Built with keywords, `Diagnostics(r_c=..., ...)`, or by
+    `step` from the one array the compiled law returns; each field is then a view of that
+    array, formed when first read. Fields can be reassigned (amcore.offboard does)."""
+
+    FIELDS = _DIAGNOSTICS_REQUIRED + _DIAGNOSTICS_OPTIONAL
+
+    def __init__(self, **fields):
+        unknown = fields.keys() - set(self.FIELDS)
+        missing = set(_DIAGNOSTICS_REQUIRED) - fields.keys()
+        if unknown or missing:
+            raise TypeError(f"Diagnostics: unknown fields {sorted(unknown)}, missing fields {sorted(missing)}")
+        self.__dict__.update(dict.fromkeys(_DIAGNOSTICS_OPTIONAL))
+        self.__dict__.update(fields)
+
+    @classmethod
+    def from_packed(cls, packed: np.ndarray, n: int, **given) -> "Diagnostics":
+        """The diagnostics of law.control_law's array (PACKED, task dimension n), with the
+        fields it does not hold given by name."""
+        d = object.__new__(cls)
+        d.__dict__.update(given)
+        d.__dict__["_packed"] = packed
+        d.__dict__["_readers"] = _readers(n)
+        return d
+
+    def __getattr__(self, name):  # called only for a field not read yet
+        readers = self.__dict__.get("_readers")
+        if readers is None or name not in readers:
+            raise AttributeError(f"Diagnostics has no field {name!r}")
+        value = readers[name](self.__dict__["_packed"])
+        self.__dict__[name] = value
+        return value
+
+    def __repr__(self) -> str:
+        return "Diagnostics(" + ", ".join(f"{k}={getattr(self, k)!r}" for k in self.FIELDS) + ")"
 
 
 @dataclass
@@ -187,34 +215,62 @@ class StepResult:
     memory: ControllerMemory
 
 
-def _saturation(e, limit: float) -> tuple[float, list | None]:
-    """Radial saturation sat(e) = e min(1, limit/|e|) of a 3-vector (floats): returns (scale, P)
-    with P = d sat / d e (nested lists) where saturated (None otherwise). Derivatives of sat(e)
-    are taken as P e^(k): exact for the first, the saturation's curvature is dropped in higher
-    ones (feed-forward only)."""
-    e0, e1, e2 = e
-    nn = e0 * e0 + e1 * e1 + e2 * e2
-    n = math.sqrt(nn)
-    if n <= limit:
-        return 1.0, None
-    s = limit / n
-    return s, [[(1.0 - e0 * e0 / nn) * s, -e0 * e1 / nn * s, -e0 * e2 / nn * s],
-               [-e1 * e0 / nn * s, (1.0 - e1 * e1 / nn) * s, -e1 * e2 / nn * s],
-               [-e2 * e0 / nn * s, -e2 * e1 / nn * s, (1.0 - e2 * e2 / nn) * s]]
+# What law.control_law returns, in order: (name, shape), with "n" the task dimension and
+# "nv" = n + 6. Diagnostics' fields, the command and the memory are views of it.
+PACKED = (
+    ("tau", ("nv",)), ("r_c", (3,)), ("rdot_c", (3,)), ("r_c_err", (3,)), ("e_R", (3,)), ("e_w", (3,)),
+    ("R_d", (3, 3)), ("w_bd", (3,)), ("wdot_bd", (3,)), ("Omega_d", (3,)), ("f_d", (3,)),
+    ("y", ("n",)), ("y_err", ("n",)), ("ydot", ("n",)), ("F_y", ("n",)),
+    ("wrench_W_filtered", (6,)), ("wrench_E_filtered", (6,)),
+    ("memory_x", (6,)), ("memory_xdot", (6,)),  # the filter's new state (its own copy, for ControllerMemory)
+    ("u", ("nv",)), ("Lambda_y", ("n", "n")),
+    ("guard", (4,)),  # sigma_min(Jbar_3), damping, CoM error saturated, task error saturated
+    ("Lambda_w", (3, 3)), ("Gamma_xi_xi", ("nv",)), ("T_inv", ("nv", "nv")), ("M_inv", ("nv", "nv")),
+    ("J_y", ("n", "nv")), ("J_e_xi", (6, "nv")),
+)
 
 
-def _feedforward_pd(m: float, a, K, x, D, xd, f) -> v3.Vec:
-    """m a - K x - D xd - f on 3-vectors (K, D nested lists): the pattern of eq. Com_controller
-    and of its time derivatives."""
-    (k00, k01, k02), (k10, k11, k12), (k20, k21, k22) = K
-    (d00, d01, d02), (d10, d11, d12), (d20, d21, d22) = D
-    x0, x1, x2 = x
-    y0, y1, y2 = xd
-    a0, a1, a2 = a
-    f0, f1, f2 = f
-    return (m * a0 - (k00 * x0 + k01 * x1 + k02 * x2) - (d00 * y0 + d01 * y1 + d02 * y2) - f0,
-            m * a1 - (k10 * x0 + k11 * x1 + k12 * x2) - (d10 * y0 + d11 * y1 + d12 * y2) - f1,
-            m * a2 - (k20 * x0 + k21 * x1 + k22 * x2) - (d20 * y0 + d21 * y1 + d22 * y2) - f2)
+@lru_cache(maxsize=None)
+def packed_slices(n: int) -> dict[str, tuple[slice, tuple[int, ...]]]:
+    """name -> (slice, shape) of PACKED for a task dimension n."""
+    size = {"n": n, "nv": n + 6}
+    out, at = {}, 0
+    for name, shape in PACKED:
+        shape = tuple(size.get(d, d) for d in shape)
+        k = int(np.prod(shape))
+        out[name] = (slice(at, at + k), shape)
+        at += k
+    return out
+
+
+def _view(sl: slice, shape: tuple[int, ...]):
+    if len(shape) == 1:
+        return lambda a: a[sl]
+    return lambda a: a[sl].reshape(shape)
+
+
+@lru_cache(maxsize=None)
+def _readers(n: int) -> dict:
+    """Diagnostics' fields read from the packed array, for a task dimension n."""
+    at = packed_slices(n)
+    r = {name: _view(*at[name]) for name in (
+        "tau", "r_c", "rdot_c", "r_c_err", "e_R", "e_w", "R_d", "w_bd", "wdot_bd", "Omega_d", "f_d", "y", "y_err",
+        "ydot", "F_y", "wrench_W_filtered", "wrench_E_filtered", "u", "Lambda_y")}
+    g = at["guard"][0].start
+    f = at["wrench_W_filtered"][0].start
+    r.update(
+        F_rc=lambda a: a[f:f + 3],
+        sigma_min_J3=lambda a: float(a[g]),
+        damping=lambda a: float(a[g + 1]),
+        com_err_saturated=lambda a: bool(a[g + 2]),
+        y_err_saturated=lambda a: bool(a[g + 3]),
+        terms=lambda a: StepTerms(**{k: _view(*at[k])(a) for k in (
+            "M_inv", "T_inv", "Lambda_w", "Gamma_xi_xi", "J_y", "J_e_xi")}),
+    )
+    return r
+
+
+_NO_FILTER_STATE = np.zeros(0)
 
 
 def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmState,
@@ -226,160 +282,53 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     expressed in {e} (an F/T sensor's reading) [N, N m]. task_frame: this step's task frame
     if it moves (amcore.adapt turns it with the heading), else params.task_frame.
 
-    The 3-vector chains (wrench filter, CoM law, eq. Rd, orientation law) run on Python
-    floats (amcore.vec3); the matrix work of eq. u3 on numpy.
+    Pinocchio computes M^-1, C, the CoM Jacobian and {e}'s placement and Jacobians; the
+    compiled law.control_law does the rest.
     """
     p = params
-    fg = p.float_gains
-    m, g, n = model.mass_kg, model.gravity_mps2, model.n
-    need_full = p.compensate_Lambda_y_dot
-    tm = decoupled_terms(model, data, state, full=need_full)
-    tk = task_terms(model, data, tm, p.task_frame if task_frame is None else task_frame, p.components,
-                    full=need_full)
-    R = state.R_WB
-    comp = p.force_compensation
-    s = 1.0 if comp else 0.0
+    frame = p.task_frame if task_frame is None else task_frame
+    pm, fid = model.pin_model, model.ee_frame_id
+    q_pin, V = pin_configuration(state)
+    Jcom = pin.jacobianCenterOfMass(pm, data, q_pin, False)  # R [I, -hat(r_b), J_b]
+    M_inv = pin.computeMinverse(pm, data, q_pin)
+    C = pin.computeCoriolisMatrix(pm, data, q_pin, V)  # its pass also fills the joint placements, data.J, data.dJ
+    H_WE = pin.updateFramePlacement(pm, data, fid).homogeneous
+    J_e = pin.getFrameJacobian(pm, data, fid, pin.LOCAL)
+    Jdot_e = pin.getFrameJacobianTimeVariation(pm, data, fid, pin.LOCAL)
 
-    # --- measured wrench: world-aligned at {e}, low-pass filtered (exact derivatives)
-    (e00, e01, e02, _), (e10, e11, e12, _), (e20, e21, e22, _), _ = tk.H_WE.tolist()  # R_WE's rows
-    f0, f1, f2, t0, t1, t2 = np.asarray(wrench_E, dtype=float).tolist()
-    raw_W = [e00 * f0 + e01 * f1 + e02 * f2, e10 * f0 + e11 * f1 + e12 * f2, e20 * f0 + e21 * f1 + e22 * f2,
-             e00 * t0 + e01 * t1 + e02 * t2, e10 * t0 + e11 * t1 + e12 * t2, e20 * t0 + e21 * t1 + e22 * t2]  # [R_e f_e; R_e tau_e]
     dt = 0.0 if memory.t_s is None else t_s - memory.t_s
-    x_W, xd_W = lowpass_update_floats(p.wrench_filter, memory.wrench, raw_W, dt)
-    f0, f1, f2, t0, t1, t2 = x_W
-    wrench_E_f = [e00 * f0 + e10 * f1 + e20 * f2, e01 * f0 + e11 * f1 + e21 * f2, e02 * f0 + e12 * f1 + e22 * f2,
-                  e00 * t0 + e10 * t1 + e20 * t2, e01 * t0 + e11 * t1 + e21 * t2, e02 * t0 + e12 * t1 + e22 * t2]  # [R_e^T f; R_e^T tau]
-    F_xi = np.array(wrench_E_f).dot(tk.J_e_xi)  # (J_e T^-1)^T F = T^-T J_e^T F
-    sF_W = (s * f0, s * f1, s * f2)  # the filtered force, if compensated
-    if p.force_rate_feedforward:
-        sF_W_d = v3.scale(s, xd_W[0:3])
-        wf, zeta = p.wrench_filter.omega, p.wrench_filter.zeta
-        sF_W_dd = tuple(s * (wf * wf * (raw_W[i] - x_W[i]) - 2.0 * zeta * wf * xd_W[i]) for i in range(3))  # lowpass_accel
-    else:  # F_e treated as slowly varying in f_d's derivatives (see ControllerOptions)
-        sF_W_d = sF_W_dd = (0.0, 0.0, 0.0)
-
-    # --- CoM law, eq. Com_controller, and its first two time derivatives
-    Rl = R.tolist()
-    (R00, R01, R02), (R10, R11, R12), (R20, R21, R22) = Rl
-    w0, w1, w2 = state.w_B.tolist()
-    b3 = (R02, R12, R22)
-    b3_d = (R00 * w1 - R01 * w0, R10 * w1 - R11 * w0, R20 * w1 - R21 * w0)  # R (w x e3)
-    rdot_c = tm.rdot_c.tolist()
-    e = v3.sub(tm.r_c.tolist(), ref.r_c.tolist())
-    ed = v3.sub(rdot_c, ref.r_c_d1.tolist())
-    scale, P = _saturation(e, p.com_err_max)
-    K, D = fg.K_t, fg.D_t
-    r_d2, r_d3, r_d4 = ref.r_c_d2.tolist(), ref.r_c_d3.tolist(), ref.r_c_d4.tolist()
-    mg = m * g
-    f_d = _feedforward_pd(m, r_d2, K, v3.scale(scale, e), D, ed, (sF_W[0], sF_W[1], sF_W[2] - mg))
-    u1 = v3.dot(f_d, b3)
-    if comp:  # the model's CoM acceleration (u_1 b_3 + F_rc)/m - g e_3, less r_c,d''
-        edd = ((u1 * R02 + sF_W[0]) / m - r_d2[0], (u1 * R12 + sF_W[1]) / m - r_d2[1],
-               ((u1 * R22 + sF_W[2]) / m - g) - r_d2[2])
-    else:  # without an F/T sensor the CoM acceleration is unknown under contact (see module doc)
-        edd = (0.0, 0.0, 0.0)
-    f_d_d = _feedforward_pd(m, r_d3, K, ed if P is None else v3.mv(P, ed), D, edd, sF_W_d)
-    u1_d = v3.dot(f_d_d, b3) + v3.dot(f_d, b3_d)
-    if comp:
-        eddd = ((u1_d * R02 + u1 * b3_d[0] + sF_W_d[0]) / m - r_d3[0],
-                (u1_d * R12 + u1 * b3_d[1] + sF_W_d[1]) / m - r_d3[1],
-                (u1_d * R22 + u1 * b3_d[2] + sF_W_d[2]) / m - r_d3[2])
-    else:
-        eddd = (0.0, 0.0, 0.0)
-    f_d_dd = _feedforward_pd(m, r_d4, K, edd if P is None else v3.mv(P, edd), D, eddd, sF_W_dd)
-
-    # --- desired attitude, eq. Rd
-    c, sn = math.cos(ref.psi), math.sin(ref.psi)
-    pd1, pd2 = ref.psi_d1, ref.psi_d2
-    b1 = (c, sn, 0.0)
-    b1_d = (pd1 * -sn, pd1 * c, 0.0)
-    b1_dd = (pd2 * -sn - pd1**2 * c, pd2 * c - pd1**2 * sn, 0.0)
-    (d1, d2, d3), Om_d, Omd_d = desired_attitude_cols(f_d, f_d_d, f_d_dd, b1, b1_d, b1_dd)
-
-    # --- orientation law, eq. ori_controller, through Q = R_b^T R_d (Q_ij = b_i . d_j):
-    # e_R = vee(R_d^T R_b - R_b^T R_d) / 2 = vee(Q^T - Q) / 2, w_bd = Q Omega_d and
-    # d/dt w_bd = Q Omegadot_d - w x w_bd
-    (x0, x1, x2), (y0, y1, y2), (z0, z1, z2) = d1, d2, d3
-    Q00, Q01, Q02 = R00 * x0 + R10 * x1 + R20 * x2, R00 * y0 + R10 * y1 + R20 * y2, R00 * z0 + R10 * z1 + R20 * z2
-    Q10, Q11, Q12 = R01 * x0 + R11 * x1 + R21 * x2, R01 * y0 + R11 * y1 + R21 * y2, R01 * z0 + R11 * z1 + R21 * z2
-    Q20, Q21, Q22 = R02 * x0 + R12 * x1 + R22 * x2, R02 * y0 + R12 * y1 + R22 * y2, R02 * z0 + R12 * z1 + R22 * z2
-    e_R = (0.5 * (Q12 - Q21), 0.5 * (Q20 - Q02), 0.5 * (Q01 - Q10))
-    o0, o1, o2 = Om_d
-    w_bd = wb0, wb1, wb2 = (Q00 * o0 + Q01 * o1 + Q02 * o2, Q10 * o0 + Q11 * o1 + Q12 * o2,
-                            Q20 * o0 + Q21 * o1 + Q22 * o2)
-    e_w = (w0 - wb0, w1 - wb1, w2 - wb2)
-    o0, o1, o2 = Omd_d
-    wdot_bd = (Q00 * o0 + Q01 * o1 + Q02 * o2 - (w1 * wb2 - w2 * wb1),
-               Q10 * o0 + Q11 * o1 + Q12 * o2 - (w2 * wb0 - w0 * wb2),
-               Q20 * o0 + Q21 * o1 + Q22 * o2 - (w0 * wb1 - w1 * wb0))
-    Gxi = tm.Gamma_xi_xi.tolist()
-    G_w = Gxi[3:6]
-    k_R, k_w = p.k_R, p.k_w
-    k_e = v3.mv(fg.Lambda_wb_d_inv, (k_R * e_R[0] + k_w * e_w[0], k_R * e_R[1] + k_w * e_w[1],
-                                     k_R * e_R[2] + k_w * e_w[2]))
-    L_w = v3.mv(tm.Lambda_w.tolist(), v3.sub(wdot_bd, k_e))
-    F_w = F_xi.tolist()[3:6]
-    u2 = (L_w[0] + G_w[0] - s * F_w[0], L_w[1] + G_w[1] - s * F_w[1], L_w[2] + G_w[2] - s * F_w[2])
-
-    # --- end-effector impedance law, eq. u3
-    # With J = J_y T^-1 and Lambda_xi^-1 = T M^-1 T^T: J Lambda_xi^-1 = J_y M^-1 T^T and
-    # Lambda_y^-1 = J Lambda_xi^-1 J^T = J_y M^-1 J_y^T (T cancels)
-    J_y = tk.J_y
-    JyMi = J_y.dot(tm.M_inv)
-    Lambda_y = linalg3.inv_sym(JyMi.dot(J_y.T))
-    Jbar = Lambda_y.dot(JyMi.dot(tm.T.T))  # (J^{Lambda+})^T = Lambda_y J Lambda_xi^-1
-    y_err_l = list(map(float.__sub__, tk.y.tolist(), ref.y.tolist()))
-    y_err_s = [lim if x > lim else (-lim if x < -lim else x) for x, lim in zip(y_err_l, fg.y_err_max)]  # np.clip
-    ydot = tk.ydot  # J_y V = J xi
-    yd_err = list(map(float.__sub__, ydot.tolist(), ref.y_d1.tolist()))
-    # Jbar (u - Gamma_xi xi - zeta) = rhs, rhs = -(Lambda_y (Jdot xi - y_d'') + D_y y~d + K_y sat(y~)),
-    # where the known part of u - Gamma_xi xi - zeta is z = [u_1 b_3 - m g e_3; u_2 - G_w; 0]:
-    # Jbar_3 (u_3 - G_3) = -r, r = [Lambda_y, Jbar, D_y, K_y] [Jdot xi - y_d''; z; y~d; sat(y~)]
-    # (one product: numpy's cost is per call).
-    u1_b3 = (u1 * R02, u1 * R12, u1 * R22)
-    z = [u1_b3[0], u1_b3[1], u1_b3[2] - mg, u2[0] - G_w[0], u2[1] - G_w[1], u2[2] - G_w[2], *(0.0,) * n]
-    a = list(map(float.__sub__, tk.Jdot_xi.tolist(), ref.y_d2.tolist()))
-    r = np.concatenate((Lambda_y, Jbar, p.DK_y), axis=1).dot(np.fromiter(a + z + yd_err + y_err_s, float, 6 + 4 * n))
-    Lambda_y_dot = None
+    filt = memory.wrench
+    x0, xdot0 = (_NO_FILTER_STATE, _NO_FILTER_STATE) if filt is None else (filt.x, filt.xdot)
+    wf = p.wrench_filter
+    Lambda_y_dot, r_extra = None, p.zero_task
     if p.compensate_Lambda_y_dot:
-        Lxi_dot = tm.Gamma_xi + tm.Gamma_xi.T
-        Jd = tk.Jdot
-        LiJt = tm.Lambda_xi_inv @ tk.J.T
-        inner = Jd @ LiJt + LiJt.T @ Jd.T - LiJt.T @ Lxi_dot @ LiJt
-        Lambda_y_dot = -Lambda_y @ inner @ Lambda_y
-        r = r + 0.5 * Lambda_y_dot @ np.array(yd_err)
-    J3 = Jbar[:, 6:]
-    sigma_min, J3_inv_r = linalg3.sigma_min_and_solve(J3, r, as_list=True)
-    damping = 0.0
-    if sigma_min >= p.sigma_damping:
-        if J3_inv_r is None:
-            raise np.linalg.LinAlgError("eq. u3: Jbar_3 is singular")
-        u3_G3 = J3_inv_r  # -(u_3 - G_3)
-    else:
-        damping = p.damping_max**2 * (1.0 - (sigma_min / p.sigma_damping) ** 2)
-        u3_G3 = (J3.T @ np.linalg.solve(J3 @ J3.T + damping * np.eye(n), r)).tolist()
+        Lambda_y_dot, ydot = _Lambda_y_dot_and_ydot(model, data, state, frame, p.components)
+        r_extra = 0.5 * Lambda_y_dot.dot(ydot - ref.y_d1)
+    try:
+        packed = law.control_law(
+            model.mass_kg, model.gravity_mps2, state.R_WB, state.p_WB, state.w_B, V, Jcom, M_inv, C, H_WE, J_e,
+            Jdot_e, frame.H_TW, p.axes, ref.r_c, ref.r_c_d1, ref.r_c_d2, ref.r_c_d3, ref.r_c_d4,
+            ref.psi, ref.psi_d1, ref.psi_d2, ref.y, ref.y_d1, ref.y_d2,
+            wrench_E, x0, xdot0, wf.transition(max(dt, 0.0)), wf.omega, wf.zeta,
+            p.gains_K_t, p.gains_D_t, p.k_R, p.k_w, p.Lambda_wb_d_inv, p.K_y, p.D_y, p.com_err_max, p.y_err_max,
+            p.sigma_damping, p.damping_max, p.force_compensation, p.force_rate_feedforward, r_extra)
+    except ZeroDivisionError as e:
+        raise np.linalg.LinAlgError(f"eq. u3: {e}") from None
+    n = model.n
+    at = packed_slices(n)
+    tau = packed[at["tau"][0]].copy()  # the command does not share memory with the diagnostics
+    diag = Diagnostics.from_packed(packed, n, r_c_d=ref.r_c, y_d=ref.y, R_WB=state.R_WB, Lambda_y_dot=Lambda_y_dot)
+    memory = ControllerMemory(t_s=t_s, wrench=FilterState(x=packed[at["memory_x"][0]], xdot=packed[at["memory_xdot"][0]]))
+    return StepResult(Command(thrust_n=float(tau[2]), tau_B_nm=tau[3:6], tau_q_nm=tau[6:]), diag, memory)
 
-    u3 = list(map(float.__sub__, Gxi[6:], u3_G3))
-    # u and the diagnostics' vectors (and R_d's rows) as views of one array: numpy's cost is per
-    # call (the memory's filter state too: its own, non-overlapping slices)
-    v = np.fromiter([*f_d, *e_R, *e_w, *w_bd, *wdot_bd, *Om_d, d1[0], d2[0], d3[0], d1[1], d2[1], d3[1],
-                     d1[2], d2[2], d3[2], *e, *x_W, *wrench_E_f, *x_W, *xd_W, *y_err_l,
-                     *u1_b3, *u2, *u3], float, 60 + 2 * n)
-    u = v[54 + n:]
-    tau = u.dot(tm.T)  # T^T u
-    F_y = Jbar.dot(F_xi)
-    tau_cmd = tau.copy()  # the command does not share memory with the diagnostics
-    cmd = Command(tau.item(2), tau_cmd[3:6], tau_cmd[6:])  # (thrust_n, tau_B_nm, tau_q_nm); positional: half the cost
-    diag = Diagnostics(  # positional, in field order: matching 28 keywords would cost ~1.4 us more
-        tm.r_c, ref.r_c, v[27:30], tm.rdot_c,  # r_c, r_c_d, r_c_err, rdot_c
-        v[3:6], v[6:9], R, v[18:27].reshape(3, 3),  # e_R, e_w, R_WB, R_d
-        v[9:12], v[12:15], v[15:18], v[0:3],  # w_bd, wdot_bd, Omega_d, f_d
-        tk.y, ref.y, v[54:54 + n], ydot, F_y,  # y, y_d, y_err, ydot, F_y
-        v[30:33], v[36:42],  # F_rc, wrench_E_filtered
-        sigma_min, damping, P is not None,  # sigma_min_J3, damping, com_err_saturated
-        any(map(float.__ne__, y_err_s, y_err_l)),  # y_err_saturated: the clip changed something
-        u, tau, Lambda_y, Lambda_y_dot, v[30:36],  # u, tau, Lambda_y, Lambda_y_dot, wrench_W_filtered
-        tm, tk,  # decoupled, task
-    )
-    return StepResult(cmd, diag, ControllerMemory(t_s, FilterState(v[42:48], v[48:54])))
+
+def _Lambda_y_dot_and_ydot(model: AmModel, data: pin.Data, state: AmState, frame: TaskFrame,
+                           components) -> tuple[np.ndarray, np.ndarray]:
+    """dLambda_y/dt = -Lambda_y (Jdot Lambda_xi^-1 J^T + (.)^T - J Lambda_xi^-1 Lambda_xi' Lambda_xi^-1 J^T)
+    Lambda_y with Lambda_xi' = Gamma_xi + Gamma_xi^T, and ydot (numpy model terms, full=True)."""
+    tm = decoupled_terms(model, data, state, full=True)
+    tk = task_terms(model, data, tm, frame, components, full=True)
+    Lambda_y = np.linalg.inv(tk.J_y @ tm.M_inv @ tk.J_y.T)
+    LiJt = tm.Lambda_xi_inv @ tk.J.T
+    inner = tk.Jdot @ LiJt + LiJt.T @ tk.Jdot.T - LiJt.T @ (tm.Gamma_xi + tm.Gamma_xi.T) @ LiJt
+    return -Lambda_y @ inner @ Lambda_y, tk.ydot

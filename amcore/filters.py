@@ -46,7 +46,9 @@ class LowPass2:
         return 2.0 * np.pi * self.cutoff_hz
 
     def transition(self, dt: float) -> np.ndarray:
-        return np.array(self._transition_entries(dt)).reshape(2, 2)
+        """exp(A dt) of the filter's state matrix A = [[0, 1], [-w^2, -2 zeta w]] (cached per dt:
+        treat it as read-only)."""
+        return _transition_matrix(self.cutoff_hz, self.zeta, dt)
 
     def _transition_entries(self, dt: float) -> tuple[float, float, float, float]:
         return _transition_entries(self.cutoff_hz, self.zeta, dt)
@@ -57,6 +59,11 @@ def _transition_entries(cutoff_hz: float, zeta: float, dt: float) -> tuple[float
     """exp(A dt) of the filter's state matrix A = [[0, 1], [-w^2, -2 zeta w]], row by row."""
     w = 2.0 * np.pi * cutoff_hz
     return _expm2_entries(0.0, dt, -w * w * dt, -2.0 * zeta * w * dt)
+
+
+@lru_cache(maxsize=64)
+def _transition_matrix(cutoff_hz: float, zeta: float, dt: float) -> np.ndarray:
+    return np.array(_transition_entries(cutoff_hz, zeta, dt)).reshape(2, 2)
 
 
 @dataclass(frozen=True)

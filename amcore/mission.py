@@ -21,12 +21,13 @@ from functools import cached_property
 import numpy as np
 import pinocchio as pin
 
+from . import law
 from .config import AmSpec, ObjectSpec, ScenarioSpec
 from .control import Reference
 from .model import AmModel, AmState, create_data, decoupled_terms
 from .so3 import Rz
 from .task import TaskFrame, angle_of, task_terms
-from .trajectory import SmoothPath, _smoothstep_derivs, path_through
+from .trajectory import SmoothPath, path_through
 
 
 @dataclass(frozen=True)
@@ -107,13 +108,10 @@ class AmMission:
     contact_point_W: np.ndarray  # where the pad plans to touch the face, in {w} [m]
 
     def reference(self, t: float) -> Reference:
-        # the CoM path taken to {w} once (_com_path_w), both paths on floats, and one array
-        # whose slices are the Reference's vectors: numpy's cost is per call
-        v = np.array(self._com_path_w.eval_flat(t, 4) + self.y_path.eval_flat(t, 2))
-        n = (len(v) - 15) // 3
-        y = 15 + n
-        return Reference(v[0:3], v[3:6], v[6:9], v[9:12], v[12:15], self.psi, 0.0, 0.0, v[15:y], v[y:y + n],
-                         v[y + n:])  # positional (r_c..r_c_d4, psi..psi_d2, y..y_d2): keywords cost more
+        r = self._com_path_w.eval_array(t, 4)  # the CoM path taken to {w} once (_com_path_w)
+        y = self.y_path.eval_array(t, 2)
+        return Reference(r_c=r[0], r_c_d1=r[1], r_c_d2=r[2], r_c_d3=r[3], r_c_d4=r[4], psi=self.psi, psi_d1=0.0,
+                         psi_d2=0.0, y=y[0], y_d1=y[1], y_d2=y[2])
 
     @cached_property
     def _com_path_w(self) -> SmoothPath:
@@ -203,8 +201,7 @@ class JoinBlend:
         tau = (t - self.t0) / self.duration_s
         if tau >= 1.0:
             return ref
-        s = _smoothstep_derivs(max(tau, 0.0), 4)
-        s = [sk / self.duration_s ** k for k, sk in enumerate(s)]  # d^k s / dt^k
+        s = [law.smoothstep(max(tau, 0.0), k) / self.duration_s ** k for k in range(5)]  # d^k s / dt^k
         r = [ref.r_c - np.array(self.r_c0), ref.r_c_d1, ref.r_c_d2, ref.r_c_d3, ref.r_c_d4]
         y = [ref.y - np.array(self.y0), ref.y_d1, ref.y_d2]
 

@@ -81,11 +81,11 @@ def body_torque_estimate(params: ControllerParams, res: StepResult, memory: Offb
     if memory.t_s is None or memory.w_B is None or memory.tau_q_nm is None or not t_s > memory.t_s:
         return None
     d = res.diagnostics
-    tm, tk = d.decoupled, d.task
+    tm = d.terms
     wdot = (state.w_B - np.asarray(memory.w_B)) / (t_s - memory.t_s)
     u2 = tm.Lambda_w.dot(wdot) + tm.Gamma_xi_xi[3:6]
     if params.force_compensation:  # F_wb from the filtered F/T reading (F_xi = (J_e T^-1)^T F_e)
-        u2 = u2 - d.wrench_E_filtered.dot(tk.J_e_xi[:, 3:6])
+        u2 = u2 - d.wrench_E_filtered.dot(tm.J_e_xi[:, 3:6])
     K = tm.T_inv[:, 3:6].T  # T^-T's middle block row: u_2 = K tau
     return u2 - K[:, 2] * memory.thrust_n - K[:, 6:].dot(memory.tau_q_nm)
 
@@ -95,7 +95,7 @@ def joint_torques_for_body_torque(res: StepResult, tau_b: np.ndarray) -> np.ndar
     (module doc): tau_q^p - (J_y M^-1)_q^-1 (J_y M^-1)_w (tau_b - tau_b^p), damped like eq. u3
     where the controller damped it."""
     d, c = res.diagnostics, res.command
-    JyMi = d.task.J_y.dot(d.decoupled.M_inv)
+    JyMi = d.terms.J_y.dot(d.terms.M_inv)
     A, B = JyMi[:, 6:], JyMi[:, 3:6]
     rhs = B.dot(tau_b - c.tau_B_nm)
     if d.damping > 0.0:  # near the arm's singularity: the same damped least squares, in Lambda_y's metric
@@ -118,7 +118,7 @@ def offboard_step(model: AmModel, data: pin.Data, params: ControllerParams, stat
     else:
         tau_q = joint_torques_for_body_torque(res, tau_b)
     tau = np.concatenate(([0.0, 0.0, c.thrust_n], tau_b, tau_q))
-    d.tau, d.u = tau, d.decoupled.T_inv.T.dot(tau)  # the bookkeeping: what the vehicle received
+    d.tau, d.u = tau, d.terms.T_inv.T.dot(tau)  # the bookkeeping: what the vehicle received
     cmd = Command(c.thrust_n, tau[3:6], tau[6:])
     mem = OffboardMemory(res.memory, t_s, tuple(state.w_B.tolist()), c.thrust_n, cmd.tau_q_nm)
     return OffboardResult(StepResult(cmd, d, res.memory), mem, None if tau_b is c.tau_B_nm else tau_b)

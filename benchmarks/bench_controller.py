@@ -1,39 +1,45 @@
-"""Benchmark of one full controller step (model terms included): median and p95, and where
-the time goes. Targets (issue 2): median <= 150 us on the project's 2-core machines, goal 60 us.
+"""Benchmark of one full controller step (pinocchio terms included): median and p95, where the
+time goes, and the ratio to the literal transcription of the paper timed in the same run.
 
     python benchmarks/bench_controller.py [--iters 3000]
 
+Targets (issue 15, medians on the project's 2-core machines): controller step <= 30 us
+(goal 15 us); against the literal transcription (tests/amcore/literal.py) <= 0.1x (goal
+0.05x); the companion's whole step from a sensor frame to its setpoint, telemetry excluded,
+<= 50 us (goal 25 us).
+
 The step is fed back its own memory every call, as the companion does at 1 kHz. Where the
-time goes is measured inside the step (its calls to decoupled_terms and task_terms are
-timed in place, the control laws are the remainder: eqs. Com_controller, Rd, ori_controller,
-u3, the wrench filter and the result objects), and also for the model and task terms
-called on their own in a tight loop, where caches stay warm. The rows are timed in
-interleaved rounds so that a change in machine load hits all of them alike.
-The companion calls, every step besides, mission.reference and the wire conversions of
-companion/adapter.py (state_from_frame, setpoint_from_result); each has its own line, and
-the last line times the companion's whole step from a sensor frame to its setpoint (the
-state then carries the frame's quaternion, AmState.quat_xyzw).
+time goes: pinocchio's six calls (M^-1, C, CoM Jacobian, {e}'s placement, Jacobian and its
+rate), the compiled law (amcore.law.control_law, called alone on the same inputs), and the
+rest of `step` (argument passing, naming the results). The companion calls, every step
+besides, mission.reference and the wire conversions of companion/adapter.py; each has its
+own line. Rows are timed in interleaved rounds so that a change in machine load hits all
+of them alike. The literal transcription (finite differences, generic inverses) is timed
+on fewer calls: it takes milliseconds.
 """
 from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 
+from amcore import law
 from amcore.config import load_scenario
-from amcore import control
 from amcore.control import ControllerMemory, ControllerParams, step
 from amcore.mission import am_mission
-from amcore.model import AmState, build_model, create_data, decoupled_terms
+from amcore.model import AmState, build_model, create_data, pin_configuration
 from amcore.so3 import R_to_quat_wxyz, exp_so3
-from amcore.task import task_terms
 from amlink.types import SensorFrame
 from companion.adapter import setpoint_from_result, state_from_frame
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # tests/amcore/literal.py
+from tests.amcore.literal import controller_literal  # noqa: E402
 
 
 def main() -> None:
@@ -57,16 +63,30 @@ def main() -> None:
                           v_B=s.v_B, w_B=s.w_B, q=s.q, qdot=s.qdot, wrench_E=F) for k, s in enumerate(sts)]
     thrust_max = spec.vehicle.rotors.thrust_max_n * spec.vehicle.rotors.count
     mem = [ControllerMemory(), ControllerMemory()]
-    inside = {"model": [], "task": []}
+    pm, fid = model.pin_model, model.ee_frame_id
     clock = time.perf_counter_ns
 
-    def timed(fn, key):
-        def wrapper(*args, **kwargs):
-            t0 = clock()
-            out = fn(*args, **kwargs)
-            inside[key].append(clock() - t0)
-            return out
-        return wrapper
+    def pinocchio_terms(st):
+        q_pin, V = pin_configuration(st)
+        out = (pin.jacobianCenterOfMass(pm, data, q_pin, False), pin.computeMinverse(pm, data, q_pin),
+               pin.computeCoriolisMatrix(pm, data, q_pin, V), pin.updateFramePlacement(pm, data, fid).homogeneous,
+               pin.getFrameJacobian(pm, data, fid, pin.LOCAL),
+               pin.getFrameJacobianTimeVariation(pm, data, fid, pin.LOCAL))
+        return V, out
+
+    p, wf = params, params.wrench_filter
+    res0 = step(model, data, params, sts[0], refs[0], F, ControllerMemory(), 0.0)
+    x0, xd0 = res0.memory.wrench.x.copy(), res0.memory.wrench.xdot.copy()
+    Phi = wf.transition(1e-3)
+    law_inputs = []
+    for st, ref in zip(sts, refs):
+        V, (Jcom, M_inv, C, H_WE, J_e, Jd_e) = pinocchio_terms(st)
+        law_inputs.append((model.mass_kg, model.gravity_mps2, st.R_WB, st.p_WB, st.w_B, V, Jcom.copy(), M_inv.copy(),
+                           C.copy(), H_WE.copy(), J_e.copy(), Jd_e.copy(), p.task_frame.H_TW, p.axes, ref.r_c,
+                           ref.r_c_d1, ref.r_c_d2, ref.r_c_d3, ref.r_c_d4, ref.psi, ref.psi_d1, ref.psi_d2, ref.y,
+                           ref.y_d1, ref.y_d2, F, x0, xd0, Phi, wf.omega, wf.zeta, p.gains_K_t, p.gains_D_t, p.k_R,
+                           p.k_w, p.Lambda_wb_d_inv, p.K_y, p.D_y, p.com_err_max, p.y_err_max, p.sigma_damping,
+                           p.damping_max, p.force_compensation, p.force_rate_feedforward, p.zero_task))
 
     def run_step(i):
         mem[0] = step(model, data, params, sts[i % 64], refs[i % 64], F, mem[0], 1e-3 * i).memory
@@ -77,21 +97,10 @@ def main() -> None:
         mem[1] = res.memory
         setpoint_from_result(i, res, thrust_max)
 
-    def run_step_split(i):
-        control.decoupled_terms, control.task_terms = timed_model, timed_task
-        try:
-            run_step(i)
-        finally:
-            control.decoupled_terms, control.task_terms = decoupled_terms, task_terms
-
-    timed_model, timed_task = timed(decoupled_terms, "model"), timed(task_terms, "task")
-    tm = decoupled_terms(model, data, sts[0])
-    res0 = step(model, data, params, sts[0], refs[0], F, ControllerMemory(), 0.0)
     parts = {
         "step": run_step,
-        "step, split": run_step_split,
-        "model": lambda i: decoupled_terms(model, data, sts[i % 64]),
-        "task": lambda i: task_terms(model, data, tm, params.task_frame, params.components),
+        "pinocchio": lambda i: pinocchio_terms(sts[i % 64]),
+        "law": lambda i: law.control_law(*law_inputs[i % 64]),
         "reference": lambda i: mission.reference(0.0067 * i),
         "state_from_frame": lambda i: state_from_frame(frames[i % 64]),
         "setpoint_from_result": lambda i: setpoint_from_result(i, res0, thrust_max),
@@ -101,8 +110,7 @@ def main() -> None:
         for fn in parts.values():
             fn(i)
     samples = {name: [] for name in parts}
-    inside["model"].clear()
-    inside["task"].clear()
+    literal = []
     load_before = os.getloadavg()
     for r in range(max(1, a.iters // 100)):
         for name, fn in parts.items():
@@ -111,30 +119,40 @@ def main() -> None:
                 t0 = clock()
                 fn(i)
                 ts.append(clock() - t0)
+        if r % 3 == 0:  # the literal transcription: a few calls per round
+            for i in range(2):
+                k = (r + i) % 64
+                t0 = clock()
+                controller_literal(model, params, sts[k], refs[k], F)
+                literal.append(clock() - t0)
     load_after = os.getloadavg()
 
-    def row(name, ts):
-        print(f"{name:<58} {np.median(ts) / 1e3:12.1f} {np.percentile(ts, 95) / 1e3:10.1f}")
+    def med(ts):
+        return np.median(ts) / 1e3
 
-    split = np.array(samples["step, split"])
-    laws = split - np.array(inside["model"]) - np.array(inside["task"])
-    print(f"{'what':<58} {'median [us]':>12} {'p95 [us]':>10}")
-    row("full controller step", samples["step"])
-    print("  inside the step:")
-    row("    decoupled_terms (pinocchio + T, T^-1, Tdot V, Lambda_w)", inside["model"])
-    row("    task_terms (y, J_y, J_e T^-1, Jdot xi)", inside["task"])
-    row("    control laws (eqs. Com_controller, Rd, ori_controller, u3)", laws)
-    print("  called on their own (warm caches):")
-    row("    decoupled_terms", samples["model"])
-    row("    task_terms", samples["task"])
+    def row(name, ts):
+        print(f"{name:<62} {med(ts):12.1f} {np.percentile(ts, 95) / 1e3:10.1f}")
+
+    print(f"{'what':<62} {'median [us]':>12} {'p95 [us]':>10}")
+    row("full controller step (amcore.control.step)", samples["step"])
+    row("  pinocchio: M^-1, C, CoM Jacobian, {e}'s placement, J_e, Jdot_e", samples["pinocchio"])
+    row("  compiled law (amcore.law.control_law) alone", samples["law"])
+    print(f"{'  the rest of step (arguments, naming the results)':<62} "
+          f"{med(samples['step']) - med(samples['pinocchio']) - med(samples['law']):12.1f}")
+    row("literal transcription (tests/amcore/literal.py)", literal)
     print("  called by the companion every step besides:")
     row("    mission.reference (7th-order paths)", samples["reference"])
     row("    adapter.state_from_frame", samples["state_from_frame"])
     row("    adapter.setpoint_from_result", samples["setpoint_from_result"])
     row("companion step: frame -> state, reference, step, setpoint", samples["companion"])
-    med = np.median(samples["step"]) / 1e3
+    step_us, comp_us, ratio = med(samples["step"]), med(samples["companion"]), med(samples["step"]) / med(literal)
+    print(f"step / literal transcription, same run: {ratio:.4f}x")
     print(f"load average (1 min) {load_before[0]:.2f} before, {load_after[0]:.2f} after; {os.cpu_count()} CPUs")
-    print(f"target: median <= 150 us (goal 60 us): {'met' if med <= 150 else 'NOT met'} at {med:.1f} us")
+    for what, value, target, goal, unit in (("controller step", step_us, 30, 15, " us"),
+                                            ("step / literal", ratio, 0.1, 0.05, "x"),
+                                            ("companion step", comp_us, 50, 25, " us")):
+        verdict = "goal met" if value <= goal else ("target met" if value <= target else "NOT met")
+        print(f"{what}: {value:.4g}{unit} (target <= {target}{unit}, goal <= {goal}{unit}): {verdict}")
 
 
 if __name__ == "__main__":

@@ -1,13 +1,19 @@
 """Real-time factor of the whole multi-process SITL (simulator + one companion process per AM,
-MAVLink over loopback UDP, lockstep) for N = 1, 2, 5, 10 AMs, next to bare PyBullet stepping
-of the same world measured in the same run.
+MAVLink over loopback UDP, lockstep) for N = 2, 5, 10, 20 AMs, next to bare PyBullet stepping
+of the same world measured in the same run, and how the processes' CPU and memory grow with N.
 
-    python benchmarks/bench_sitl.py [--duration 3] [--n 1 2 5 10]
+    python benchmarks/bench_sitl.py [--duration 3] [--n 2 5 10 20]
 
 Each N runs the ten_am scenario's object (5 kg cylinder, r = 0.6 m) with N AMs evenly spaced
 around it, for --duration simulated seconds of the approach phase. The SITL figure is the
 simulator's own (simulated time / wall time from the first lockstep step, start-up
-excluded). Targets (issue 3): 2 AMs >= 2x real time, 10 AMs >= 0.5x; goals 5x and 1x.
+excluded). Targets (issue 15): 2 AMs >= 3x real time, 10 AMs >= 0.7x; goals 5x and 1x.
+
+Per process, from the outcome files of the SITL run (companion.procstats): CPU per step
+(user + system, all threads, telemetry included) of a companion and of the simulator, and
+a companion's resident memory at the end: rss (shared libraries counted whole in every
+process), pss (shared pages divided among the processes sharing them: what N companions
+really add up to) and uss (its own pages). Target for a companion: <= 120 MiB (goal 80).
 
 More columns take the whole apart, measured in the same run:
 - "echo": the same simulator and lockstep with `echo_companion.py` in place of each
@@ -74,7 +80,7 @@ def bare_rtf(path: Path, duration: float) -> float:
         world.close()
 
 
-def sitl_rtf(path: Path, duration: float, run_dir: Path) -> tuple[float, float]:
+def sitl_rtf(path: Path, duration: float, run_dir: Path) -> tuple[float, float, dict]:
     exe = Path(sys.executable).parent / "am-run"
     cmd = [str(exe) if exe.exists() else sys.executable, *([] if exe.exists() else ["-m", "simulator.launch"]),
            str(path), "--duration", str(duration), "--run-dir", str(run_dir), "--no-progress"]
@@ -83,7 +89,17 @@ def sitl_rtf(path: Path, duration: float, run_dir: Path) -> tuple[float, float]:
     wall = time.perf_counter() - t0
     if p.returncode != 0:
         raise RuntimeError(f"SITL run failed: {p.stderr[-2000:]}")
-    return json.loads((run_dir / "outcome.json").read_text())["real_time_factor"], wall
+    outcome = json.loads((run_dir / "outcome.json").read_text())
+    comps = [json.loads(f.read_text()).get("process", {}) for f in sorted(run_dir.glob("am*.json"))]
+    proc = {"sim_cpu_us": (outcome.get("process") or {}).get("cpu_us_per_step"),
+            "comp_cpu_us": _median([c.get("cpu_us_per_step") for c in comps]),
+            **{k: _median([c.get("memory_mib", {}).get(k) for c in comps]) for k in ("rss", "pss", "uss")}}
+    return outcome["real_time_factor"], wall, proc
+
+
+def _median(xs) -> float:
+    xs = [x for x in xs if x is not None]
+    return float(np.median(xs)) if xs else float("nan")
 
 
 def echo_rtf(path: Path, duration: float, run_dir: Path, spin_us: float = 0.0) -> float:
@@ -163,7 +179,7 @@ def udp_rtf(n: int, steps: int = 3000) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--duration", type=float, default=3.0)
-    ap.add_argument("--n", type=int, nargs="+", default=[1, 2, 5, 10])
+    ap.add_argument("--n", type=int, nargs="+", default=[2, 5, 10, 20])
     ap.add_argument("--echo-spin-us", type=float, default=None,
                     help="also run echo companions that busy-wait this long per step (a controller's compute)")
     a = ap.parse_args()
@@ -172,19 +188,23 @@ def main() -> None:
     spin = a.echo_spin_us
     spin_head = f" {'echo+' + format(spin, 'g') + 'us':>12}" if spin is not None else ""
     print(f"{'N':>3} {'SITL':>7} {'echo':>7}{spin_head} {'UDP':>7} {'bare PyBullet':>14} {'bare/SITL':>10} "
-          f"{'wall incl. start-up':>20}")
+          f"{'wall incl. start-up':>20} | {'sim CPU/step':>12} {'comp CPU/step':>13} {'comp rss':>9} {'pss':>6} "
+          f"{'uss':>6}")
     with tempfile.TemporaryDirectory() as tmp:
         for n in a.n:
             path = scenario_with(n, Path(tmp))
             bare = bare_rtf(path, a.duration)
-            rtf, wall = sitl_rtf(path, a.duration, Path(tmp) / f"run{n}")
+            rtf, wall, proc = sitl_rtf(path, a.duration, Path(tmp) / f"run{n}")
             echo = echo_rtf(path, a.duration, Path(tmp) / f"echo{n}")
             spun = f" {echo_rtf(path, a.duration, Path(tmp) / f'spin{n}', spin):12.2f}" if spin is not None else ""
             udp = udp_rtf(n)
-            print(f"{n:>3} {rtf:7.2f} {echo:7.2f}{spun} {udp:7.1f} {bare:14.1f} {bare / rtf:10.0f} {wall:19.1f}s", flush=True)
+            print(f"{n:>3} {rtf:7.2f} {echo:7.2f}{spun} {udp:7.1f} {bare:14.1f} {bare / rtf:10.0f} {wall:19.1f}s | "
+                  f"{proc['sim_cpu_us']:10.0f}us {proc['comp_cpu_us']:11.0f}us {proc['rss']:6.0f}MiB {proc['pss']:6.0f} "
+                  f"{proc['uss']:6.0f}", flush=True)
     print("SITL: the product (am-run, telemetry on). echo: same lockstep, companions without a controller"
           + (f" (echo+{spin:g}us: each busy-waits {spin:g} us per step)" if spin is not None else "") + ".\n"
-          "UDP: the message pattern alone. Targets: 2 AMs >= 2x, 10 AMs >= 0.5x (goals 5x, 1x).")
+          "UDP: the message pattern alone. Targets: 2 AMs >= 3x, 10 AMs >= 0.7x (goals 5x, 1x); companion memory\n"
+          "<= 120 MiB (goal 80). CPU per step: user + system of the whole process over the run, all threads.")
 
 
 if __name__ == "__main__":

@@ -34,6 +34,7 @@ from telemetry.publisher import TelemetryPublisher
 from telemetry.session import TelemetryConfigError, add_zenoh_arguments, options_from_args
 from telemetry.wiring import CompanionTelemetry
 
+from . import jitcache, procstats
 from .pilot import Pilot
 
 
@@ -102,7 +103,17 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         print(f"{tag}: error: --sim: {exc}", file=sys.stderr)
         return 2
+    # every argument checked: compile the law (the first run on this machine) or load it
+    try:
+        jit = jitcache.warm(pilot.warm_up)
+    except _Stop as stop:
+        print(f"{tag}: stopped ({stop}) while preparing the control law", file=sys.stderr)
+        return 1
+    if jit.compiled:
+        print(f"{tag}: compiled the control law in {jit.seconds:.1f} s (once per machine: cached in "
+              f"{jitcache.cache_dir()})", file=sys.stderr, flush=True)
     why = "simulator ended the run"
+    cpu = procstats.CpuMeter()
     tele.open()  # never blocks: publishes are queued, dropped and counted while nobody listens
     if tlog is not None:
         tlog.open()
@@ -121,6 +132,7 @@ def main(argv: list[str] | None = None) -> int:
         client.arm(timeout_s=5.0)
         print(f"{tag}: connected to {a.sim}, scenario '{info.name}', armed", file=sys.stderr, flush=True)
         t0 = time.perf_counter()
+        cpu.start()
         while True:
             frame = client.recv_frame(timeout_s=a.frame_timeout)
             if frame is None:
@@ -150,7 +162,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{tag}: error: the simulator ended the run: {failure[-1]}", file=sys.stderr)
         _write(a.outcome, pilot.summary(error=failure[-1]))
         return 1
-    _write(a.outcome, pilot.summary())
+    summary = pilot.summary()
+    cpu_s = cpu.seconds()
+    summary["process"] = {"memory_mib": procstats.memory_mib(), "cpu_s": cpu_s,
+                          "cpu_us_per_step": 1e6 * cpu_s / pilot.steps if cpu_s is not None and pilot.steps else None}
+    _write(a.outcome, summary)
     steps = pilot.steps
     rate = f", {steps / wall:.0f} steps/s" if wall else ""
     print(f"{tag}: {why} after {steps} steps{rate}", file=sys.stderr)

@@ -24,7 +24,8 @@ from amcore.control import StepResult
 from amcore.mission import JoinBlend, am_mission, join_blend
 from amcore.model import build_model, create_data
 from amcore.offboard import OffboardMemory, offboard_step
-from amlink.types import AttitudeSetpoint, AttitudeTarget, SensorFrame, TorqueSetpoint
+from amcore.so3 import R_to_quat_wxyz
+from amlink.types import AttitudeSetpoint, AttitudeTarget, SensorFrame, TorqueSetpoint, sensor_frame_from_wire
 
 from .adapter import attitude_setpoint_from_result, setpoint_from_result, state_from_frame
 from .outcome import Outcome
@@ -70,6 +71,16 @@ class Pilot:
         sp, att, res = self.command(frame)
         self.record(frame.time_s, res)
         return sp, att, res
+
+    def warm_up(self) -> None:
+        """Two steps of a throwaway pilot on frames of the mission's start, built as the wire
+        builds them: the first calls into the compiled law (amcore.law), with the argument
+        types a run passes (companion.jitcache holds the lock around it). This pilot is untouched."""
+        twin = Pilot(self.spec, self.am.sysid, model=self.model)
+        x = self.mission.initial_state()
+        values = [*x.p_WB, *R_to_quat_wxyz(x.R_WB), *x.v_B, *x.w_B, *x.q, *x.qdot, *_NO_WRENCH]
+        for k in range(2):
+            twin.step(sensor_frame_from_wire(k, k * self.spec.control_dt_s, values, self.model.n, 0))
 
     def command(self, frame: SensorFrame) -> tuple[TorqueSetpoint | AttitudeSetpoint, AttitudeTarget | None, StepResult]:
         """The controller's answer to `frame`, and nothing else: in lockstep the simulator is

@@ -24,6 +24,7 @@ from amcore.config import ConfigError, ScenarioSpec, check_duration, load_scenar
 from amlink import fastcodec
 from amlink.limits import SetpointLimits
 from amlink.types import AttitudeSetpoint, SensorFrame, TorqueSetpoint
+from companion import jitcache
 from companion.pilot import Pilot
 
 from .core import SitlCore
@@ -63,6 +64,7 @@ def run(spec: ScenarioSpec, duration_s: float | None = None,
     about every simulated second."""
     core = SitlCore(spec, failsafe_after_rejected=failsafe_after_rejected)
     pilots = {s: Pilot(spec, s, model=core.model) for s in core.sysids}
+    jitcache.warm(pilots[core.sysids[0]].warm_up)  # compiles the law once per machine, else loads it
     v = spec.vehicle
     limits = SetpointLimits.for_vehicle(v.rotors.count * v.rotors.thrust_max_n, max(v.joint_torque_max_nm), v.n_joints)
     n = int(round((spec.duration_s if duration_s is None else duration_s) * spec.rate_hz))

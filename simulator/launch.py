@@ -40,6 +40,20 @@ def _command(name: str) -> list[str]:
     return [exe] if exe else [sys.executable, "-m", name]
 
 
+def _warm_control_law(spec) -> None:
+    """Compile the control law (amcore.law) before any companion starts, so that they load
+    it from the cache instead of compiling side by side (companion.jitcache)."""
+    from companion import jitcache
+    from companion.pilot import Pilot
+
+    if not jitcache.looks_cached():
+        print("am-run: compiling the control law (once per machine; later runs load it from the cache)",
+              file=sys.stderr, flush=True)
+    report = jitcache.warm(Pilot(spec, spec.ams[0].sysid).warm_up)
+    if report.compiled:
+        print(f"am-run: compiled the control law in {report.seconds:.1f} s", file=sys.stderr, flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = cliargs.ArgumentParser(prog="am-run", description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("scenario", nargs="?", type=Path, default=DEFAULT_SCENARIO, help="scenario TOML")
@@ -71,6 +85,7 @@ def main(argv: list[str] | None = None) -> int:
         run_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         return cliargs.fail("am-run", f"--run-dir {run_dir}: {exc.strerror or exc}")
+    _warm_control_law(spec)  # every argument checked: compile the law once, before any companion
     cfg = str(Path(a.scenario).resolve())
     key_args = _fresh_key(spec, run_dir)
     sim_cmd = _command("simulator") + key_args + _gcs_key(spec, run_dir) + [

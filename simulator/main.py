@@ -36,6 +36,7 @@ from amlink.errors import LinkError
 from amlink.limits import SetpointLimits
 from amlink.lockstep import SimServer
 from amlink.types import ScenarioInfo
+from companion import procstats
 
 from telemetry.publisher import TelemetryPublisher
 from telemetry.session import TelemetryConfigError, add_zenoh_arguments, options_from_args
@@ -182,6 +183,7 @@ def main(argv: list[str] | None = None) -> int:
     told = status  # what the companions hear (STATUSTEXT carries 50 bytes)
     n_steps = int(round(duration * spec.rate_hz))
     result: dict = {}
+    cpu = procstats.CpuMeter()
     tele.open()
     try:
         core.connect()
@@ -208,6 +210,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"simulator: warning: telemetry: no subscriber (recorder) after {a.telemetry_wait:g} s; "
                   f"publishing anyway", file=sys.stderr, flush=True)
         progress.t_wall0 = time.perf_counter()
+        cpu.start()
         sim_tele.start(core.time_s)
 
         def bookkeeping() -> None:  # while the companions compute step k
@@ -261,9 +264,12 @@ def main(argv: list[str] | None = None) -> int:
         tele.close()
     wall = time.perf_counter() - progress.t_wall0
     sim_time = k * spec.dt_s
+    cpu_s = cpu.seconds()
     result = {"scenario": spec.name, "scenario_id": info.scenario_id, "status": status, "exit_code": code,
               "steps": k, "sim_time_s": sim_time, "wall_s": wall,
               "real_time_factor": (sim_time / wall) if wall > 0 else None, "link": vars(server.stats),
+              "process": {"memory_mib": procstats.memory_mib(), "cpu_s": cpu_s,
+                          "cpu_us_per_step": 1e6 * cpu_s / k if cpu_s is not None and k else None},
               "gcs": {"endpoint": str(gcs_endpoint) if gcs_endpoint else None, **vars(gcs_link.stats),
                       "error": gcs_link.error, "link": vars(gcs_link.link_stats)}, **result}
     run_dir.mkdir(parents=True, exist_ok=True)

@@ -82,7 +82,7 @@ def _attitude_numpy(f, fd, fdd, b1, b1d, b1dd):
     return R, Om, vee(R.T @ Rdd - hat(Om) @ hat(Om))
 
 
-def test_float_implementation_matches_numpy_transcription():
+def test_compiled_law_matches_numpy_transcription():
     rng = np.random.default_rng(2)
     for _ in range(200):
         args = [np.array([0, 0, 17.0]) + 4 * rng.normal(size=3), 5 * rng.normal(size=3), 5 * rng.normal(size=3)]
@@ -92,15 +92,3 @@ def test_float_implementation_matches_numpy_transcription():
                  psidd * np.array([-s, c, 0.0]) - psid**2 * np.array([c, s, 0.0])]
         for got, ref in zip(desired_attitude(*args), _attitude_numpy(*args)):
             assert np.abs(got - ref).max() <= 1e-13 * max(1.0, np.abs(ref).max())
-
-
-def test_constant_heading_path_is_the_general_one():
-    """With b_1d constant, desired_attitude_cols drops b_1d's derivative terms: bit for bit
-    what the general formulas give for zero rates."""
-    from amcore import attitude
-
-    rng = np.random.default_rng(3)
-    for _ in range(200):
-        a, ad, add, b = (tuple(rng.normal(size=3).tolist()) for _ in range(4))
-        assert attitude._cross_derivs_const(a, ad, add, b) == attitude._cross_derivs(a, ad, add, b, (0.0,) * 3,
-                                                                                     (0.0,) * 3)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import subprocess
 import sys
@@ -118,7 +119,10 @@ def test_concurrent_first_use_generates_one_complete_module(tmp_path):
     files = {out.split()[1] for out, _ in outs}
     assert {out.split()[0] for out, _ in outs} == {"24000"}
     assert len(files) == 1
-    assert sorted(f.name for f in cache.iterdir()) == [Path(files.pop()).name]  # no temp leftovers
+    name = Path(files.pop()).name
+    assert sorted(f.name for f in cache.iterdir()) == ["__pycache__", name]  # no temp leftovers
+    # and its bytecode, written once beside it (PYTHONDONTWRITEBYTECODE or not)
+    assert [f.name for f in (cache / "__pycache__").iterdir()] == [Path(importlib.util.cache_from_source(name)).name]
 
 
 def test_generation_failure_is_a_typed_error(monkeypatch, tmp_path):

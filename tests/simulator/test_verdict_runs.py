@@ -40,7 +40,10 @@ CRAFTED = [
     # these two keep flying on the last valid command whatever is refused (K huge): what a
     # flight controller without the K-in-a-row failsafe would do
     ({"am4": {"start_offset_m": [0.0, 0.0, -0.7]}, **TRUST}, 0.5, None, "base contact", "base of am4 touched ground"),
-    ({"object": {"mass_kg": 2.0}, **TRUST}, 6.0, None, "diverged", "from the object's rest position > 3 m"),
+    # a base beyond the 3 m limit (placed there: where an overloaded team ends up is chaotic, it
+    # depends on the last bits of the arithmetic, and mostly ends on the table first)
+    ({"am4": {"start_offset_m": [0.0, 0.0, 3.2]}, **TRUST}, 0.5, None, "diverged",
+     "from the object's rest position > 3 m"),
     ({}, 1.0, 0.3, "failsafe", "sysid 5 in failsafe at the end"),
     ({"sensors": {"latency_s": 0.008}}, 2.0, None, "rejected setpoints", "rejected as implausible"),
     ({"am4": {"start_heading_deg": 20.0}}, 1.0, None, "saturated", "am4's actuators saturated"),
