@@ -36,6 +36,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -47,8 +48,7 @@ from .model import AmModel, AmState, decoupled_terms, pin_configuration
 from .task import TaskFrame, component_axes, task_terms
 
 
-@dataclass(frozen=True)
-class Reference:
+class Reference(NamedTuple):
     """Desired trajectories at one instant.
 
     r_c: CoM position in {w} [m] with derivatives up to snap (r_c_d4); the heading psi of
@@ -117,16 +117,14 @@ class ControllerParams:
         return np.zeros(len(self.components))
 
 
-@dataclass(frozen=True)
-class ControllerMemory:
+class ControllerMemory(NamedTuple):
     """What the controller carries from one step to the next (passed back in)."""
 
     t_s: float | None = None
     wrench: FilterState | None = None  # filtered [f; m] of F_e, world-aligned at {e} [N, N m]
 
 
-@dataclass(frozen=True)
-class Command:
+class Command(NamedTuple):
     """Torque-level setpoint: thrust along body z [N], body torque [N m], joint torques [N m]."""
 
     thrust_n: float
@@ -166,6 +164,7 @@ _DIAGNOSTICS_REQUIRED = (
 _DIAGNOSTICS_OPTIONAL = (
     "Lambda_y_dot",  # with options.compensate_Lambda_y_dot
     "wrench_W_filtered",  # filtered [f; m] of F_e in W axes, moment about {e} [N, N m]
+    "q_d",  # R_d as a unit quaternion (w, x, y, z), w >= 0
     "terms",  # StepTerms
 )
 
@@ -208,8 +207,7 @@ class Diagnostics:
         return "Diagnostics(" + ", ".join(f"{k}={getattr(self, k)!r}" for k in self.FIELDS) + ")"
 
 
-@dataclass
-class StepResult:
+class StepResult(NamedTuple):
     command: Command
     diagnostics: Diagnostics
     memory: ControllerMemory
@@ -219,7 +217,7 @@ class StepResult:
 # "nv" = n + 6. Diagnostics' fields, the command and the memory are views of it.
 PACKED = (
     ("tau", ("nv",)), ("r_c", (3,)), ("rdot_c", (3,)), ("r_c_err", (3,)), ("e_R", (3,)), ("e_w", (3,)),
-    ("R_d", (3, 3)), ("w_bd", (3,)), ("wdot_bd", (3,)), ("Omega_d", (3,)), ("f_d", (3,)),
+    ("R_d", (3, 3)), ("q_d", (4,)), ("w_bd", (3,)), ("wdot_bd", (3,)), ("Omega_d", (3,)), ("f_d", (3,)),
     ("y", ("n",)), ("y_err", ("n",)), ("ydot", ("n",)), ("F_y", ("n",)),
     ("wrench_W_filtered", (6,)), ("wrench_E_filtered", (6,)),
     ("memory_x", (6,)), ("memory_xdot", (6,)),  # the filter's new state (its own copy, for ControllerMemory)
@@ -254,7 +252,7 @@ def _readers(n: int) -> dict:
     """Diagnostics' fields read from the packed array, for a task dimension n."""
     at = packed_slices(n)
     r = {name: _view(*at[name]) for name in (
-        "tau", "r_c", "rdot_c", "r_c_err", "e_R", "e_w", "R_d", "w_bd", "wdot_bd", "Omega_d", "f_d", "y", "y_err",
+        "tau", "r_c", "rdot_c", "r_c_err", "e_R", "e_w", "R_d", "q_d", "w_bd", "wdot_bd", "Omega_d", "f_d", "y", "y_err",
         "ydot", "F_y", "wrench_W_filtered", "wrench_E_filtered", "u", "Lambda_y")}
     g = at["guard"][0].start
     f = at["wrench_W_filtered"][0].start

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 
@@ -66,8 +67,7 @@ def _transition_matrix(cutoff_hz: float, zeta: float, dt: float) -> np.ndarray:
     return np.array(_transition_entries(cutoff_hz, zeta, dt)).reshape(2, 2)
 
 
-@dataclass(frozen=True)
-class FilterState:
+class FilterState(NamedTuple):
     """x: filtered value, xdot: its rate (arrays of the signal's shape)."""
 
     x: np.ndarray

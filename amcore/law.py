@@ -632,7 +632,9 @@ def control_law(m, g, R, p_WB, w_B, V, Jcom, M_inv, C, H_WE, J_e, Jdot_e,
     tau = mtv(T, u)  # T^T u
     F_y = mv(Jbar, F_xi)
     flags = np.array([sigma, damping, 1.0 if com_saturated else 0.0, 1.0 if y_saturated else 0.0])
+    q = quaternion_xyzw(R_d)
+    q_d = np.array([q[3], q[0], q[1], q[2]]) * (1.0 if q[3] >= 0.0 else -1.0)  # R_d as (w, x, y, z), w >= 0
     return np.concatenate((
-        tau, r_c, rdot_c, e, e_R, e_w, R_d.ravel(), w_bd, wdot_bd, Omega_d, f_d,
+        tau, r_c, rdot_c, e, e_R, e_w, R_d.ravel(), q_d, w_bd, wdot_bd, Omega_d, f_d,
         y, y_err, ydot, F_y, x_W, wrench_E_f, x_W, xdot_W, u, Lambda_y.ravel(), flags,
         Lambda_w.ravel(), G, T_inv.ravel(), M_inv.ravel(), J_y.ravel(), J_e_xi.ravel()))

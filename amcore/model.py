@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -73,8 +74,7 @@ def create_data(model: AmModel) -> pin.Data:
     return model.pin_model.createData()
 
 
-@dataclass(frozen=True)
-class AmState:
+class AmState(NamedTuple):
     """Measured state of one AM.
 
     p_WB: base position in {w} [m]; R_WB: base orientation ({w} <- {b});

@@ -35,9 +35,12 @@ def setpoint_from_result(step: int, res: StepResult, thrust_max_n: float) -> tup
     quaternion, w_b,d, thrust normalized by the vehicle's maximum) that goes with it."""
     c, d = res.command, res.diagnostics
     n = c.tau_q_nm.shape[0]
-    x, y, z, w = quat_xyzw_of_R(d.R_d)
-    if w < 0.0:  # the representative with w >= 0 (so3.R_to_quat_wxyz)
-        x, y, z, w = -x, -y, -z, -w
+    if d.q_d is not None:  # R_d as a quaternion with w >= 0, from the compiled law
+        w, x, y, z = d.q_d.tolist()
+    else:
+        x, y, z, w = quat_xyzw_of_R(d.R_d)
+        if w < 0.0:  # the representative with w >= 0 (so3.R_to_quat_wxyz)
+            x, y, z, w = -x, -y, -z, -w
     thrust = c.thrust_n / thrust_max_n
     thrust = min(max(thrust, 0.0), 1.0)  # np.clip, which costs ~15x more on a float
     if not (0 <= step < 1 << 64 and n <= MAX_JOINTS):  # the validating constructors say why

@@ -63,8 +63,8 @@ def initial_state(spec: ScenarioSpec, am: AmSpec, model) -> AmState:
     x = am_mission(spec, am, model).initial_state()
     if am.start_offset_m == (0.0, 0.0, 0.0) and am.start_heading_deg == 0.0:
         return x
-    return dataclasses.replace(x, p_WB=x.p_WB + np.array(am.start_offset_m),
-                               R_WB=Rz(np.deg2rad(am.start_heading_deg)) @ x.R_WB)
+    return x._replace(p_WB=x.p_WB + np.array(am.start_offset_m),
+                      R_WB=Rz(np.deg2rad(am.start_heading_deg)) @ x.R_WB)
 
 
 class SitlCore:

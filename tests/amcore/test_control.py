@@ -240,7 +240,7 @@ def test_carried_quaternion_gives_the_same_step(model, mission, params):
     for t in (1.0, 7.0):
         st = near_reference(mission, model, t, rng)
         x, y, z, w = quat_xyzw_of_R(st.R_WB)
-        st_q = dataclasses.replace(st, quat_xyzw=(-x, -y, -z, -w))  # the other sign: same rotation
+        st_q = st._replace(quat_xyzw=(-x, -y, -z, -w))  # the other sign: same rotation
         ref = mission.reference(t)
         a = step(model, create_data(model), params, st, ref, np.ones(6), ControllerMemory(), t)
         b = step(model, create_data(model), params, st_q, ref, np.ones(6), ControllerMemory(), t)
