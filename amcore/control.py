@@ -169,6 +169,21 @@ _DIAGNOSTICS_OPTIONAL = (
 )
 
 
+class _FromPacked:
+    """A Diagnostics field that `step` reads from the compiled law's array when first asked
+    for, then keeps (a non-data descriptor: the instance's own value shadows it)."""
+
+    def __set_name__(self, owner, name):
+        self.name = name
+
+    def __get__(self, d, owner=None):
+        if d is None:
+            return self
+        value = d._readers[self.name](d._packed)
+        d.__dict__[self.name] = value
+        return value
+
+
 class Diagnostics:
     """What one control step evaluated, by name: the fields listed in FIELDS (the optional
     ones are None unless given). Built with keywords, `Diagnostics(r_c=..., ...)`, or by
@@ -190,21 +205,18 @@ class Diagnostics:
         """The diagnostics of law.control_law's array (PACKED, task dimension n), with the
         fields it does not hold given by name."""
         d = object.__new__(cls)
-        d.__dict__.update(given)
-        d.__dict__["_packed"] = packed
-        d.__dict__["_readers"] = _readers(n)
+        d.__dict__.update(given, _packed=packed, _readers=_readers(n))
         return d
-
-    def __getattr__(self, name):  # called only for a field not read yet
-        readers = self.__dict__.get("_readers")
-        if readers is None or name not in readers:
-            raise AttributeError(f"Diagnostics has no field {name!r}")
-        value = readers[name](self.__dict__["_packed"])
-        self.__dict__[name] = value
-        return value
 
     def __repr__(self) -> str:
         return "Diagnostics(" + ", ".join(f"{k}={getattr(self, k)!r}" for k in self.FIELDS) + ")"
+
+
+for _name in ("r_c", "rdot_c", "r_c_err", "e_R", "e_w", "R_d", "q_d", "w_bd", "wdot_bd", "Omega_d", "f_d", "y",
+              "y_err", "ydot", "F_y", "F_rc", "wrench_E_filtered", "wrench_W_filtered", "sigma_min_J3", "damping",
+              "com_err_saturated", "y_err_saturated", "u", "tau", "Lambda_y", "terms"):
+    setattr(Diagnostics, _name, _FromPacked())
+    Diagnostics.__dict__[_name].__set_name__(Diagnostics, _name)
 
 
 class StepResult(NamedTuple):
