@@ -286,9 +286,8 @@ def am_truth_sample(t_s: float, sysid: int, am, seq: int = 0) -> dict:
     joints = getattr(am, "p_W_joints", ())
     if len(joints):
         out["p_W_joints"] = [_l(p) for p in joints]
-    for key in ("rotor_saturated_steps", "joint_saturated_steps"):
-        if hasattr(am, key):
-            out[key] = int(getattr(am, key))
+    for key in ("rotor_saturated_steps", "joint_saturated_steps"):  # 0 where the simulator does not count
+        out[key] = int(getattr(am, key, 0))
     return out
 
 
@@ -386,16 +385,17 @@ def encode(payload: Mapping) -> tuple[bytes, bool]:
     try:
         return json.dumps(payload, separators=(",", ":"), allow_nan=False).encode(), False
     except ValueError:
-        return json.dumps(_finite(payload), separators=(",", ":"), allow_nan=False).encode(), True
+        return json.dumps(finite_or_null(payload), separators=(",", ":"), allow_nan=False).encode(), True
 
 
-def _finite(x):
+def finite_or_null(x):
+    """x with every non-finite float (in nested dicts and lists) replaced by None."""
     if isinstance(x, float):
         return x if math.isfinite(x) else None
     if isinstance(x, dict):
-        return {k: _finite(v) for k, v in x.items()}
+        return {k: finite_or_null(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [_finite(v) for v in x]
+        return [finite_or_null(v) for v in x]
     return x
 
 
