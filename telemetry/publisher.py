@@ -5,15 +5,16 @@
     tele.publish(key, payload)              # stamps seq, enqueues; never blocks
     tele.close()                            # sends what is queued (bounded wait), closes
 
-The caller only stamps the per-key `seq` and appends to a bounded deque (~1 us; no lock,
-no wake-up of another thread). A sender thread opens the zenoh session (retrying if it
-cannot, e.g. client mode with no router), wakes every poll_period_s, JSON-encodes what is
-queued and puts it: one message per run of consecutive samples of a key, carrying them as
-JSON texts separated by newlines (docs/telemetry.md; a subscriber splits on newlines). At 1 kHz
-per AM that is a handful of samples per message instead of a message per sample, whose
-cost in zenoh, in the subscriber's callback and in the recorder is per message. When the
-queue is full the sample is dropped and counted; its seq number is used up, so the
-recorder sees the gap too.
+A payload is a dict (a JSON sample: the sender encodes it) or bytes (a binary sample of
+telemetry.binary, already serialized by its builder). The caller only takes the per-key
+`seq` and appends to a bounded deque (~1 us; no lock, no wake-up of another thread). A
+sender thread opens the zenoh session (retrying if it cannot, e.g. client mode with no
+router), wakes every poll_period_s, encodes what is queued and puts it: one message per run
+of consecutive samples of a key, carrying them as JSON texts separated by newlines or as
+length-prefixed binary frames (telemetry.wire; docs/telemetry.md). At 1 kHz per AM that is
+some twenty samples per message instead of a message per sample, whose cost in zenoh, in the
+subscriber's callback and in the recorder is per message. When the queue is full the sample
+is dropped and counted; its seq number is used up, so the recorder sees the gap too.
 
 The sender's zenoh puts use congestion control BLOCK by default: a slow recorder slows
 the sender (zenoh releases the GIL while it waits, so the caller is not held), the queue
@@ -30,6 +31,7 @@ from __future__ import annotations
 
 import collections
 import logging
+import math
 import os
 import re
 import socket
@@ -39,8 +41,10 @@ from dataclasses import dataclass
 from typing import Iterable, Mapping
 
 from .auth import seal
+from .binary import HEADER
 from .schema import encode, publisher_stats_sample
 from .session import ZenohOptions, build_config
+from .wire import binary_message, json_message
 
 log = logging.getLogger(__name__)
 
@@ -59,9 +63,9 @@ class PublisherStats:
     dropped_queue_full: int  # publish() found the queue full
     dropped_no_session: int  # queued, but the session never opened before close()
     dropped_at_close: int  # still queued (or in a put) when close() gave up waiting
-    encode_errors: int  # payload not JSON-serialisable (programming error; see last_error)
+    encode_errors: int  # payload not JSON-serialisable, or neither a dict nor binary (programming error; see last_error)
     send_errors: int  # zenoh put raised
-    nonfinite: int  # payloads whose NaN/inf were sent as null
+    nonfinite: int  # JSON payloads whose NaN/inf were sent as null (binary samples carry them as they are)
     session_open_failures: int
     connected: bool  # the zenoh session is open (not: a subscriber is listening)
     queued: int
@@ -71,6 +75,16 @@ class PublisherStats:
     def dropped(self) -> int:
         return (self.dropped_queue_full + self.dropped_no_session + self.dropped_at_close + self.encode_errors
                 + self.send_errors)
+
+
+def _time_of(payload, default: float) -> float:
+    """A queued sample's simulation time "t" (for the stats sample's own t)."""
+    t = default
+    if type(payload) is dict:
+        t = payload.get("t", default)
+    elif isinstance(payload, (bytes, bytearray)) and len(payload) >= HEADER.size:
+        t = HEADER.unpack_from(payload)[0]
+    return t if isinstance(t, (int, float)) and math.isfinite(t) else default
 
 
 class TelemetryPublisher:
@@ -155,27 +169,29 @@ class TelemetryPublisher:
         self.close()
 
     # ------------------------------------------------------------------ caller side
-    def publish(self, key: str, payload: dict) -> bool:
-        """Stamp payload["seq"] with this key's counter and queue it. Never blocks.
+    def publish(self, key: str, payload: dict | bytes) -> bool:
+        """Take this key's next seq number and queue the sample. Never blocks.
 
-        Returns False if the sample was dropped (queue full, telemetry disabled). The
-        payload must not be modified afterwards (the sender thread encodes it later)."""
+        payload: a dict (JSON; payload["seq"] is stamped here) or the bytes of a binary
+        sample (telemetry.binary; the sender stamps seq into the frame). Returns False if
+        the sample was dropped (queue full, telemetry disabled). A dict must not be modified
+        afterwards (the sender thread encodes it later)."""
         if not self.enabled:
             return False
         if self._state != "open":
             raise TelemetryStateError(f"publish() on a publisher that is {self._state}; call open() first")
         n = self._seq.get(key, 0)
         self._seq[key] = n + 1
-        payload["seq"] = n
-        self._last_t = payload.get("t", self._last_t)
+        if type(payload) is dict:
+            payload["seq"] = n
         if len(self._q) >= self._queue_size:
             self._n["dropped_queue_full"] += 1
             return False
-        self._q.append((key, payload))
+        self._q.append((key, payload, n))
         self._n["published"] += 1
         return True
 
-    def publish_many(self, items: Iterable[tuple[str, dict]]) -> int:
+    def publish_many(self, items: Iterable[tuple[str, dict | bytes]]) -> int:
         """publish() each (key, payload); returns how many were queued."""
         return sum(self.publish(k, p) for k, p in items)
 
@@ -242,7 +258,7 @@ class TelemetryPublisher:
         return True
 
     def _take(self):
-        """Up to max_batch queued (key, payload) pairs, oldest first; None if there are none."""
+        """Up to max_batch queued (key, payload, seq), oldest first; None if there are none."""
         with self._lock:
             if self._abandoned or not self._q:
                 return None
@@ -251,37 +267,48 @@ class TelemetryPublisher:
             self._in_flight = len(items)
             return items
 
-    def _send(self, items: list[tuple[str, Mapping]]) -> None:
-        """Encode each sample and put each run of consecutive samples of one key as one
-        message: their JSON texts joined by newlines (JSON text has no raw newline). The
-        order of publish() calls is kept across keys too (the recorder merges keys into
-        shared topics such as /tf). A companion's stream is one key: one put per wake-up
-        instead of one per sample, and zenoh's, the subscriber's and the recorder's cost is
-        per message."""
+    def _send(self, items: list[tuple[str, Mapping | bytes, int]]) -> None:
+        """Encode each sample and put each run of consecutive samples of one key (and one
+        form) as one message: JSON texts joined by newlines, or binary samples framed with
+        their seq stamped (telemetry.wire). The order of publish() calls is kept across keys
+        too (the recorder merges keys into shared topics such as /tf). A companion's stream
+        is one key: one put per wake-up instead of one per sample, and zenoh's, the
+        subscriber's and the recorder's cost is per message."""
         counts = dict.fromkeys(("sent", "encode_errors", "send_errors", "nonfinite"), 0)
-        runs: list[tuple[str, list[bytes]]] = []
-        for key, payload in items:
-            try:
-                data, replaced = encode(payload)
-            except (TypeError, ValueError) as exc:
-                counts["encode_errors"] += 1
-                self._last_error = f"{key}: cannot encode payload: {exc}"
-                continue
-            counts["nonfinite"] += replaced
-            if runs and runs[-1][0] == key:
-                runs[-1][1].append(data)
+        runs: list[tuple[str, bool, list[bytes], list[int]]] = []  # key, binary, samples, seqs
+        for key, payload, seq in items:
+            binary = type(payload) is not dict
+            if binary:
+                if not isinstance(payload, (bytes, bytearray)) or len(payload) < HEADER.size:
+                    counts["encode_errors"] += 1
+                    self._last_error = f"{key}: a payload is neither a dict nor a binary sample: {type(payload).__name__}"
+                    continue
+                data = payload
             else:
-                runs.append((key, [data]))
-        for key, texts in runs:
+                try:
+                    data, replaced = encode(payload)
+                except (TypeError, ValueError) as exc:
+                    counts["encode_errors"] += 1
+                    self._last_error = f"{key}: cannot encode payload: {exc}"
+                    continue
+                counts["nonfinite"] += replaced
+            if runs and runs[-1][0] == key and runs[-1][1] == binary:
+                runs[-1][2].append(data)
+                runs[-1][3].append(seq)
+            else:
+                runs.append((key, binary, [data], [seq]))
+        if items:
+            self._last_t = _time_of(items[-1][1], self._last_t)
+        for key, binary, samples, seqs in runs:
             try:
                 pub = self._publishers.get(key)
                 if pub is None:
                     pub = self._publishers[key] = self._session.declare_publisher(key, congestion_control=self._cc)
-                body = b"\n".join(texts)
+                body = binary_message(samples, seqs) if binary else json_message(samples)
                 pub.put(body if self._key is None else seal(self._key, key, body))
-                counts["sent"] += len(texts)
+                counts["sent"] += len(samples)
             except Exception as exc:
-                counts["send_errors"] += len(texts)
+                counts["send_errors"] += len(samples)
                 self._last_error = f"{key}: put: {exc}"
         with self._lock:
             self._in_flight = 0
