@@ -21,8 +21,8 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from telemetry.auth import TAG, unseal
-from telemetry.schema import samples_of
+from telemetry import wire
+from telemetry.auth import unseal
 from telemetry.session import ZenohOptions, build_config
 
 from .contract import Translator
@@ -135,15 +135,17 @@ class Recorder:
             if self._master is not None:
                 body = unseal(self._master, self.keys, key, message)
                 if body is None:  # forged, or not of this run: counted, never written
-                    self._rejected += sum(1 for line in samples_of(message) if not line.startswith(TAG))
+                    self._rejected += wire.count(message)
                     continue
                 message = body
-            for data in samples_of(message):
-                if data.startswith(TAG):  # a sealed message, and this recorder has no key: not a sample
-                    continue  # one or more samples, one JSON text per line
+            batch = wire.split(message)  # JSON lines or binary frames (without a key: the tag line skipped)
+            if batch.error:  # a truncated or garbled binary message: the frames before the damage are kept
+                self.translator.malformed += 1
+                self.translator.last_error = f"{key}: {batch.error}"
+            for data in batch.samples:
                 samples += 1
                 try:
-                    outs = translate(key, data)
+                    outs = translate(key, data, batch.binary)
                 except Exception as exc:  # a payload the contract did not foresee: count it, never stop recording
                     self.translator.malformed += 1
                     self.translator.last_error = f"{key}: {type(exc).__name__}: {exc}"

@@ -11,6 +11,7 @@ import pytest
 
 from telemetry import binary, schema
 from telemetry.schema import PHASES, Channel, Keys
+from telemetry.validate import binary_errors
 
 KEYS = Keys()
 
@@ -128,3 +129,14 @@ def test_with_seq_sets_only_the_seq():
     assert binary.to_dict(Channel.CONTROLLER, stamped) == {**binary.to_dict(Channel.CONTROLLER, data), "seq": 2**40 + 3}
     with pytest.raises(ValueError):
         binary.header(data[:15])
+
+
+def test_the_validator_checks_binary_samples_through_their_json_view(step_result):
+    data = binary.controller_sample(0.7, "grasp", step_result.diagnostics, step_result.command, sysid=4)
+    assert binary_errors(Channel.CONTROLLER, data) == []
+    assert binary_errors(Channel.CONTROLLER, data[:-1])  # not a whole message
+    assert binary_errors(Channel.OBJECT, data)  # not of that channel's layout
+    wrong_phase = binary.controller_sample(0.7, "landing", step_result.diagnostics, step_result.command, sysid=4)
+    assert any("landing" in e for e in binary_errors(Channel.CONTROLLER, wrong_phase))
+    nan = binary.from_dict(Channel.CONTROLLER, {**binary.to_dict(Channel.CONTROLLER, data), "damping": math.nan})
+    assert any("non-finite" in e for e in binary_errors(Channel.CONTROLLER, nan))
