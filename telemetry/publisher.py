@@ -5,8 +5,9 @@
     tele.publish(key, payload)              # stamps seq, enqueues; never blocks
     tele.close()                            # sends what is queued (bounded wait), closes
 
-A payload is a dict (a JSON sample: the sender encodes it) or bytes (a binary sample of
-telemetry.binary, already serialized by its builder). The caller only takes the per-key
+A payload is a dict (a JSON sample: the sender encodes it), bytes (a binary sample of
+telemetry.binary) or a (finish, pre-sample) pair of telemetry.capture (the sender calls
+finish(pre-sample) for the sample's bytes). The caller only takes the per-key
 `seq` and appends to a bounded deque (~1 us; no lock, no wake-up of another thread). A
 sender thread opens the zenoh session (retrying if it cannot, e.g. client mode with no
 router), wakes every poll_period_s, encodes what is queued and puts it: one message per run
@@ -44,7 +45,7 @@ from .auth import seal
 from .binary import HEADER
 from .schema import encode, publisher_stats_sample
 from .session import ZenohOptions, build_config
-from .wire import binary_message, json_message
+from . import wire
 
 log = logging.getLogger(__name__)
 
@@ -82,8 +83,10 @@ def _time_of(payload, default: float) -> float:
     t = default
     if type(payload) is dict:
         t = payload.get("t", default)
-    elif isinstance(payload, (bytes, bytearray)) and len(payload) >= HEADER.size:
-        t = HEADER.unpack_from(payload)[0]
+    else:
+        data = payload[1] if type(payload) is tuple and len(payload) == 2 else payload  # a pre-sample starts so too
+        if isinstance(data, (bytes, bytearray)) and len(data) >= HEADER.size:
+            t = HEADER.unpack_from(data)[0]
     return t if isinstance(t, (int, float)) and math.isfinite(t) else default
 
 
@@ -91,9 +94,11 @@ class TelemetryPublisher:
     """One process's telemetry sender. See the module docstring."""
 
     def __init__(self, options: ZenohOptions | None = None, *, name: str | None = None, queue_size: int = 8192,
-                 congestion: str = "block", poll_period_s: float = 0.02, reopen_period_s: float = 1.0,
+                 congestion: str = "block", poll_period_s: float = 0.1, reopen_period_s: float = 1.0,
                  stats_period_s: float = 1.0, max_batch: int = 256):
-        """name: this process in <prefix>/telemetry/<name> ('am4', 'simulator'; default host-pid)."""
+        """name: this process in <prefix>/telemetry/<name> ('am4', 'simulator'; default host-pid).
+        poll_period_s: how often the sender wakes; zenoh's cost is per message (~100 us of CPU
+        per put here, whatever its size), so at 1 kHz 0.1 s costs ~1 us per sample, 0.02 s ~5 us."""
         if congestion not in ("block", "drop"):
             raise ValueError(f"congestion {congestion!r} must be 'block' or 'drop'")
         if queue_size < 1:
@@ -103,6 +108,7 @@ class TelemetryPublisher:
         self._key = self.options.auth_key  # telemetry.auth: seal every message
         self.name = name or re.sub(r"[^A-Za-z0-9_\-]", "-", f"{socket.gethostname()}-{os.getpid()}")
         self._stats_key = self.keys.publisher(self.name)  # validates the name
+        self._batch_key = self.keys.batch(self.name)
         self._stats_period_s = stats_period_s
         self._last_t = 0.0
         self._queue_size = queue_size
@@ -172,22 +178,25 @@ class TelemetryPublisher:
     def publish(self, key: str, payload: dict | bytes) -> bool:
         """Take this key's next seq number and queue the sample. Never blocks.
 
-        payload: a dict (JSON; payload["seq"] is stamped here) or the bytes of a binary
-        sample (telemetry.binary; the sender stamps seq into the frame). Returns False if
+        payload: a dict (JSON; payload["seq"] is stamped here), the bytes of a binary sample
+        (telemetry.binary) or a (finish, pre-sample) pair (telemetry.capture); the sender
+        stamps seq into a binary sample's frame. Returns False if
         the sample was dropped (queue full, telemetry disabled). A dict must not be modified
         afterwards (the sender thread encodes it later)."""
-        if not self.enabled:
-            return False
-        if self._state != "open":
+        if self._state != "open" or not self.options.enabled:
+            if not self.options.enabled:
+                return False
             raise TelemetryStateError(f"publish() on a publisher that is {self._state}; call open() first")
-        n = self._seq.get(key, 0)
-        self._seq[key] = n + 1
+        seq = self._seq  # key -> seq numbers issued so far (the next one)
+        n = seq.get(key, 0)
+        seq[key] = n + 1
         if type(payload) is dict:
             payload["seq"] = n
-        if len(self._q) >= self._queue_size:
+        q = self._q
+        if len(q) >= self._queue_size:
             self._n["dropped_queue_full"] += 1
             return False
-        self._q.append((key, payload, n))
+        q.append((key, payload, n))
         self._n["published"] += 1
         return True
 
@@ -268,43 +277,60 @@ class TelemetryPublisher:
             return items
 
     def _send(self, items: list[tuple[str, Mapping | bytes, int]]) -> None:
-        """Encode each sample and put each run of consecutive samples of one key (and one
-        form) as one message: JSON texts joined by newlines, or binary samples framed with
-        their seq stamped (telemetry.wire). The order of publish() calls is kept across keys
-        too (the recorder merges keys into shared topics such as /tf). A companion's stream
-        is one key: one put per wake-up instead of one per sample, and zenoh's, the
-        subscriber's and the recorder's cost is per message."""
+        """Encode the samples and put them, in publish order (the recorder merges keys into
+        shared topics such as /tf), as few messages as that order allows (telemetry.wire):
+        each run of JSON samples of one key as one message; each run of binary samples
+        between two JSON ones as one message of their key, or as one batch on this
+        publisher's batch key when they are of several keys (the simulator's interleaved
+        truth). A companion's stream is one key: one put per wake-up instead of one per
+        sample; zenoh's, the subscriber's and the recorder's cost is per message."""
         counts = dict.fromkeys(("sent", "encode_errors", "send_errors", "nonfinite"), 0)
-        runs: list[tuple[str, bool, list[bytes], list[int]]] = []  # key, binary, samples, seqs
+        messages: list[tuple[str, str, list, list[bytes], list[int]]] = []  # key, form, keys (batch), samples, seqs
+        binary_run: tuple[list[str], list[bytes], list[int]] = ([], [], [])
         for key, payload, seq in items:
-            binary = type(payload) is not dict
-            if binary:
-                if not isinstance(payload, (bytes, bytearray)) or len(payload) < HEADER.size:
-                    counts["encode_errors"] += 1
-                    self._last_error = f"{key}: a payload is neither a dict nor a binary sample: {type(payload).__name__}"
-                    continue
-                data = payload
-            else:
+            if type(payload) is not dict:
                 try:
-                    data, replaced = encode(payload)
-                except (TypeError, ValueError) as exc:
+                    data = payload[0](payload[1]) if type(payload) is tuple else payload  # telemetry.capture
+                    if not isinstance(data, (bytes, bytearray)) or len(data) < HEADER.size:
+                        raise TypeError(f"{type(data).__name__} is neither a dict nor a binary sample")
+                except Exception as exc:
                     counts["encode_errors"] += 1
-                    self._last_error = f"{key}: cannot encode payload: {exc}"
+                    self._last_error = f"{key}: cannot finish a binary sample: {exc}"
                     continue
-                counts["nonfinite"] += replaced
-            if runs and runs[-1][0] == key and runs[-1][1] == binary:
-                runs[-1][2].append(data)
-                runs[-1][3].append(seq)
+                binary_run[0].append(key)
+                binary_run[1].append(data)
+                binary_run[2].append(seq)
+                continue
+            try:
+                data, replaced = encode(payload)
+            except (TypeError, ValueError) as exc:
+                counts["encode_errors"] += 1
+                self._last_error = f"{key}: cannot encode payload: {exc}"
+                continue
+            counts["nonfinite"] += replaced
+            if binary_run[0]:
+                messages.append(self._binary_run(*binary_run))
+                binary_run = ([], [], [])
+            if messages and messages[-1][0] == key and messages[-1][1] == "json":
+                messages[-1][3].append(data)
+                messages[-1][4].append(seq)
             else:
-                runs.append((key, binary, [data], [seq]))
+                messages.append((key, "json", [], [data], [seq]))
+        if binary_run[0]:
+            messages.append(self._binary_run(*binary_run))
         if items:
             self._last_t = _time_of(items[-1][1], self._last_t)
-        for key, binary, samples, seqs in runs:
+        for key, form, keys, samples, seqs in messages:
             try:
                 pub = self._publishers.get(key)
                 if pub is None:
                     pub = self._publishers[key] = self._session.declare_publisher(key, congestion_control=self._cc)
-                body = binary_message(samples, seqs) if binary else json_message(samples)
+                if form == "batch":
+                    body = wire.batch_message(keys, samples, seqs)
+                elif form == "binary":
+                    body = wire.binary_message(samples, seqs)
+                else:
+                    body = wire.json_message(samples)
                 pub.put(body if self._key is None else seal(self._key, key, body))
                 counts["sent"] += len(samples)
             except Exception as exc:
@@ -315,6 +341,12 @@ class TelemetryPublisher:
             if not self._abandoned:  # else close() counted them already
                 for name, k in counts.items():
                     self._n[name] += k
+
+    def _binary_run(self, keys: list[str], samples: list[bytes], seqs: list[int]):
+        """One message of a run of binary samples: on their key, or a batch if of several keys."""
+        if keys.count(keys[0]) == len(keys):
+            return keys[0], "binary", keys, samples, seqs
+        return self._batch_key, "batch", keys, samples, seqs
 
     def _send_stats(self, final: bool) -> None:
         with self._lock:

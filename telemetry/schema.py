@@ -11,6 +11,8 @@ Keys (prefix configurable, default "amstack"):
     <p>/sim/object                 simulator: object pose, twist      OBJECT_SCHEMA
     <p>/sim/event                  simulator: run start/end, phases   EVENT_SCHEMA
     <p>/telemetry/<name>           every publisher, 1 Hz and at close PUBLISHER_SCHEMA
+    <p>/batch/<name>               binary samples of several keys of publisher <name> in one
+                                   message (telemetry.wire; the simulator's interleaved truth)
 
 Every payload is one compact JSON object whose first two members are, in this order,
 "t" (simulation time [s]) and "seq" (per-key counter, 0, 1, 2, ... assigned by the
@@ -88,6 +90,18 @@ class Keys:
         if not is_key_chunk(name):
             raise ValueError(f"publisher name {name!r} must be one plain key chunk")
         return f"{self.prefix}/telemetry/{name}"
+
+    def batch(self, name: str) -> str:
+        """Where publisher `name` puts binary samples of several of its keys as one message."""
+        if not is_key_chunk(name):
+            raise ValueError(f"publisher name {name!r} must be one plain key chunk")
+        return f"{self.prefix}/batch/{name}"
+
+    def batch_name(self, key: str) -> str | None:
+        """The publisher of a batch key, or None if `key` is not one."""
+        p = self.prefix + "/batch/"
+        name = key[len(p):] if key.startswith(p) else ""
+        return name if is_key_chunk(name) else None
 
     @property
     def everything(self) -> str:

@@ -81,3 +81,23 @@ def test_without_a_key_the_same_attack_lands(capture, tmp_path):
     ends = [p["t"] for _, p in log.decoded(c.SIM_EVENT_TOPIC) if p["kind"] == "run_end"]
     assert 0.5 in ends  # the forged run_end is in the log (the live recorder would stop on it)
     assert max(p["p_WO"][2] for _, p in log.decoded(c.OBJECT_STATE_TOPIC)) >= 1000.0
+
+
+def test_a_batch_keeps_only_the_samples_its_publisher_may_write(capture, tmp_path):
+    """A batch on <p>/batch/<name> is sealed with <name>'s key; every sample in it must be of a
+    key <name> may write: a companion cannot slip a run_end or an object into its batch."""
+    ctrl = [(k, p) for k, p in stamped(capture.samples) if k == KEYS.controller(4)][:5]
+    up = {"t": 0.6, "seq": 0, "p_WO": [0.0, 0.0, 1000.0], "q_WO": [1.0, 0.0, 0.0, 0.0],
+          "v_WO": [0.0, 0.0, 0.0], "w_WO": [0.0, 0.0, 0.0], "touching": []}
+    keys = [k for k, _ in ctrl] + [KEYS.object]
+    samples = [p for _, p in ctrl] + [binary.from_dict(Channel.OBJECT, up)]
+    seqs = [binary.header(p)[1] for p in samples]
+    am4 = publisher_key(MASTER, "am4")
+    messages = [(KEYS.batch("am4"), seal(am4, KEYS.batch("am4"), wire.batch_message(keys, samples, seqs))),
+                (KEYS.batch("simulator"), seal(am4, KEYS.batch("simulator"), wire.batch_message(keys, samples, seqs))),
+                (KEYS.controller(4), seal(am4, KEYS.controller(4), wire.batch_message(keys, samples, seqs)))]
+    got, _, summary, log = _record(tmp_path / "batch.mcap", messages, MASTER)
+    assert [p["seq"] for _, p in log.decoded(c.controller_topic(4))] == [0, 1, 2, 3, 4]  # am4's own
+    assert c.OBJECT_STATE_TOPIC not in got
+    assert summary.rejected == 1 + 6  # the object in am4's batch; the batch sealed by the wrong publisher
+    assert summary.malformed == 6  # a batch on a key that is not a batch key

@@ -66,3 +66,31 @@ def test_junk_after_the_magic_never_raises():
         assert batch.binary and all(isinstance(s, bytes) for s in batch.samples)
         assert sum(4 + len(s) for s in batch.samples) <= len(junk) - len(wire.MAGIC)
     assert not wire.is_binary(b"{") and not wire.is_binary(b"") and wire.is_binary(wire.MAGIC)
+
+
+@given(st.lists(st.tuples(st.sampled_from(["a/x", "a/y", "a/ü", "b"]), st.integers(0, 300)), max_size=30), st.data())
+def test_batches_of_several_keys_split_back_into_keyed_samples_and_cuts_keep_a_prefix(items, data):
+    keys = [k for k, _ in items]
+    ss = [_sample(0.5, n) for _, n in items]
+    msg = wire.batch_message(keys, ss, list(range(len(ss))))
+    batch = wire.split(msg)
+    assert batch.binary and batch.error == "" and batch.keys == keys
+    assert [header(s)[1] for s in batch.samples] == list(range(len(ss)))
+    assert [s[16:] for s in batch.samples] == [s[16:] for s in ss]
+    assert wire.split(seal(bytes(32), KEYS.batch("simulator"), msg)) == batch
+    table_end = len(wire.BATCH_MAGIC) + 2 + sum(2 + len(k.encode()) for k in dict.fromkeys(keys))
+    ends = [table_end]
+    for s in ss:
+        ends.append(ends[-1] + 6 + len(s))
+    cut = data.draw(st.integers(len(wire.BATCH_MAGIC), len(msg)))
+    part = wire.split(msg[:cut])
+    complete = sum(1 for e in ends[1:] if e <= cut)
+    assert part.keys == keys[:complete] and part.samples == batch.samples[:complete]
+    assert (part.error == "") == (cut in ends)  # a cut inside the table or a frame is reported
+
+
+def test_junk_batches_never_raise():
+    rng = random.Random(5)
+    for _ in range(3000):
+        batch = wire.split(wire.BATCH_MAGIC + rng.randbytes(rng.randrange(0, 80)))
+        assert batch.binary and len(batch.keys) == len(batch.samples)
