@@ -1,4 +1,4 @@
-"""The hot telemetry channels as ROS 1 messages: layouts, fast builders, the JSON view (pure).
+"""The hot telemetry channels as ROS 1 messages: their layouts and their JSON view (pure).
 
 Which channels: a companion's controller state (every control step) and the simulator's
 per-step ground truth (AmTruth, PadContact, ObjectTruth). Each is a flat ROS 1 message
@@ -19,19 +19,18 @@ Every message starts with `float64 t` and `uint64 seq` (bytes 0-7 and 8-15): the
 recorder reads without decoding the rest (`header`), and where the publisher stamps seq.
 NaN and infinity travel as IEEE 754 values (JSON has to send null instead).
 
-The builders pack with one precompiled struct.Struct per layout (per number of task
-variables, joints and phase name): ~3 us for a controller sample, where building the JSON
-dict took ~5 us and json.dumps ~27 us. The literal path, `from_dict` (Ros1Message.encode of
-the JSON builder's dict, one field at a time), is what the tests check them against.
+The builders (telemetry.capture) copy a sample's arrays on the caller's thread and leave
+the quaternions to the publisher's sender thread; the literal path, `from_dict` (Ros1Message.encode
+of the JSON builder's dict, one field at a time), is what the tests check them against.
 """
 from __future__ import annotations
 
 import struct
-from typing import Any, Iterator, Mapping
+from typing import Any, Mapping
 
 from . import schema
-from .ros1 import Ros1Message, string_array
-from .schema import Channel, Keys, quat_wxyz
+from .ros1 import Ros1Message
+from .schema import Channel
 
 CONTROLLER_MSG = """\
 # amstack.ControllerState: one control step of one AM (amcore.control.step); docs/telemetry.md
@@ -158,100 +157,3 @@ def from_dict(channel: Channel, payload: Mapping[str, Any]) -> bytes:
                    "rotor_saturated_steps": payload.get("rotor_saturated_steps", 0),
                    "joint_saturated_steps": payload.get("joint_saturated_steps", 0)}
     return MESSAGES[channel].encode(payload)
-
-
-# ----------------------------------------------------------------------------- builders
-_controller_structs: dict[tuple[int, int, str], tuple[struct.Struct, bytes]] = {}
-
-
-def _controller_struct(n_y: int, n_q: int, phase: str) -> tuple[struct.Struct, bytes]:
-    ph = phase.encode("utf-8")
-    lengths = {"phase": len(ph), "y": n_y, "y_d": n_y, "y_err": n_y, "F_y": n_y, "tau_q_nm": n_q}
-    return CONTROLLER.struct(lengths), ph
-
-
-def controller_sample(t_s: float, phase: str, diag, cmd, seq: int = 0, sysid: int = 0) -> bytes:
-    """Binary <p>/am/<sysid>/controller sample from amcore.control's Diagnostics and Command
-    (their public fields, as schema.controller_sample reads them). `seq` is stamped by the
-    publisher. Arrays of unexpected lengths or types take the literal path."""
-    n_y, n_q = len(diag.y), len(cmd.tau_q_nm)
-    layout = _controller_structs.get((n_y, n_q, phase))
-    if layout is None:
-        layout = _controller_structs.setdefault((n_y, n_q, phase), _controller_struct(n_y, n_q, phase))
-    st, ph = layout
-    try:
-        return st.pack(
-            t_s, seq, sysid, len(ph), ph,
-            *diag.r_c.tolist(), *diag.r_c_d.tolist(), *diag.r_c_err.tolist(), *diag.e_R.tolist(), *diag.e_w.tolist(),
-            *quat_wxyz(diag.R_WB), *quat_wxyz(diag.R_d),
-            n_y, *diag.y.tolist(), n_y, *diag.y_d.tolist(), n_y, *diag.y_err.tolist(), n_y, *diag.F_y.tolist(),
-            *diag.F_rc.tolist(), *diag.wrench_W_filtered.tolist(), *diag.wrench_E_filtered.tolist(),
-            cmd.thrust_n, *cmd.tau_B_nm.tolist(), n_q, *cmd.tau_q_nm.tolist(),
-            diag.sigma_min_J3, diag.damping, diag.com_err_saturated, diag.y_err_saturated)
-    except (struct.error, AttributeError, TypeError):  # e.g. y_d not as long as y, a list for an array
-        return from_dict(Channel.CONTROLLER, schema.controller_sample(t_s, phase, diag, cmd, seq=seq, sysid=sysid))
-
-
-_truth_structs: dict[int, struct.Struct] = {}
-_CONTACT_HEAD = CONTACT.struct(stop="pad_other_contacts")
-_OBJECT_HEAD = OBJECT.struct(stop="touching")
-_strings_cache: dict[tuple, bytes] = {}
-
-
-def _strings(items) -> bytes:
-    """string[] of names (contacts: a handful of distinct tuples per run, hence the cache)."""
-    try:
-        out = _strings_cache.get(items)
-    except TypeError:  # a list: not hashable
-        return string_array(items)
-    if out is None:
-        if len(_strings_cache) > 1024:
-            _strings_cache.clear()
-        out = _strings_cache[items] = string_array(items)
-    return out
-
-
-def am_truth_sample(t_s: float, sysid: int, am, seq: int = 0) -> bytes:
-    """Binary <p>/sim/am/<sysid>/truth sample from a simulator AmTruth (duck-typed as for
-    schema.am_truth_sample)."""
-    joints = getattr(am, "p_W_joints", ())
-    n = len(joints)
-    st = _truth_structs.get(n)
-    if st is None:
-        st = _truth_structs.setdefault(n, AM_TRUTH.struct({"p_W_joints": 3 * n}))
-    try:
-        return st.pack(t_s, seq, sysid, *am.p_WB.tolist(), *quat_wxyz(am.R_WB), *am.p_WE.tolist(), *quat_wxyz(am.R_WE),
-                       3 * n, *[v for p in joints for v in p.tolist()],
-                       getattr(am, "rotor_saturated_steps", 0), getattr(am, "joint_saturated_steps", 0))
-    except (struct.error, AttributeError, TypeError):  # sequences that are not numpy arrays, odd lengths
-        return from_dict(Channel.AM_TRUTH, schema.am_truth_sample(t_s, sysid, am, seq=seq))
-
-
-def contact_sample(t_s: float, sysid: int, am, seq: int = 0) -> bytes:
-    """Binary <p>/sim/am/<sysid>/contact sample from a simulator AmTruth (duck-typed)."""
-    c = am.pad_object_contact
-    try:
-        return (_CONTACT_HEAD.pack(t_s, seq, sysid, c.normal_force_n, *c.normal_W.tolist(),
-                                   *c.tangential_force_W.tolist(), *c.point_W.tolist(), c.n_points)
-                + _strings(am.pad_other_contacts) + _strings(am.base_contacts))
-    except (struct.error, AttributeError, TypeError):
-        return from_dict(Channel.CONTACT, schema.contact_sample(t_s, sysid, am, seq=seq))
-
-
-def object_sample(t_s: float, obj, seq: int = 0) -> bytes:
-    """Binary <p>/sim/object sample from a simulator ObjectTruth (duck-typed)."""
-    try:
-        return (_OBJECT_HEAD.pack(t_s, seq, *obj.p_WO.tolist(), *obj.quat_WO_wxyz.tolist(), *obj.v_WO.tolist(),
-                                  *obj.w_WO.tolist())
-                + _strings(obj.touching))
-    except (struct.error, AttributeError, TypeError):
-        return from_dict(Channel.OBJECT, schema.object_sample(t_s, obj, seq=seq))
-
-
-def ground_truth_samples(gt, keys: Keys) -> Iterator[tuple[str, bytes]]:
-    """(key, binary sample) for one simulator GroundTruth, in schema.ground_truth_samples' order."""
-    t = gt.time_s
-    for sysid, am in gt.ams.items():
-        yield keys.am_truth(sysid), am_truth_sample(t, sysid, am)
-        yield keys.contact(sysid), contact_sample(t, sysid, am)
-    yield keys.object, object_sample(t, gt.object)

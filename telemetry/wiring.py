@@ -16,12 +16,14 @@ Companion main (after each `amcore.control.step`):
 `tele` is a telemetry.publisher.TelemetryPublisher (or anything with publish(key, payload)).
 
 The hot samples (controller state, ground truth) go out binary by default (telemetry.binary:
-packed ROS 1 messages, ~10x cheaper to build and encode than JSON); encoding="json" sends
-them as JSON texts (telemetry.schema), as earlier versions did. Events are always JSON.
+ROS 1 messages, copied on the caller's thread and finished on the publisher's sender thread
+by telemetry.capture; ~4x less CPU than JSON in all, benchmarks/bench_telemetry.py);
+encoding="json" sends them as JSON texts (telemetry.schema), as earlier versions did.
+Events are always JSON.
 """
 from __future__ import annotations
 
-from . import binary, schema
+from . import capture, schema
 
 ENCODINGS = ("binary", "json")
 
@@ -45,7 +47,7 @@ class SimulatorTelemetry:
         if truth_every < 1:
             raise ValueError("truth_every must be >= 1")
         _check_encoding(encoding)
-        self._samples = binary.ground_truth_samples if encoding == "binary" else schema.ground_truth_samples
+        self._samples = capture.ground_truth if encoding == "binary" else schema.ground_truth_samples
         self.pub = publisher
         self.spec = spec
         self.keys = keys or getattr(publisher, "keys", None) or schema.Keys()
@@ -88,7 +90,7 @@ class CompanionTelemetry:
         if every < 1:
             raise ValueError("every must be >= 1")
         _check_encoding(encoding)
-        self._sample = binary.controller_sample if encoding == "binary" else schema.controller_sample
+        self._sample = capture.controller if encoding == "binary" else schema.controller_sample
         self.pub = publisher
         self.sysid = int(sysid)
         self.every = every

@@ -6,7 +6,7 @@ import dataclasses
 import pytest
 
 from simulator.world import World
-from telemetry import binary, schema
+from telemetry import binary, capture, schema
 from telemetry.schema import Channel, Keys
 from telemetry.validate import binary_errors, errors
 from telemetry.wiring import CompanionTelemetry, SimulatorTelemetry, phase_at
@@ -18,10 +18,12 @@ class Collect:
 
     def __init__(self):
         self.keys = Keys("lab")
-        self.raw = []
+        self.given = []  # as published: dicts, bytes, (finish, pre-sample) pairs
+        self.raw = []  # binary ones finished (what the sender puts on the wire)
 
     def publish(self, key, payload):
-        self.raw.append((key, payload))
+        self.given.append((key, payload))
+        self.raw.append((key, capture.finished(payload) if type(payload) is tuple else payload))
         return True
 
     @property
