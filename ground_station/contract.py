@@ -29,7 +29,8 @@ import re
 import struct
 from dataclasses import dataclass
 
-from telemetry.binary import BY_NAME as ROS1_SCHEMAS, JSON_TITLE, MESSAGES as BINARY_MESSAGES, from_dict, to_dict
+from telemetry.binary import (BY_NAME as ROS1_SCHEMAS, HEADER, JSON_TITLE, MESSAGES as BINARY_MESSAGES, OBJECT_POSE,
+                              TRUTH_POSES, from_dict, to_dict)
 from telemetry.schema import SCHEMAS as PAYLOAD_SCHEMAS, Channel, Keys, encode, finite_or_null, peek_header
 
 from . import foxglove as fg
@@ -215,6 +216,10 @@ def _pose_spliced(t: float, data: bytes) -> bytes | None:
     return _POSE % (sec, nsec, *p, q[1], q[2], q[3], q[0])
 
 
+def _poses(p: dict) -> tuple:
+    return p["p_WB"], p["q_WB"], p["p_WE"], p["q_WE"]
+
+
 def _finite_numbers(*vectors) -> bool:
     return all(math.isfinite(x) for v in vectors for x in v)
 
@@ -226,8 +231,7 @@ _TF_R = _TF.replace(b'"child_frame_id":"%s"', b'"child_frame_id":"%b"').replace(
 _POSE_R = _POSE.replace(b"%s", b"%r")
 
 
-def _tf_of(t: float, sysid: int, p: dict) -> bytes:
-    pb, qb, pe, qe = p["p_WB"], p["q_WB"], p["p_WE"], p["q_WE"]
+def _tf_of(t: float, sysid: int, pb, qb, pe, qe) -> bytes:
     if not _finite_numbers(pb, qb, pe, qe) or (len(pb), len(qb), len(pe), len(qe)) != (3, 4, 3, 4):
         return _dumps(finite_or_null({"transforms": [fg.frame_transform(t, "world", base_frame(sysid), pb, qb),
                                               fg.frame_transform(t, "world", ee_frame(sysid), pe, qe)]}))
@@ -237,8 +241,7 @@ def _tf_of(t: float, sysid: int, p: dict) -> bytes:
     return b'{"transforms":[' + base + b"," + ee + b"]}"
 
 
-def _pose_of(t: float, p: dict) -> bytes:
-    pos, q = p["p_WO"], p["q_WO"]
+def _pose_of(t: float, pos, q) -> bytes:
     if not _finite_numbers(pos, q) or (len(pos), len(q)) != (3, 4):
         return _dumps(finite_or_null(fg.pose_in_frame(t, "world", pos, q)))
     sec, nsec = _sec_nsec(t)
@@ -336,12 +339,12 @@ class Translator:
                 self._scene.truth[sysid] = raw
                 tf = _tf_spliced(t, sysid, raw)  # None: not our encoder's layout, the slow, general way
                 return [Out(TF_TOPIC, "foxglove.FrameTransforms", ns,
-                            tf if tf is not None else _tf_of(t, sysid, parsed or json.loads(raw)))]
+                            tf if tf is not None else _tf_of(t, sysid, *_poses(parsed or json.loads(raw))))]
             if ch is Channel.OBJECT:
                 pose = _pose_spliced(t, raw)
                 if pose is None:
                     parsed = parsed or json.loads(raw)
-                    pose = _pose_of(t, parsed)
+                    pose = _pose_of(t, parsed["p_WO"], parsed["q_WO"])
                 return self._object(t, ns, pose, self._as_received(OBJECT_STATE_TOPIC, ch, ns, raw, parsed),
                                     lambda: parsed or json.loads(raw))
             return self._event(key, m, t, ns, raw, parsed if parsed is not None else json.loads(raw))
@@ -355,37 +358,41 @@ class Translator:
                 self.unknown += 1  # no contract to tell its layout: counted, not written
                 return []
             return self._bad(key, "a binary sample on a key whose channel is JSON only")
-        try:
-            p = to_dict(m.channel, data)
+        try:  # one whole message of the channel's layout (its counts and lengths; the values are not read)
+            size = msg.size_of(data)
+            if size != len(data):
+                raise ValueError(f"{len(data) - size} bytes after the end of the message")
         except ValueError as exc:
             return self._bad(key, f"binary sample: {exc}")
-        t = p["t"]
-        if not self._seen(key, t, p["seq"]):
+        t, seq = HEADER.unpack_from(data)
+        if not self._seen(key, t, seq):
             return []
         ch, sysid, ns, raw = m.channel, m.sysid, _ns(t), bytes(data)
         try:
             if ch is Channel.CONTROLLER:
-                return [self._as_received(controller_topic(sysid), ch, ns, raw, p, True)]
+                return [self._as_received(controller_topic(sysid), ch, ns, raw, None, True)]
             if ch is Channel.CONTACT:
-                self._scene.contact[sysid] = p
-                return [self._as_received(contact_topic(sysid), ch, ns, raw, p, True)]
+                self._scene.contact[sysid] = (ch, raw)  # decoded if drawn
+                return [self._as_received(contact_topic(sysid), ch, ns, raw, None, True)]
             if ch is Channel.AM_TRUTH:
-                self._scene.truth[sysid] = p
-                return [Out(TF_TOPIC, "foxglove.FrameTransforms", ns, _tf_of(t, sysid, p))]
-            return self._object(t, ns, _pose_of(t, p), self._as_received(OBJECT_STATE_TOPIC, ch, ns, raw, p, True),
-                                lambda: p)
+                self._scene.truth[sysid] = (ch, raw)
+                v = TRUTH_POSES.unpack_from(raw)
+                return [Out(TF_TOPIC, "foxglove.FrameTransforms", ns, _tf_of(t, sysid, v[3:6], v[6:10], v[10:13], v[13:17]))]
+            v = OBJECT_POSE.unpack_from(raw)
+            return self._object(t, ns, _pose_of(t, v[2:5], v[5:9]),
+                                self._as_received(OBJECT_STATE_TOPIC, ch, ns, raw, None, True), lambda: to_dict(ch, raw))
         except (ValueError, KeyError, TypeError, IndexError, OverflowError, struct.error) as exc:
             return self._bad(key, f"{type(exc).__name__}: {exc}")
 
     def _as_received(self, topic: str, ch: Channel, ns: int, raw: bytes, fields: dict | None,
                      binary: bool = False) -> Out:
         """The message of a channel fed as received, in the form of the topic's first sample.
-        fields: the sample decoded (required for a binary sample; None: a JSON one not parsed yet)."""
+        fields: the sample decoded, if it was (None: not yet)."""
         first = self._binary_topic.setdefault(topic, binary)
         if first == binary:
             pass
         elif binary:  # a binary sample on a JSON topic
-            raw = encode(fields)[0]
+            raw = encode(fields if fields is not None else to_dict(ch, raw))[0]
         else:  # a JSON sample on a binary topic
             raw = from_dict(ch, fields if fields is not None else json.loads(raw))
         if first:

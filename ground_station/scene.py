@@ -1,9 +1,9 @@
 """The /scene topic: a foxglove.SceneUpdate of the object and every AM, drawn from the latest
 ground truth the recorder saw (pure).
 
-The recorder keeps each AM's latest truth and contact sample as it arrived (JSON bytes, or the
-dict of a decoded binary sample) and draws only at the scene rate, so a JSON sample is parsed
-only when it is drawn.
+The recorder keeps each AM's latest truth and contact sample as it arrived (JSON bytes, or a
+binary sample with its channel) and draws only at the scene rate, so a sample is decoded only
+when it is drawn.
 """
 from __future__ import annotations
 
@@ -11,16 +11,21 @@ import json
 import math
 from dataclasses import dataclass, field
 
+from telemetry.binary import to_dict
+
 from . import foxglove as fg
 
 
-def _fields(sample: bytes | dict) -> dict:
-    return json.loads(sample) if isinstance(sample, (bytes, bytearray)) else sample
+def _fields(sample: bytes | dict | tuple) -> dict:
+    """A kept sample's fields: JSON bytes parsed, a (channel, binary sample) decoded."""
+    if isinstance(sample, (bytes, bytearray)):
+        return json.loads(sample)
+    return to_dict(*sample) if isinstance(sample, tuple) else sample
 
 
 @dataclass
 class SceneState:
-    truth: dict = field(default_factory=dict)  # sysid -> latest truth sample (JSON bytes or decoded dict)
+    truth: dict = field(default_factory=dict)  # sysid -> latest truth sample (JSON bytes, (channel, binary bytes), a dict)
     contact: dict = field(default_factory=dict)  # sysid -> latest contact sample (likewise)
     object_geometry: dict | None = None  # run_start data["object"]
 

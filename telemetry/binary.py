@@ -111,6 +111,8 @@ BY_NAME: Mapping[str, Ros1Message] = {m.name: m for m in MESSAGES.values()}
 JSON_TITLE: Mapping[str, str] = {m.name: schema.SCHEMAS[ch]["title"] for ch, m in MESSAGES.items()}
 
 HEADER = struct.Struct("<dQ")  # t, seq: the first two fields of every binary sample
+TRUTH_POSES = AM_TRUTH.struct(stop="p_W_joints")  # t, seq, sysid, p_WB, q_WB, p_WE, q_WE: what /tf needs
+OBJECT_POSE = OBJECT.struct(stop="v_WO")  # t, seq, p_WO, q_WO
 SEQ_OFFSET = 8
 _SEQ = struct.Struct("<Q")
 

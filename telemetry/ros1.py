@@ -140,6 +140,33 @@ class Ros1Message:
             raise ValueError(f"{self.name}: {len(data) - off} bytes after the end of the message")
         return out
 
+    def size_of(self, data: bytes) -> int:
+        """The length of the message that `data` starts with, read from its counts without
+        decoding the numbers (a recorder's check that a sample is one whole message that will
+        decode: size_of(data) == len(data)). ValueError if `data` ends inside it, or a string
+        is not UTF-8."""
+        off = 0
+        try:
+            for step in self._steps:
+                if type(step) is _Fixed:
+                    off += step.st.size
+                elif step.type == "string":
+                    k = 1
+                    if step.count is not None:
+                        k = step.count
+                        if k == VARIABLE:
+                            (k,), off = _COUNT.unpack_from(data, off), off + 4
+                    for _ in range(k):
+                        off = _string(data, off)[1]
+                else:
+                    (k,) = _COUNT.unpack_from(data, off)
+                    off += 4 + k * struct.calcsize(step.code)
+        except struct.error:
+            off = len(data) + 1
+        if off > len(data):
+            raise ValueError(f"{self.name}: {len(data)} bytes end inside the message")
+        return off
+
     # ------------------------------------------------------------------ encoding
     def encode(self, values: Mapping[str, Any]) -> bytes:
         """Serialize `values` (every field by name), one field at a time: the literal path,

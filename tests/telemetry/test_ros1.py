@@ -139,3 +139,26 @@ def test_garbled_counts_and_strings_are_refused_not_allocated():
         msg.decode(b"\x00\x00\x00\x00" + b"\xff\xff\x00\x00ab")
     with pytest.raises(ValueError, match="UTF-8"):
         msg.decode(b"\x00\x00\x00\x00" + b"\x02\x00\x00\x00\xff\xfe")
+
+
+@settings(max_examples=200, deadline=None)
+@given(messages(), st.binary(max_size=8))
+def test_size_of_reads_the_length_from_the_counts(case, tail):
+    msg, values = case
+    data = msg.encode(values)
+    assert msg.size_of(data) == len(data) and msg.size_of(data + tail) == len(data)
+    for cut in range(len(data)):
+        try:
+            n = msg.size_of(data[:cut])
+        except ValueError:
+            continue
+        assert n <= cut  # never a length past the bytes it was given
+        with pytest.raises(ValueError):
+            msg.decode(data[:cut])
+
+
+def test_size_of_refuses_strings_that_would_not_decode():
+    msg = Ros1Message.parse("pkg/T", "float64 t\nstring s")
+    assert msg.size_of(msg.encode({"t": 0.0, "s": "grasp"})) == 17
+    with pytest.raises(ValueError, match="UTF-8"):
+        msg.size_of(b"\0" * 8 + b"\x02\x00\x00\x00\xff\xfe")
