@@ -104,9 +104,10 @@ class _KeyedRecorder:
         self.endpoint = free_endpoint()
         keyfile = tmp / f"{name}.key"
         keyfile.write_text(MASTER.hex())
-        self.proc = subprocess.Popen([sys.executable, "-m", "ground_station", "record", "--out", str(tmp / f"{name}.mcap"),
-                                      "--zenoh-listen", self.endpoint, "--telemetry-key-file", str(keyfile),
-                                      "--summary-json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.proc = subprocess.Popen([sys.executable, "-m", "ground_station", "record",
+                                      "--out", str(tmp / f"{name}.mcap"), "--zenoh-listen", self.endpoint,
+                                      "--telemetry-key-file", str(keyfile), "--summary-json"],
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         self.proc.stderr.readline()
 
     def stop(self) -> dict:
@@ -139,7 +140,8 @@ class _Loop:
         if kind == "companion":
             model = templates["model"]
             m = am_mission(spec, spec.ams[0], model)
-            params, data, x0 = ControllerParams.from_vehicle(spec.vehicle, m.frame), create_data(model), m.initial_state()
+            params, data = ControllerParams.from_vehicle(spec.vehicle, m.frame), create_data(model)
+            x0 = m.initial_state()
             self.work = lambda t: (m.phase(t), step(model, data, params, x0, m.reference(t), np.zeros(6),
                                                     ControllerMemory(), t))
         else:
@@ -235,7 +237,8 @@ def cpu_per_step(templates: dict, n: int, rounds: int) -> None:
             total[f] = float(np.median([sum(r) for r in rows]))
             print(f"    {f:13s} caller {caller:6.1f} + background {bg:6.1f} = {total[f]:6.1f} us/step   "
                   f"(rounds: {', '.join(f'{sum(r):.1f}' for r in rows)})")
-        print(f"    binary/JSON: {total['binary'] / total['json']:.2f} ({total['json'] / total['binary']:.1f}x less CPU); "
+        print(f"    binary/JSON: {total['binary'] / total['json']:.2f} "
+              f"({total['json'] / total['binary']:.1f}x less CPU); "
               f"binary/JSON (before): {total['binary'] / total['json (before)']:.2f} "
               f"({total['json (before)'] / total['binary']:.1f}x less)")
         if kind == "companion":
@@ -444,7 +447,8 @@ def recorder_capacity(templates: dict, n_ams: int, seconds: float, encoding: str
     per_step = []
     for s in range(n_ams):
         for name, ch, key in (("controller", Channel.CONTROLLER, KEYS.controller(s)),
-                              ("truth", Channel.AM_TRUTH, KEYS.am_truth(s)), ("contact", Channel.CONTACT, KEYS.contact(s))):
+                              ("truth", Channel.AM_TRUTH, KEYS.am_truth(s)),
+                              ("contact", Channel.CONTACT, KEYS.contact(s))):
             per_step.append((key, [enc(ch, p, sysid=s) for p in templates[name][4 + s % 2][:200]]))
     print(f"\n3. recorder capacity: controller + truth + contact of {n_ams} AMs, pre-encoded {encoding}, "
           f"one sample per message, for {seconds:.0f} s")

@@ -377,10 +377,11 @@ class Translator:
             if ch is Channel.AM_TRUTH:
                 self._scene.truth[sysid] = (ch, raw)
                 v = TRUTH_POSES.unpack_from(raw)
-                return [Out(TF_TOPIC, "foxglove.FrameTransforms", ns, _tf_of(t, sysid, v[3:6], v[6:10], v[10:13], v[13:17]))]
+                tf = _tf_of(t, sysid, v[3:6], v[6:10], v[10:13], v[13:17])  # p_WB, q_WB, p_WE, q_WE
+                return [Out(TF_TOPIC, "foxglove.FrameTransforms", ns, tf)]
             v = OBJECT_POSE.unpack_from(raw)
-            return self._object(t, ns, _pose_of(t, v[2:5], v[5:9]),
-                                self._as_received(OBJECT_STATE_TOPIC, ch, ns, raw, None, True), lambda: to_dict(ch, raw))
+            state = self._as_received(OBJECT_STATE_TOPIC, ch, ns, raw, None, True)
+            return self._object(t, ns, _pose_of(t, v[2:5], v[5:9]), state, lambda: to_dict(ch, raw))
         except (ValueError, KeyError, TypeError, IndexError, OverflowError, struct.error) as exc:
             return self._bad(key, f"{type(exc).__name__}: {exc}")
 
@@ -405,7 +406,8 @@ class Translator:
             # the next slot of the fixed grid k * period (t + period would drift: a sample
             # a hair before its slot waits for the next one)
             self._next_scene_t = (math.floor(t / self.scene_period_s + _SCENE_SLACK) + 1) * self.scene_period_s
-            out.append(Out(SCENE_TOPIC, "foxglove.SceneUpdate", ns, _dumps(finite_or_null(self._scene.update(t, fields())))))
+            scene = finite_or_null(self._scene.update(t, fields()))
+            out.append(Out(SCENE_TOPIC, "foxglove.SceneUpdate", ns, _dumps(scene)))
         return out
 
     def _event(self, key: str, m, t: float, ns: int, raw: bytes, p: dict) -> list[Out]:

@@ -25,7 +25,7 @@ def _fields(sample: bytes | dict | tuple) -> dict:
 
 @dataclass
 class SceneState:
-    truth: dict = field(default_factory=dict)  # sysid -> latest truth sample (JSON bytes, (channel, binary bytes), a dict)
+    truth: dict = field(default_factory=dict)  # sysid -> latest truth sample: JSON bytes, (channel, binary), a dict
     contact: dict = field(default_factory=dict)  # sysid -> latest contact sample (likewise)
     object_geometry: dict | None = None  # run_start data["object"]
 

@@ -117,7 +117,8 @@ def am_truth(t_s: float, sysid: int, am) -> Pending:
         size = _truth_sizes.setdefault(n, AM_TRUTH.struct({"p_W_joints": 3 * n}).size + 2 * (_R_BYTES - _QUAT_BYTES))
     try:
         pre = b"".join((_TRUTH_HEAD.pack(t_s, 0, sysid), am.p_WB, am.p_WE, am.R_WB, am.R_WE, _U32.pack(3 * n), *joints,
-                        _COUNTERS.pack(getattr(am, "rotor_saturated_steps", 0), getattr(am, "joint_saturated_steps", 0))))
+                        _COUNTERS.pack(getattr(am, "rotor_saturated_steps", 0),
+                                       getattr(am, "joint_saturated_steps", 0))))
         if len(pre) == size and _LITTLE:
             return _finish_truth, pre
     except (TypeError, ValueError, BufferError, struct.error):

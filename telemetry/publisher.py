@@ -64,7 +64,7 @@ class PublisherStats:
     dropped_queue_full: int  # publish() found the queue full
     dropped_no_session: int  # queued, but the session never opened before close()
     dropped_at_close: int  # still queued (or in a put) when close() gave up waiting
-    encode_errors: int  # payload not JSON-serialisable, or neither a dict nor binary (programming error; see last_error)
+    encode_errors: int  # payload not JSON-serialisable, nor binary (programming error; see last_error)
     send_errors: int  # zenoh put raised
     nonfinite: int  # JSON payloads whose NaN/inf were sent as null (binary samples carry them as they are)
     session_open_failures: int

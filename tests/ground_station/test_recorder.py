@@ -39,7 +39,8 @@ def _batched(samples, per_message: int = 7):
     for k, p in stamped(samples) + [(None, None)]:
         if run and (k != run[0][0] or len(run) == per_message or isinstance(p, bytes) != isinstance(run[0][1], bytes)):
             data = [wire_form(q)[0] for _, q in run]
-            out.append((run[0][0], wire.binary_message(data) if isinstance(run[0][1], bytes) else wire.json_message(data)))
+            is_binary = isinstance(run[0][1], bytes)
+            out.append((run[0][0], wire.binary_message(data) if is_binary else wire.json_message(data)))
             run = []
         if k is not None:
             run.append((k, p))

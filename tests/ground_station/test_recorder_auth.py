@@ -21,7 +21,8 @@ STATS = "/recorder/stats"
 
 def _authentic(capture):
     """The capture's samples as the run's publishers send them: each sealed with its own key."""
-    return [(k, seal(publisher_key(MASTER, publisher_of(KEYS, k)), k, message_of(p))) for k, p in stamped(capture.samples)]
+    return [(k, seal(publisher_key(MASTER, publisher_of(KEYS, k)), k, message_of(p)))
+            for k, p in stamped(capture.samples)]
 
 
 def _forged():

@@ -105,7 +105,8 @@ def test_unexpected_shapes_and_types_take_the_literal_path(change):
     assert type(pending) is bytes  # the literal path, all on the caller
     assert binary.to_dict(Channel.CONTROLLER, pending) == schema.controller_sample(0.5, "grasp", diag, cmd, sysid=4)
     am = NS(p_WB=(1.0, 2.0, 3.0), R_WB=np.eye(3), p_WE=[0.0, 0.0, 1.0], R_WE=np.eye(3))  # no counters, tuples
-    assert binary.to_dict(Channel.AM_TRUTH, finished(capture.am_truth(0.5, 4, am))) == schema.am_truth_sample(0.5, 4, am)
+    got = binary.to_dict(Channel.AM_TRUTH, finished(capture.am_truth(0.5, 4, am)))
+    assert got == schema.am_truth_sample(0.5, 4, am)
     with pytest.raises(TypeError):  # a missing array is an error on both paths
         finished(capture.controller(0.5, "grasp", *_diag(rng, 3, 3, wrench_W_filtered=None)))
 

@@ -17,7 +17,7 @@ import zenoh
 
 from telemetry import binary, wire
 from telemetry.publisher import TelemetryPublisher, TelemetryStateError
-from telemetry.schema import Channel, Keys, samples_of
+from telemetry.schema import Keys, samples_of
 from telemetry.session import ZenohOptions, build_config
 
 from .zenoh_testing import free_endpoint, start_subscriber
