@@ -49,6 +49,7 @@ class SimulatorTelemetry:
         _check_encoding(encoding)
         self._samples = capture.ground_truth if encoding == "binary" else schema.ground_truth_samples
         self.pub = publisher
+        self._on = getattr(publisher, "enabled", True)  # nothing to build for a disabled publisher (--no-telemetry)
         self.spec = spec
         self.keys = keys or getattr(publisher, "keys", None) or schema.Keys()
         self.truth_every = truth_every
@@ -66,8 +67,9 @@ class SimulatorTelemetry:
     def truth(self, gt) -> None:
         """Publish one GroundTruth (and a phase event if its time entered a new phase)."""
         self._track_phase(gt.time_s)
-        for key, payload in self._samples(gt, self.keys):
-            self.pub.publish(key, payload)
+        if self._on:
+            for key, payload in self._samples(gt, self.keys):
+                self.pub.publish(key, payload)
 
     def fault(self, t_s: float, text: str, level: str = "error") -> None:
         self.pub.publish(self.keys.sim_event, schema.fault_event(t_s, text, "simulator", level))
@@ -92,6 +94,7 @@ class CompanionTelemetry:
         _check_encoding(encoding)
         self._sample = capture.controller if encoding == "binary" else schema.controller_sample
         self.pub = publisher
+        self._on = getattr(publisher, "enabled", True)
         self.sysid = int(sysid)
         self.every = every
         self.keys = keys or getattr(publisher, "keys", None) or schema.Keys()
@@ -100,7 +103,7 @@ class CompanionTelemetry:
 
     def step(self, t_s: float, phase: str, result) -> None:
         """result: amcore.control.StepResult (diagnostics and command are read)."""
-        if self._n % self.every == 0:
+        if self._n % self.every == 0 and self._on:
             self.pub.publish(self._key, self._sample(t_s, phase, result.diagnostics, result.command,
                                                      sysid=self.sysid))
         self._n += 1

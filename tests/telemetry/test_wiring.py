@@ -96,3 +96,15 @@ def test_an_unknown_encoding_is_refused(spec):
         CompanionTelemetry(Collect(), 4, encoding="protobuf")
     with pytest.raises(ValueError, match="protobuf"):
         SimulatorTelemetry(Collect(), spec, encoding="protobuf")
+
+
+def test_nothing_is_built_for_a_disabled_publisher(step_result, spec):
+    class Off(Collect):
+        enabled = False
+
+    c = Off()
+    CompanionTelemetry(c, 7).step(0.0, "approach", step_result)
+    sim = SimulatorTelemetry(c, spec)
+    with World(spec, far_apart(spec)) as w:
+        sim.truth(w.ground_truth())
+    assert [c.keys.parse(k).channel for k, _ in c.given] == [Channel.SIM_EVENT]  # the phase event only
