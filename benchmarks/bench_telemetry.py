@@ -1,7 +1,17 @@
-"""Telemetry speed figures (never timed tests): publish cost on the caller, recorder throughput.
+"""Telemetry speed figures (never timed tests): CPU per step, publish cost on the caller, recorder throughput.
 
-    python benchmarks/bench_telemetry.py [--ams 10] [--rate 1000] [--truth-every 1] [--seconds 5] [--skip-caller]
+    python benchmarks/bench_telemetry.py [--ams 10] [--rate 1000] [--truth-every 1] [--seconds 5]
+        [--encoding binary|json] [--skip-cpu] [--skip-caller] [--skip-throughput] [--cpu-steps 3000] [--cpu-rounds 3]
 
+0. Telemetry CPU per step of a companion (its controller sample) and of the simulator (truth
+   and contact of 2 AMs and the object), JSON and binary samples in the same run, alternating,
+   in place: a loop paced at 1 kHz does the process's own work each step (the companion's
+   controller step, whose StepResult the sample is built from; the simulator's physics step
+   and ground truth) and then publishes through telemetry.wiring as the mains do, sealed with
+   a per-run key, to a live `ground-station record`. Counted: the telemetry call's time on
+   the loop's thread, plus every other thread's CPU time (the sender's, zenoh's) until the
+   queue is drained. Medians over rounds. (The same calls back to back, with hot caches, cost
+   a third as much: printed too, they are what a microbenchmark says.)
 1. Caller-side cost of one controller sample, paced at 1 kHz like a control loop, with
    no subscriber, with a live recorder, and with a frozen (SIGSTOP) recorder, for
    (a) TelemetryPublisher.publish (stamp + bounded queue; a thread encodes and puts) and
@@ -9,7 +19,9 @@
 2. Recorder throughput: `ground-station record` as a subprocess, N companion processes
    publishing controller samples at --rate and one simulator process publishing truth and
    contact of every AM plus the object at --rate, for --seconds, all paced in real time.
-   Payloads are real: one simulated second of the two-AM scenario, cycled.
+   Payloads are real: one simulated second of the two-AM scenario, cycled, in --encoding
+   (binary: the JSON templates converted once, t and sysid patched per step).
+3. Recorder capacity: pre-encoded samples (--encoding) put as fast as the recorder takes them.
 Run from the repository root (it reuses the tests' short-run helper for real payloads).
 """
 from __future__ import annotations
@@ -18,10 +30,12 @@ import argparse
 import json
 import os
 import signal
+import struct
 import subprocess
 import sys
 import tempfile
 import time
+import timeit
 from pathlib import Path
 
 import numpy as np
@@ -29,25 +43,40 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from telemetry import schema  # noqa: E402
+from telemetry import binary, capture, schema, wire  # noqa: E402
+from telemetry.auth import publisher_key  # noqa: E402
 from telemetry.publisher import TelemetryPublisher  # noqa: E402
-from telemetry.schema import Keys  # noqa: E402
+from telemetry.schema import Channel, Keys  # noqa: E402
 from telemetry.session import ZenohOptions, build_config  # noqa: E402
+from telemetry.wiring import CompanionTelemetry, SimulatorTelemetry  # noqa: E402
 from tests.telemetry.zenoh_testing import free_endpoint  # noqa: E402
 
 KEYS = Keys()
+MASTER = bytes(range(32))  # the run key of the CPU benchmark's recorders (every message sealed, as am-run does)
+FORMS = ("json", "binary")
+# part 0's publishers: JSON and binary as they are, and JSON as it was before the binary channels
+# (the sender woke every 20 ms; zenoh's shared-memory transport was on)
+SETUPS = {"json (before)": "json", "json": "json", "binary": "binary"}
+BEFORE_ZENOH = """{scouting: {multicast: {enabled: false}, gossip: {enabled: false}, delay: 0},
+                   transport: {shared_memory: {enabled: true}}}"""
 
 
 def capture_real_run(seconds: float) -> dict:
-    """Payload templates from a real in-process run of the two-AM scenario."""
+    """Payload templates (JSON dicts) from a real in-process run of the two-AM scenario, and
+    what they were built from: StepResults per AM and the GroundTruths."""
     from amcore.config import load_scenario
     from amcore.model import build_model
     from tests.ground_station import simrun
 
     spec = simrun.short_spec(load_scenario(ROOT / "configs" / "scenarios" / "two_am_comp.toml"))
     model = build_model(spec.vehicle)
-    out: dict = {"controller": {}, "truth": {}, "contact": {}, "object": []}
-    for k, p in _collect(simrun, spec, model, seconds):
+    out: dict = {"controller": {}, "truth": {}, "contact": {}, "object": [], "steps": {}, "truths": [], "spec": spec,
+                 "model": model}
+    got = []
+    simrun.run(spec, model, seconds, lambda k, p: got.append((k, p)), KEYS, encoding="json",
+               on_truth=out["truths"].append,
+               on_step=lambda s, t, phase, res: out["steps"].setdefault(s, []).append((phase, res)))
+    for k, p in got:
         m = KEYS.parse(k)
         if m.channel is schema.Channel.CONTROLLER:
             out["controller"].setdefault(m.sysid, []).append(p)
@@ -61,15 +90,176 @@ def capture_real_run(seconds: float) -> dict:
     return out
 
 
-def _collect(simrun, spec, model, seconds):
-    got = []
-    simrun.run(spec, model, seconds, lambda k, p: got.append((k, p)), KEYS)
-    return got
-
-
 def stats_us(ns: np.ndarray) -> str:
     us = ns / 1e3
     return f"median {np.median(us):6.1f} us  p99 {np.percentile(us, 99):7.1f} us  max {us.max():8.1f} us"
+
+
+# ----------------------------------------------------------------------------- part 0
+class _KeyedRecorder:
+    """`ground-station record` as a subprocess on a fresh endpoint, keeping only what the
+    run's publishers sealed (MASTER), as in an am-run run."""
+
+    def __init__(self, tmp: Path, name: str):
+        self.endpoint = free_endpoint()
+        keyfile = tmp / f"{name}.key"
+        keyfile.write_text(MASTER.hex())
+        self.proc = subprocess.Popen([sys.executable, "-m", "ground_station", "record",
+                                      "--out", str(tmp / f"{name}.mcap"), "--zenoh-listen", self.endpoint,
+                                      "--telemetry-key-file", str(keyfile), "--summary-json"],
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.proc.stderr.readline()
+
+    def stop(self) -> dict:
+        time.sleep(1.0)  # the last messages in
+        self.proc.send_signal(signal.SIGINT)
+        return json.loads(self.proc.communicate(timeout=60)[0])
+
+
+def _drain(pub: TelemetryPublisher, timeout_s: float = 20.0) -> None:
+    """Until the sender thread has handed every queued sample to zenoh."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        st = pub.stats()
+        if st.queued == 0 and st.sent + st.encode_errors + st.send_errors >= st.published:
+            return
+        time.sleep(0.002)
+
+
+class _Loop:
+    """One process's own work per step, as in its main: the companion's controller step (the
+    sample is built from its StepResult), or the simulator's physics step and ground truth."""
+
+    def __init__(self, kind: str, templates: dict):
+        from amcore.control import ControllerMemory, ControllerParams, step
+        from amcore.mission import am_mission
+        from amcore.model import create_data
+        from simulator.world import World
+
+        self.kind, spec = kind, templates["spec"]
+        if kind == "companion":
+            model = templates["model"]
+            m = am_mission(spec, spec.ams[0], model)
+            params, data = ControllerParams.from_vehicle(spec.vehicle, m.frame), create_data(model)
+            x0 = m.initial_state()
+            self.work = lambda t: (m.phase(t), step(model, data, params, x0, m.reference(t), np.zeros(6),
+                                                    ControllerMemory(), t))
+        else:
+            missions = {a.sysid: am_mission(spec, a, templates["model"]) for a in spec.ams}
+            self.world = World(spec, {s: mi.initial_state() for s, mi in missions.items()})
+            self.world.connect()
+
+            def work(t):
+                self.world.step()
+                return self.world.ground_truth()
+            self.work = work
+
+    def close(self) -> None:
+        if self.kind == "simulator":
+            self.world.close()
+
+
+def _cpu_round(loop: _Loop, setup: str, n: int, templates: dict, recorder, sysid: int, tmp: Path
+               ) -> tuple[float, float, int]:
+    """One paced 1 kHz loop of n steps publishing as `setup` (a key of SETUPS): (caller's
+    share, background share) in us per step, and the publisher's drops. Caller: wall time of
+    each telemetry call on the loop's thread (perf_counter; the slowest 1 % dropped as
+    preempted). Background: the process's CPU time (every thread) minus the loop thread's
+    own, from before the first sample until the queue is drained: the sender thread and zenoh's."""
+    name = "simulator" if loop.kind == "simulator" else f"am{sysid}"
+    form, before = SETUPS[setup], setup.endswith("(before)")
+    config = None
+    if before:
+        config = tmp / "before.json5"
+        config.write_text(BEFORE_ZENOH)
+    pub = TelemetryPublisher(ZenohOptions(connect=(recorder.endpoint,), auth_key=publisher_key(MASTER, name),
+                                          config_file=config),
+                             name=name, queue_size=20000, poll_period_s=0.02 if before else 0.1)
+    pub.open()
+    if not pub.wait_for_subscriber(KEYS.sim_event if loop.kind == "simulator" else KEYS.controller(sysid), 20.0):
+        raise RuntimeError("recorder not reachable")
+    if loop.kind == "simulator":
+        tele = SimulatorTelemetry(pub, templates["spec"], encoding=form)
+        call = lambda t, out: tele.truth(out)  # noqa: E731
+    else:
+        tele = CompanionTelemetry(pub, sysid, encoding=form)
+        call = lambda t, out: tele.step(t, out[0], out[1])  # noqa: E731
+    time.sleep(0.3)
+    ts = np.empty(n)
+    c0, m0 = time.process_time_ns(), time.thread_time_ns()
+    t0 = time.perf_counter()
+    for i in range(n):
+        t = i * 1e-3
+        out = loop.work(t)
+        a = time.perf_counter_ns()
+        call(t, out)
+        ts[i] = time.perf_counter_ns() - a
+        wait = t0 + (i + 1) * 1e-3 - time.perf_counter()
+        if wait > 0:
+            time.sleep(wait)
+    _drain(pub)
+    background = (time.process_time_ns() - c0) - (time.thread_time_ns() - m0)
+    dropped = pub.close(timeout_s=10.0).dropped
+    ts.sort()
+    return float(ts[:int(0.99 * n)].mean()) / 1e3, background / n / 1e3, dropped
+
+
+def cpu_per_step(templates: dict, n: int, rounds: int) -> None:
+    """Part 0: telemetry CPU per step, JSON and binary samples (see the module docstring)."""
+    print(f"\n0. telemetry CPU per step at 1 kHz (build, encode, seal, batch, zenoh put; sealed, to a live keyed "
+          f"recorder): {rounds} rounds x {n} steps per form, alternating; medians over rounds")
+    got: dict = {}
+    drops = {f: 0 for f in SETUPS}
+    with tempfile.TemporaryDirectory() as tmp:
+        recs = {f: _KeyedRecorder(Path(tmp), f"rec{i}") for i, f in enumerate(SETUPS)}
+        try:
+            sysid = 10
+            for kind in ("companion", "simulator"):
+                loop = _Loop(kind, templates)
+                try:
+                    for r in range(rounds):
+                        for setup in list(SETUPS) if r % 2 == 0 else list(SETUPS)[::-1]:
+                            sysid += 1
+                            caller, bg, d = _cpu_round(loop, setup, n, templates, recs[setup], sysid, Path(tmp))
+                            got.setdefault((kind, setup), []).append((caller, bg))
+                            drops[setup] += d
+                finally:
+                    loop.close()
+        finally:
+            summaries = {f: r.stop() for f, r in recs.items()}
+    for kind, what in (("companion", "one AM's controller sample per step, after its controller step"),
+                       ("simulator", "truth + contact of 2 AMs + the object per step, after its physics step")):
+        print(f"  {kind} ({what}):")
+        total = {}
+        for f in SETUPS:
+            rows = got[kind, f]
+            caller, bg = (float(np.median([r[i] for r in rows])) for i in (0, 1))
+            total[f] = float(np.median([sum(r) for r in rows]))
+            print(f"    {f:13s} caller {caller:6.1f} + background {bg:6.1f} = {total[f]:6.1f} us/step   "
+                  f"(rounds: {', '.join(f'{sum(r):.1f}' for r in rows)})")
+        print(f"    binary/JSON: {total['binary'] / total['json']:.2f} "
+              f"({total['json'] / total['binary']:.1f}x less CPU); "
+              f"binary/JSON (before): {total['binary'] / total['json (before)']:.2f} "
+              f"({total['json (before)'] / total['binary']:.1f}x less)")
+        if kind == "companion":
+            print(f"    target <= 10 us: {'met' if total['binary'] <= 10 else 'NOT met'}; "
+                  f"goal <= 5 us: {'met' if total['binary'] <= 5 else 'not met'}")
+    for f in SETUPS:
+        s = summaries[f]
+        print(f"  loss, {f}: {drops[f]} dropped by the publishers; recorder: {s['received']} samples received, "
+              f"missing {s['missing']}, rejected {s['rejected']}, malformed {s['malformed']}")
+    # the same calls back to back (hot caches): what a microbenchmark of them says
+    phase, res = templates["steps"][4][0]
+    d, c = res.diagnostics, res.command
+    calls = {"schema.controller_sample": lambda: schema.controller_sample(0.1, phase, d, c, sysid=4),
+             "  + schema.encode (json.dumps)": lambda: schema.encode(schema.controller_sample(0.1, phase, d, c,
+                                                                                              sysid=4)),
+             "capture.controller (caller)": lambda: capture.controller(0.1, phase, d, c, sysid=4),
+             "  + finish (sender)": lambda: capture.finished(capture.controller(0.1, phase, d, c, sysid=4))}
+    print("  the same builders called back to back (hot caches), best of 7 x 2000:")
+    for name, fn in calls.items():
+        best = min(timeit.repeat(fn, number=2000, repeat=7)) / 2000 * 1e6
+        print(f"    {name:32s} {best:5.1f} us")
 
 
 # ----------------------------------------------------------------------------- part 1
@@ -148,6 +338,9 @@ def caller_costs(templates: dict, n: int) -> None:
 
 
 # ----------------------------------------------------------------------------- part 2
+_TEMPLATES = ("controller", "truth", "contact", "object", "run_start")  # what the children get (JSON)
+_HEAD = binary.HEADER
+_HEAD_SYSID = struct.Struct("<dQI")  # t, seq, sysid: how controller, truth and contact start
 def child(a) -> None:
     """One publishing process of the throughput test."""
     data = json.loads(Path(a.data).read_text())
@@ -156,6 +349,17 @@ def child(a) -> None:
     pub.open()
     pub.wait_for_subscriber(KEYS.sim_event, 20.0)
     steps = int(a.seconds * a.rate)
+    if a.encoding == "binary":  # each template converted once; per step only t, sysid patched
+        for name, ch in (("controller", Channel.CONTROLLER), ("truth", Channel.AM_TRUTH), ("contact", Channel.CONTACT)):
+            data[name] = {s: [bytearray(binary.from_dict(ch, p)) for p in ps] for s, ps in data[name].items()}
+        data["object"] = [bytearray(binary.from_dict(Channel.OBJECT, p)) for p in data["object"]]
+
+    def sample(template, t: float, sysid: int | None = None):
+        if a.encoding == "json":
+            return dict(template, t=t) if sysid is None else dict(template, t=t, sysid=sysid)
+        out = bytes(template)  # a copy: the publisher keeps it until it is sent
+        return _HEAD.pack(t, 0) + out[16:] if sysid is None else _HEAD_SYSID.pack(t, 0, sysid) + out[20:]
+
     src = lambda table, s: table[str(4 + s % 2)]  # noqa: E731  real AM 4/5 samples for any sysid
     if a.child == "sim":
         pub.publish(KEYS.sim_event, dict(data["run_start"]))
@@ -171,26 +375,25 @@ def child(a) -> None:
             late += 1
         j = k % len(data["object"])
         if a.child == "companion":
-            p = dict(src(data["controller"], a.sysid)[j], t=t, sysid=a.sysid)
-            pub.publish(KEYS.controller(a.sysid), p)
+            pub.publish(KEYS.controller(a.sysid), sample(src(data["controller"], a.sysid)[j], t, a.sysid))
         elif k % a.truth_every == 0:
             for s in range(a.ams):
-                pub.publish(KEYS.am_truth(s), dict(src(data["truth"], s)[j], t=t, sysid=s))
-                pub.publish(KEYS.contact(s), dict(src(data["contact"], s)[j], t=t, sysid=s))
-            pub.publish(KEYS.object, dict(data["object"][j], t=t))
+                pub.publish(KEYS.am_truth(s), sample(src(data["truth"], s)[j], t, s))
+                pub.publish(KEYS.contact(s), sample(src(data["contact"], s)[j], t, s))
+            pub.publish(KEYS.object, sample(data["object"][j], t))
     wall = time.perf_counter() - t0
     st = pub.close(timeout_s=10.0)
     print(json.dumps({"who": a.child, "sysid": a.sysid, "published": st.published, "sent": st.sent,
                       "dropped": st.dropped, "wall_s": wall, "late_steps": late}), flush=True)
 
 
-def throughput(templates: dict, n_ams: int, rate: float, seconds: float, truth_every: int) -> None:
-    print(f"\n2. recorder throughput: {n_ams} companions x {rate:.0f} Hz controller + simulator "
+def throughput(templates: dict, n_ams: int, rate: float, seconds: float, truth_every: int, encoding: str) -> None:
+    print(f"\n2. recorder throughput, {encoding} samples: {n_ams} companions x {rate:.0f} Hz controller + simulator "
           f"({n_ams} truth + {n_ams} contact + object) x {rate / truth_every:.0f} Hz, {seconds:.0f} s")
     with tempfile.TemporaryDirectory() as tmp:
         data = Path(tmp) / "templates.json"
         data.write_text(json.dumps({k: ({str(s): v for s, v in t.items()} if isinstance(t, dict) and k != "run_start"
-                                        else t) for k, t in templates.items()}))
+                                        else t) for k, t in templates.items() if k in _TEMPLATES}))
         ep, out = free_endpoint(), Path(tmp) / "run.mcap"
         rec = subprocess.Popen([sys.executable, "-m", "ground_station", "record", "--out", str(out), "--zenoh-listen",
                                 ep, "--summary-json", "--linger", "2"], stdout=subprocess.PIPE,
@@ -198,7 +401,8 @@ def throughput(templates: dict, n_ams: int, rate: float, seconds: float, truth_e
         rec.stderr.readline()
         start_at = time.time() + 4.0 + 0.3 * n_ams  # every child imported and connected by then
         common = ["--data", str(data), "--endpoint", ep, "--rate", str(rate), "--seconds", str(seconds),
-                  "--ams", str(n_ams), "--start-at", str(start_at), "--truth-every", str(truth_every)]
+                  "--ams", str(n_ams), "--start-at", str(start_at), "--truth-every", str(truth_every),
+                  "--encoding", encoding]
         kids = [subprocess.Popen([sys.executable, __file__, "--child", "companion", "--sysid", str(s), *common],
                                  stdout=subprocess.PIPE, text=True) for s in range(n_ams)]
         kids.append(subprocess.Popen([sys.executable, __file__, "--child", "sim", *common], stdout=subprocess.PIPE,
@@ -230,19 +434,24 @@ def throughput(templates: dict, n_ams: int, rate: float, seconds: float, truth_e
           f"{size / 1e6 / max(summary['sim_time_s'], 1e-9):.2f} MB per simulated second (zstd, 1 s chunks)")
 
 
-def recorder_capacity(templates: dict, n_ams: int, seconds: float) -> None:
-    """The recorder alone: one process puts pre-encoded real payloads (no JSON cost on the
-    sending side) as fast as zenoh's BLOCK congestion control lets it, i.e. as fast as the
-    recorder takes them."""
+def recorder_capacity(templates: dict, n_ams: int, seconds: float, encoding: str) -> None:
+    """The recorder alone: one process puts pre-encoded real payloads (no encoding cost on the
+    sending side), one sample per message, as fast as zenoh's BLOCK congestion control lets
+    it, i.e. as fast as the recorder takes them."""
     import zenoh
 
-    enc = lambda p, **kw: schema.encode(dict(p, **kw))[0]  # noqa: E731
+    def enc(ch, p, **kw):
+        p = dict(p, **kw)
+        return schema.encode(p)[0] if encoding == "json" else wire.binary_message([binary.from_dict(ch, p)])
+
     per_step = []
     for s in range(n_ams):
-        per_step.append((KEYS.controller(s), [enc(p, sysid=s) for p in templates["controller"][4 + s % 2][:200]]))
-        per_step.append((KEYS.am_truth(s), [enc(p, sysid=s) for p in templates["truth"][4 + s % 2][:200]]))
-        per_step.append((KEYS.contact(s), [enc(p, sysid=s) for p in templates["contact"][4 + s % 2][:200]]))
-    print(f"\n3. recorder capacity: controller + truth + contact of {n_ams} AMs, pre-encoded, for {seconds:.0f} s")
+        for name, ch, key in (("controller", Channel.CONTROLLER, KEYS.controller(s)),
+                              ("truth", Channel.AM_TRUTH, KEYS.am_truth(s)),
+                              ("contact", Channel.CONTACT, KEYS.contact(s))):
+            per_step.append((key, [enc(ch, p, sysid=s) for p in templates[name][4 + s % 2][:200]]))
+    print(f"\n3. recorder capacity: controller + truth + contact of {n_ams} AMs, pre-encoded {encoding}, "
+          f"one sample per message, for {seconds:.0f} s")
     with tempfile.TemporaryDirectory() as tmp:
         ep = free_endpoint()
         rec = subprocess.Popen([sys.executable, "-m", "ground_station", "record", "--out", f"{tmp}/c.mcap",
@@ -274,6 +483,10 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=5.0)
     ap.add_argument("--truth-every", type=int, default=1, help="simulator publishes ground truth every N steps")
     ap.add_argument("--calls", type=int, default=2000)
+    ap.add_argument("--encoding", choices=FORMS, default="binary", help="samples of parts 2 and 3")
+    ap.add_argument("--cpu-steps", type=int, default=3000, help="part 0: steps per round")
+    ap.add_argument("--cpu-rounds", type=int, default=3)
+    ap.add_argument("--skip-cpu", action="store_true")
     ap.add_argument("--skip-caller", action="store_true")
     ap.add_argument("--skip-throughput", action="store_true")
     ap.add_argument("--child", choices=("companion", "sim"))
@@ -289,11 +502,13 @@ def main() -> None:
     t0 = time.perf_counter()
     templates = capture_real_run(1.0)
     print(f"captured 1 s of the two-AM scenario for payload templates in {time.perf_counter() - t0:.1f} s")
+    if not a.skip_cpu:
+        cpu_per_step(templates, a.cpu_steps, a.cpu_rounds)
     if not a.skip_caller:
         caller_costs(templates, a.calls)
     if not a.skip_throughput:
-        throughput(templates, a.ams, a.rate, a.seconds, a.truth_every)
-        recorder_capacity(templates, a.ams, a.seconds)
+        throughput(templates, a.ams, a.rate, a.seconds, a.truth_every, a.encoding)
+        recorder_capacity(templates, a.ams, a.seconds, a.encoding)
 
 
 if __name__ == "__main__":

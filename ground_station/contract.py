@@ -1,20 +1,23 @@
 """The MCAP topic contract: what the recorder writes for each telemetry key. Pure.
 
-    key (telemetry.schema.Keys)      MCAP topic                   schema (jsonschema, JSON)
-    <p>/am/<id>/controller      ->   /am/<id>/controller          amstack.ControllerState (as received)
+    key (telemetry.schema.Keys)      MCAP topic                   schema
+    <p>/am/<id>/controller      ->   /am/<id>/controller          amstack/ControllerState (ros1) as received
     <p>/am/<id>/event           ->   /am/<id>/event               amstack.Event (as received)
                                      /am/<id>/events              foxglove.Log
     <p>/sim/am/<id>/truth       ->   /tf                          foxglove.FrameTransforms: world->am<id>/base, world->am<id>/ee
-    <p>/sim/am/<id>/contact     ->   /sim/am/<id>/contact         amstack.PadContact (as received)
+    <p>/sim/am/<id>/contact     ->   /sim/am/<id>/contact         amstack/PadContact (ros1) as received
     <p>/sim/object              ->   /sim/object/pose             foxglove.PoseInFrame (frame world)
-                                     /sim/object/state            amstack.ObjectTruth (as received)
+                                     /sim/object/state            amstack/ObjectTruth (ros1) as received
     <p>/sim/event               ->   /sim/event                   amstack.Event (as received)
                                      /events                      foxglove.Log
     <p>/telemetry/<name>        ->   /telemetry/<name>            amstack.PublisherStats (as received)
     (derived, scene_rate_hz)    ->   /scene                       foxglove.SceneUpdate: object, AM bases, arms, pads, contact forces
     (recorder, every flush)     ->   /recorder/stats              amstack.RecorderStats
-    anything else under <p>/    ->   /unknown/<key>               (no schema) as received
+    anything else under <p>/    ->   /unknown/<key>               (no schema) JSON as received; binary: counted only
 
+Schemas with a dot are JSON Schemas of JSON messages; those with a slash are ROS 1 .msg
+texts of binary messages (telemetry.binary), written when the channel's first sample was
+binary (a JSON-speaking publisher's channel is JSON: amstack.ControllerState, ...).
 Log time and publish time of every message = simulation time "t" of its payload [ns].
 Every channel is fed by one process, so its log times do not decrease.
 """
@@ -23,11 +26,15 @@ from __future__ import annotations
 import json
 import math
 import re
-from dataclasses import dataclass, field
+import struct
+from dataclasses import dataclass
 
-from telemetry.schema import SCHEMAS as PAYLOAD_SCHEMAS, Channel, Keys, peek_header
+from telemetry.binary import (BY_NAME as ROS1_SCHEMAS, HEADER, JSON_TITLE, MESSAGES as BINARY_MESSAGES, OBJECT_POSE,
+                              TRUTH_POSES, from_dict, to_dict)
+from telemetry.schema import SCHEMAS as PAYLOAD_SCHEMAS, Channel, Keys, encode, finite_or_null, peek_header
 
 from . import foxglove as fg
+from .scene import SceneState
 
 RECORDER_STATS_SCHEMA = {
     "title": "amstack.RecorderStats", "type": "object",
@@ -43,10 +50,17 @@ RECORDER_STATS_SCHEMA = {
     },
 }
 
-SCHEMAS: dict[str, dict] = {s["title"]: s for s in PAYLOAD_SCHEMAS.values()}
+SCHEMAS: dict[str, dict] = {s["title"]: s for s in PAYLOAD_SCHEMAS.values()}  # JSON Schemas by title
 SCHEMAS.update(fg.SCHEMAS)
 SCHEMAS[RECORDER_STATS_SCHEMA["title"]] = RECORDER_STATS_SCHEMA
 _RAW_SCHEMA = {ch: PAYLOAD_SCHEMAS[ch]["title"] for ch in Channel}
+ROS1 = "ros1"  # MCAP message encoding of the binary channels (schema encoding ros1msg; ROS1_SCHEMAS by name)
+
+
+def json_schema(name: str) -> dict:
+    """The JSON Schema of a schema name of the contract: the payload's, also for the .msg
+    name of a binary channel ('amstack/ControllerState' -> amstack.ControllerState)."""
+    return SCHEMAS[JSON_TITLE.get(name, name)]
 
 TF_TOPIC = "/tf"
 SCENE_TOPIC = "/scene"
@@ -87,12 +101,14 @@ def ee_frame(sysid: int) -> str:
 
 @dataclass(frozen=True)
 class Out:
-    """One MCAP message to write. schema: a key of SCHEMAS, or None (schemaless JSON)."""
+    """One MCAP message to write. schema: a key of SCHEMAS (encoding json), of ROS1_SCHEMAS
+    (encoding ros1), or None (schemaless JSON)."""
 
     topic: str
     schema: str | None
     log_time_ns: int
     data: bytes
+    encoding: str = "json"
 
 
 @dataclass
@@ -200,15 +216,46 @@ def _pose_spliced(t: float, data: bytes) -> bytes | None:
     return _POSE % (sec, nsec, *p, q[1], q[2], q[3], q[0])
 
 
-@dataclass
-class _SceneState:
-    truth: dict = field(default_factory=dict)  # sysid -> raw truth payload (parsed when drawn)
-    contact: dict = field(default_factory=dict)  # sysid -> raw contact bytes (parsed when drawn)
-    object_geometry: dict | None = None  # run_start data["object"]
+def _poses(p: dict) -> tuple:
+    return p["p_WB"], p["q_WB"], p["p_WE"], p["q_WE"]
+
+
+def _finite_numbers(*vectors) -> bool:
+    return all(math.isfinite(x) for v in vectors for x in v)
+
+
+# The same messages from a decoded binary sample's floats: `%r` prints Python's shortest
+# repr, which is what json.dumps writes for a finite float (non-finite ones take the
+# general path, where they become null as in a JSON sample).
+_TF_R = _TF.replace(b'"child_frame_id":"%s"', b'"child_frame_id":"%b"').replace(b"%s", b"%r")
+_POSE_R = _POSE.replace(b"%s", b"%r")
+
+
+def _tf_of(t: float, sysid: int, pb, qb, pe, qe) -> bytes:
+    if not _finite_numbers(pb, qb, pe, qe) or (len(pb), len(qb), len(pe), len(qe)) != (3, 4, 3, 4):
+        return _dumps(finite_or_null({"transforms": [fg.frame_transform(t, "world", base_frame(sysid), pb, qb),
+                                              fg.frame_transform(t, "world", ee_frame(sysid), pe, qe)]}))
+    sec, nsec = _sec_nsec(t)
+    base = _TF_R % (sec, nsec, base_frame(sysid).encode(), *pb, qb[1], qb[2], qb[3], qb[0])
+    ee = _TF_R % (sec, nsec, ee_frame(sysid).encode(), *pe, qe[1], qe[2], qe[3], qe[0])
+    return b'{"transforms":[' + base + b"," + ee + b"]}"
+
+
+def _pose_of(t: float, pos, q) -> bytes:
+    if not _finite_numbers(pos, q) or (len(pos), len(q)) != (3, 4):
+        return _dumps(finite_or_null(fg.pose_in_frame(t, "world", pos, q)))
+    sec, nsec = _sec_nsec(t)
+    return _POSE_R % (sec, nsec, *pos, q[1], q[2], q[3], q[0])
 
 
 class Translator:
-    """Turns (key, payload bytes) into MCAP messages per the contract and counts seq gaps.
+    """Turns (key, sample bytes) into MCAP messages per the contract and counts seq gaps.
+
+    A sample is a JSON text or, with binary=True, a binary sample (telemetry.binary) of a
+    hot channel. Channels fed as received keep the form their first sample had: JSON on a
+    `json` channel with its JSON Schema, binary on a `ros1` channel with its .msg text; a
+    later sample of the other form is converted (a publisher of another version), so that
+    a topic has one schema. The derived Foxglove topics are JSON whatever the input.
 
     scene_rate_hz: /scene messages per simulated second (0: none), drawn when an object
     sample arrives (the simulator publishes the object after every AM of a step)."""
@@ -225,16 +272,37 @@ class Translator:
         self.run_end: dict | None = None
         self._next_scene_t = 0.0 if scene_rate_hz > 0 else math.inf
         self._parsed: dict = {}  # key -> KeyMatch | None (a deployment has few keys)
-        self._scene = _SceneState()
+        self._binary_topic: dict[str, bool] = {}  # topic fed as received -> its first sample was binary
+        self._scene = SceneState()
 
-    def translate(self, key: str, data: bytes) -> list[Out]:
+    def _match(self, key: str):
         try:
-            m = self._parsed[key]
+            return self._parsed[key]
         except KeyError:
             m = self.keys.parse(key)
             if len(self._parsed) < 10_000:
                 self._parsed[key] = m
+            return m
 
+    def _bad(self, key: str, why: str) -> list[Out]:
+        self.malformed += 1
+        self.last_error = f"{key}: {why}"
+        return []
+
+    def _seen(self, key: str, t: float, seq: int) -> bool:
+        """Count a sample's seq; False (and counted as malformed) if t or seq is implausible."""
+        if not (0.0 <= t <= MAX_SIM_TIME_S and 0 <= seq < 2**63):  # NaN fails too
+            self._bad(key, f"implausible t = {t!r} or seq = {seq!r}")
+            return False
+        self.stats.setdefault(key, KeyStats()).see(seq)
+        if t > self.latest_t:
+            self.latest_t = t
+        return True
+
+    def translate(self, key: str, data: bytes, binary: bool = False) -> list[Out]:
+        m = self._match(key)
+        if binary:
+            return self._translate_binary(key, m, data)
         head = peek_header(data)
         parsed = None
         if head is None:  # not in the contract's shape: decode to see whether it is usable at all
@@ -245,124 +313,118 @@ class Translator:
                 if m is None:
                     self.unknown += 1
                     return [Out(f"/unknown/{key}", None, _ns(self.latest_t), bytes(data))]
-                self.malformed += 1
-                self.last_error = f"{key}: payload without t/seq ({exc}): {bytes(data[:80])!r}"
-                return []
+                return self._bad(key, f"payload without t/seq ({exc}): {bytes(data[:80])!r}")
         t, seq = head
-        if not (0.0 <= t <= MAX_SIM_TIME_S and 0 <= seq < 2**63):  # NaN fails too
-            self.malformed += 1
-            self.last_error = f"{key}: implausible t = {t!r} or seq = {seq!r}"
+        if not self._seen(key, t, seq):
             return []
-        self.stats.setdefault(key, KeyStats()).see(seq)
-        if t > self.latest_t:
-            self.latest_t = t
         ns = _ns(t)
         if m is None:
             self.unknown += 1
             return [Out(f"/unknown/{key}", None, ns, bytes(data))]
         ch, sysid = m.channel, m.sysid
         raw = bytes(data)
-        if ch is Channel.CONTROLLER:
-            return [Out(controller_topic(sysid), _RAW_SCHEMA[ch], ns, raw)]
-        if ch is Channel.CONTACT:
-            self._scene.contact[sysid] = raw
-            return [Out(contact_topic(sysid), _RAW_SCHEMA[ch], ns, raw)]
-        if ch is Channel.PUBLISHER:
-            try:
+        try:
+            if ch is Channel.CONTROLLER:
+                return [self._as_received(controller_topic(sysid), ch, ns, raw, parsed)]
+            if ch is Channel.CONTACT:
+                self._scene.contact[sysid] = raw
+                return [self._as_received(contact_topic(sysid), ch, ns, raw, parsed)]
+            if ch is Channel.PUBLISHER:
                 p = parsed if parsed is not None else json.loads(raw)
                 if p["final"]:
                     for k, issued in p["seq_issued"].items():
                         self.stats.setdefault(k, KeyStats()).close(int(issued))
-            except (ValueError, KeyError, TypeError, AttributeError) as exc:
-                self.malformed += 1
-                self.last_error = f"{key}: {type(exc).__name__}: {exc}"
-                return []
-            return [Out(publisher_topic(m.name), _RAW_SCHEMA[ch], ns, raw)]
-        try:
+                return [Out(publisher_topic(m.name), _RAW_SCHEMA[ch], ns, raw)]
             if ch is Channel.AM_TRUTH:
                 self._scene.truth[sysid] = raw
-                tf = _tf_spliced(t, sysid, raw)
-                if tf is None:  # not our encoder's layout: the slow, general way
-                    p = parsed if parsed is not None else json.loads(raw)
-                    tf = _dumps({"transforms": [
-                        fg.frame_transform(t, "world", base_frame(sysid), p["p_WB"], p["q_WB"]),
-                        fg.frame_transform(t, "world", ee_frame(sysid), p["p_WE"], p["q_WE"])]})
-                return [Out(TF_TOPIC, "foxglove.FrameTransforms", ns, tf)]
+                tf = _tf_spliced(t, sysid, raw)  # None: not our encoder's layout, the slow, general way
+                return [Out(TF_TOPIC, "foxglove.FrameTransforms", ns,
+                            tf if tf is not None else _tf_of(t, sysid, *_poses(parsed or json.loads(raw))))]
             if ch is Channel.OBJECT:
                 pose = _pose_spliced(t, raw)
-                p = None
                 if pose is None:
-                    p = parsed if parsed is not None else json.loads(raw)
-                    pose = _dumps(fg.pose_in_frame(t, "world", p["p_WO"], p["q_WO"]))
-                out = [Out(OBJECT_POSE_TOPIC, "foxglove.PoseInFrame", ns, pose),
-                       Out(OBJECT_STATE_TOPIC, _RAW_SCHEMA[ch], ns, raw)]
-                if t >= self._next_scene_t - _SCENE_SLACK * self.scene_period_s:
-                    # the next slot of the fixed grid k * period (t + period would drift: a sample
-                    # a hair before its slot waits for the next one)
-                    self._next_scene_t = (math.floor(t / self.scene_period_s + _SCENE_SLACK) + 1) * self.scene_period_s
-                    p = p if p is not None else json.loads(raw)
-                    out.append(Out(SCENE_TOPIC, "foxglove.SceneUpdate", ns, _dumps(self._scene_update(t, p))))
-                return out
-            p = parsed if parsed is not None else json.loads(raw)
-            # events
-            level, kind = p["level"], p["kind"]
-            if ch is Channel.SIM_EVENT and kind == "run_start":
-                self.run_start = p
-                self._scene.object_geometry = (p.get("data") or {}).get("object")
-            if ch is Channel.SIM_EVENT and kind == "run_end":
-                self.run_end = p
-            name = p.get("source", "simulator" if sysid is None else f"am{sysid}")
-            msg = _dumps(fg.log(t, level, f"[{kind}] {p['text']}", name))
-            if ch is Channel.SIM_EVENT:
-                return [Out(SIM_EVENT_TOPIC, _RAW_SCHEMA[ch], ns, raw), Out(EVENTS_TOPIC, "foxglove.Log", ns, msg)]
-            return [Out(am_event_topic(sysid), _RAW_SCHEMA[ch], ns, raw),
-                    Out(am_log_topic(sysid), "foxglove.Log", ns, msg)]
-        except (ValueError, KeyError, TypeError, IndexError, OverflowError, AttributeError) as exc:
-            self.malformed += 1
-            self.last_error = f"{key}: {type(exc).__name__}: {exc}"
+                    parsed = parsed or json.loads(raw)
+                    pose = _pose_of(t, parsed["p_WO"], parsed["q_WO"])
+                return self._object(t, ns, pose, self._as_received(OBJECT_STATE_TOPIC, ch, ns, raw, parsed),
+                                    lambda: parsed or json.loads(raw))
+            return self._event(key, m, t, ns, raw, parsed if parsed is not None else json.loads(raw))
+        except (ValueError, KeyError, TypeError, IndexError, OverflowError, AttributeError, struct.error) as exc:
+            return self._bad(key, f"{type(exc).__name__}: {exc}")
+
+    def _translate_binary(self, key: str, m, data: bytes) -> list[Out]:
+        msg = None if m is None else BINARY_MESSAGES.get(m.channel)
+        if msg is None:
+            if m is None:
+                self.unknown += 1  # no contract to tell its layout: counted, not written
+                return []
+            return self._bad(key, "a binary sample on a key whose channel is JSON only")
+        try:  # one whole message of the channel's layout (its counts and lengths; the values are not read)
+            size = msg.size_of(data)
+            if size != len(data):
+                raise ValueError(f"{len(data) - size} bytes after the end of the message")
+        except ValueError as exc:
+            return self._bad(key, f"binary sample: {exc}")
+        t, seq = HEADER.unpack_from(data)
+        if not self._seen(key, t, seq):
             return []
+        ch, sysid, ns, raw = m.channel, m.sysid, _ns(t), bytes(data)
+        try:
+            if ch is Channel.CONTROLLER:
+                return [self._as_received(controller_topic(sysid), ch, ns, raw, None, True)]
+            if ch is Channel.CONTACT:
+                self._scene.contact[sysid] = (ch, raw)  # decoded if drawn
+                return [self._as_received(contact_topic(sysid), ch, ns, raw, None, True)]
+            if ch is Channel.AM_TRUTH:
+                self._scene.truth[sysid] = (ch, raw)
+                v = TRUTH_POSES.unpack_from(raw)
+                tf = _tf_of(t, sysid, v[3:6], v[6:10], v[10:13], v[13:17])  # p_WB, q_WB, p_WE, q_WE
+                return [Out(TF_TOPIC, "foxglove.FrameTransforms", ns, tf)]
+            v = OBJECT_POSE.unpack_from(raw)
+            state = self._as_received(OBJECT_STATE_TOPIC, ch, ns, raw, None, True)
+            return self._object(t, ns, _pose_of(t, v[2:5], v[5:9]), state, lambda: to_dict(ch, raw))
+        except (ValueError, KeyError, TypeError, IndexError, OverflowError, struct.error) as exc:
+            return self._bad(key, f"{type(exc).__name__}: {exc}")
+
+    def _as_received(self, topic: str, ch: Channel, ns: int, raw: bytes, fields: dict | None,
+                     binary: bool = False) -> Out:
+        """The message of a channel fed as received, in the form of the topic's first sample.
+        fields: the sample decoded, if it was (None: not yet)."""
+        first = self._binary_topic.setdefault(topic, binary)
+        if first == binary:
+            pass
+        elif binary:  # a binary sample on a JSON topic
+            raw = encode(fields if fields is not None else to_dict(ch, raw))[0]
+        else:  # a JSON sample on a binary topic
+            raw = from_dict(ch, fields if fields is not None else json.loads(raw))
+        if first:
+            return Out(topic, BINARY_MESSAGES[ch].name, ns, raw, ROS1)
+        return Out(topic, _RAW_SCHEMA[ch], ns, raw)
+
+    def _object(self, t: float, ns: int, pose: bytes, state: Out, fields) -> list[Out]:
+        out = [Out(OBJECT_POSE_TOPIC, "foxglove.PoseInFrame", ns, pose), state]
+        if t >= self._next_scene_t - _SCENE_SLACK * self.scene_period_s:
+            # the next slot of the fixed grid k * period (t + period would drift: a sample
+            # a hair before its slot waits for the next one)
+            self._next_scene_t = (math.floor(t / self.scene_period_s + _SCENE_SLACK) + 1) * self.scene_period_s
+            scene = finite_or_null(self._scene.update(t, fields()))
+            out.append(Out(SCENE_TOPIC, "foxglove.SceneUpdate", ns, _dumps(scene)))
+        return out
+
+    def _event(self, key: str, m, t: float, ns: int, raw: bytes, p: dict) -> list[Out]:
+        ch, sysid = m.channel, m.sysid
+        level, kind = p["level"], p["kind"]
+        if ch is Channel.SIM_EVENT and kind == "run_start":
+            self.run_start = p
+            self._scene.object_geometry = (p.get("data") or {}).get("object")
+        if ch is Channel.SIM_EVENT and kind == "run_end":
+            self.run_end = p
+        name = p.get("source", "simulator" if sysid is None else f"am{sysid}")
+        msg = _dumps(fg.log(t, level, f"[{kind}] {p['text']}", name))
+        if ch is Channel.SIM_EVENT:
+            return [Out(SIM_EVENT_TOPIC, _RAW_SCHEMA[ch], ns, raw), Out(EVENTS_TOPIC, "foxglove.Log", ns, msg)]
+        return [Out(am_event_topic(sysid), _RAW_SCHEMA[ch], ns, raw), Out(am_log_topic(sysid), "foxglove.Log", ns, msg)]
 
     def stats_out(self, wall_s: float, inbox_overflow: int, rejected: int = 0) -> Out:
         body = {"t": self.latest_t, "wall_s": wall_s, "inbox_overflow": inbox_overflow, "malformed": self.malformed,
                 "unknown": self.unknown, "rejected": rejected, "keys": {k: s.as_dict() for k, s in sorted(self.stats.items())}}
         return Out(STATS_TOPIC, RECORDER_STATS_SCHEMA["title"], _ns(self.latest_t), _dumps(body))
-
-    # ------------------------------------------------------------------ scene
-    def _scene_update(self, t: float, obj: dict) -> dict:
-        geo = self._scene.object_geometry or {"shape": "box", "size_m": [0.2, 0.2, 0.2]}
-        obj_pose = fg.pose(obj["p_WO"], obj["q_WO"])
-        blue = fg.color(0.2, 0.4, 0.8, 0.9)
-        if geo.get("shape") == "cylinder":
-            d = 2.0 * geo.get("radius_m", 0.1)
-            prim = {"cylinders": [{"pose": obj_pose, "size": fg.vec3([d, d, geo.get("height_m", 0.2)]),
-                                   "bottom_scale": 1.0, "top_scale": 1.0, "color": blue}]}
-        else:
-            prim = {"cubes": [{"pose": obj_pose, "size": fg.vec3(geo.get("size_m", [0.2, 0.2, 0.2])), "color": blue}]}
-        entities = [fg.entity(t, "object", **prim)]
-        for sysid, raw in sorted(self._scene.truth.items()):
-            entities.append(self._am_entity(t, sysid, json.loads(raw)))
-        return {"deletions": [], "entities": entities}
-
-    def _am_entity(self, t: float, sysid: int, tr: dict) -> dict:
-        grey, orange = fg.color(0.25, 0.25, 0.25), fg.color(1.0, 0.55, 0.0)
-        base = {"pose": fg.pose(tr["p_WB"], tr["q_WB"]), "size": fg.vec3([0.5, 0.5, 0.04]),
-                "bottom_scale": 1.0, "top_scale": 1.0, "color": fg.color(0.3, 0.3, 0.3, 0.6)}
-        arm = {"type": 0, "pose": fg.pose([0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]), "thickness": 0.015,
-               "scale_invariant": False, "points": [fg.vec3(p) for p in [tr["p_WB"], *tr.get("p_W_joints", ()), tr["p_WE"]]], "color": grey,
-               "colors": [], "indices": []}
-        pad = {"pose": fg.pose(tr["p_WE"], tr["q_WE"]), "size": fg.vec3([0.01, 0.06, 0.06]), "color": orange}
-        label = {"pose": fg.pose([tr["p_WB"][0], tr["p_WB"][1], tr["p_WB"][2] + 0.15], [1.0, 0.0, 0.0, 0.0]),
-                 "billboard": True, "font_size": 14.0, "scale_invariant": True, "color": fg.color(1, 1, 1),
-                 "text": f"am{sysid}"}
-        arrows = []
-        raw = self._scene.contact.get(sysid)
-        if raw is not None:
-            c = json.loads(raw)
-            if c.get("n_points", 0) > 0:
-                f = [c["normal_force_n"] * n + s for n, s in zip(c["normal_W"], c["tangential_force_W"])]
-                mag = math.sqrt(sum(v * v for v in f))
-                if mag > 1e-6:
-                    arrows.append({"pose": fg.pose(c["point_W"], fg.quat_x_to(f)), "shaft_length": 0.02 * mag,
-                                   "shaft_diameter": 0.008, "head_length": 0.02, "head_diameter": 0.02,
-                                   "color": fg.color(0.9, 0.1, 0.1)})
-        return fg.entity(t, f"am{sysid}", cylinders=[base], lines=[arm], cubes=[pad], texts=[label], arrows=arrows)

@@ -8,7 +8,9 @@ what arrived since the last flush. Compression: zstd (the mcap package's default
 
 Reader: walks the file record by record (no summary section needed) and stops at the
 first incomplete or corrupt record; `LogData.truncated` says whether the footer was
-reached.
+reached. `LogData.decoded` gives JSON messages parsed and binary (`ros1`) ones decoded with
+the .msg text stored in the file, in the JSON payload's shape (telemetry.binary.json_shape):
+logs of either form read the same.
 """
 from __future__ import annotations
 
@@ -23,10 +25,13 @@ from mcap.records import Channel, Chunk, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
-from .contract import SCHEMAS, Out
+from telemetry.binary import json_shape
+from telemetry.ros1 import Ros1Message
+
+from .contract import ROS1, ROS1_SCHEMAS, SCHEMAS, Out
 
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
-PROFILE = ""  # no ROS profile: JSON messages with jsonschema schemas
+PROFILE = ""  # no ROS profile: JSON messages with jsonschema schemas, and ros1 ones with ros1msg schemas
 LIBRARY = "amstack ground-station"
 
 
@@ -54,18 +59,22 @@ class McapLogWriter:
         self._writer = Writer(self._file, chunk_size=self.chunk_size, compression=COMPRESSIONS[self.compression])
         self._writer.start(profile=PROFILE, library=LIBRARY)
 
-    def _channel(self, topic: str, schema: str | None) -> int:
+    def _channel(self, topic: str, schema: str | None, encoding: str) -> int:
         cid = self._channel_ids.get(topic)
         if cid is None:
             sid = self._schema_ids.get(schema)
             if sid is None:
-                sid = self._writer.register_schema(schema, "jsonschema", json.dumps(SCHEMAS[schema]).encode())
+                if encoding == ROS1:
+                    sid = self._writer.register_schema(schema, "ros1msg", ROS1_SCHEMAS[schema].text.encode())
+                else:
+                    sid = self._writer.register_schema(schema, "jsonschema", json.dumps(SCHEMAS[schema]).encode())
                 self._schema_ids[schema] = sid
-            cid = self._channel_ids[topic] = self._writer.register_channel(topic, "json", sid)
+            cid = self._channel_ids[topic] = self._writer.register_channel(topic, encoding, sid)
         return cid
 
     def write(self, out: Out) -> None:
-        cid = self._channel(out.topic, out.schema)
+        """One message; a topic's channel (schema, encoding) is that of its first message."""
+        cid = self._channel(out.topic, out.schema, out.encoding)
         self._writer.add_message(cid, log_time=out.log_time_ns, data=out.data, publish_time=out.log_time_ns)
         self.messages += 1
 
@@ -100,7 +109,9 @@ class LogData:
     chunks: int = 0
     orphans: int = 0  # messages whose channel record was not found
     channels: dict[str, str | None] = field(default_factory=dict)  # topic -> schema name
+    encodings: dict[str, str] = field(default_factory=dict)  # topic -> message encoding ("json", "ros1")
     schemas: dict[str, dict] = field(default_factory=dict)  # schema name -> JSON schema
+    ros1_schemas: dict[str, str] = field(default_factory=dict)  # schema name -> .msg text (ros1msg)
     messages: dict[str, list[tuple[int, bytes]]] = field(default_factory=dict)
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
 
@@ -109,8 +120,15 @@ class LogData:
         return sum(len(v) for v in self.messages.values())
 
     def decoded(self, topic: str) -> list[tuple[float, dict]]:
-        """(log time [s], decoded JSON) of one topic."""
-        return [(ns * 1e-9, json.loads(d)) for ns, d in self.messages.get(topic, [])]
+        """(log time [s], message as a dict) of one topic: JSON parsed, ros1 decoded with the
+        file's .msg text into the JSON payload's shape. ValueError for a message that does
+        not decode, or a ros1 schema this reader does not support."""
+        msgs = self.messages.get(topic, [])
+        if self.encodings.get(topic, "json") != ROS1:
+            return [(ns * 1e-9, json.loads(d)) for ns, d in msgs]
+        name = self.channels[topic]
+        msg = Ros1Message.parse(name, self.ros1_schemas[name])
+        return [(ns * 1e-9, json_shape(name, msg.decode(d))) for ns, d in msgs]
 
     def topics(self, prefix: str = "", suffix: str = "") -> list[str]:
         return sorted(t for t in self.messages if t.startswith(prefix) and t.endswith(suffix))
@@ -164,9 +182,12 @@ def read_log(path: str | Path, topics: set[str] | None = None) -> LogData:
                     log.schemas[rec.name] = json.loads(rec.data)
                 except ValueError:
                     pass
+            elif rec.encoding == "ros1msg":
+                log.ros1_schemas[rec.name] = bytes(rec.data).decode("utf-8", "replace")
         elif isinstance(rec, Channel):
             channel_topic[rec.id] = rec.topic
             log.channels[rec.topic] = schema_name.get(rec.schema_id) if rec.schema_id else None
+            log.encodings[rec.topic] = rec.message_encoding
         elif isinstance(rec, Message):
             topic = channel_topic.get(rec.channel_id)
             if topic is None:

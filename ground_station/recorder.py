@@ -21,8 +21,8 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from telemetry.auth import TAG, unseal
-from telemetry.schema import samples_of
+from telemetry import wire
+from telemetry.auth import publisher_of, unseal
 from telemetry.session import ZenohOptions, build_config
 
 from .contract import Translator
@@ -135,15 +135,17 @@ class Recorder:
             if self._master is not None:
                 body = unseal(self._master, self.keys, key, message)
                 if body is None:  # forged, or not of this run: counted, never written
-                    self._rejected += sum(1 for line in samples_of(message) if not line.startswith(TAG))
+                    self._rejected += wire.count(message)
                     continue
                 message = body
-            for data in samples_of(message):
-                if data.startswith(TAG):  # a sealed message, and this recorder has no key: not a sample
-                    continue  # one or more samples, one JSON text per line
+            batch = wire.split(message)  # JSON lines or binary frames (without a key: the tag line skipped)
+            if batch.error:  # a truncated or garbled binary message: the frames before the damage are kept
+                self.translator.malformed += 1
+                self.translator.last_error = f"{key}: {batch.error}"
+            for key_i, data in self._samples(key, batch):
                 samples += 1
                 try:
-                    outs = translate(key, data)
+                    outs = translate(key_i, data, batch.binary)
                 except Exception as exc:  # a payload the contract did not foresee: count it, never stop recording
                     self.translator.malformed += 1
                     self.translator.last_error = f"{key}: {type(exc).__name__}: {exc}"
@@ -155,6 +157,26 @@ class Recorder:
             self.writer.add_metadata("run_start", {"json": json.dumps(self.translator.run_start)})
             self._run_start_written = True
         return n
+
+    def _samples(self, key: str, batch: wire.Batch):
+        """(key, sample) of a message's samples. A batch (on <p>/batch/<name>) names each
+        sample's key; with a run key each must be one that <name> may write (telemetry.auth),
+        the others are counted as rejected."""
+        name = self.keys.batch_name(key)
+        if (batch.keys is None) != (name is None):  # a batch on another key, or a plain message on a batch key
+            if batch.samples:
+                self.translator.malformed += len(batch.samples)
+                self.translator.last_error = f"{key}: {'a batch on a key' if name is None else 'not a batch'}"
+            return
+        if batch.keys is None:
+            for data in batch.samples:
+                yield key, data
+            return
+        for key_i, data in zip(batch.keys, batch.samples):
+            if self._master is not None and publisher_of(self.keys, key_i) != name:
+                self._rejected += 1  # sealed by <name>, but not a key <name> may write
+                continue
+            yield key_i, data
 
     def _flush(self) -> None:
         self.writer.write(self.translator.stats_out(time.monotonic() - self._t0, self._overflow, self._rejected))

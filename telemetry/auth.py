@@ -11,8 +11,9 @@ review). With a run key the recorder keeps only what the run's own publishers se
   HMAC-SHA256(its key, key expression, NUL, the message's samples), in hex;
 - the recorder derives the key of the one publisher that may write each key expression
   (`publisher_of`: the simulator for <p>/sim/**, am<sysid> for <p>/am/<sysid>/**, <name> for
-  <p>/telemetry/<name>) and drops and counts every message whose tag is missing or wrong, or
-  whose key no publisher may write. So a run_end (<p>/sim/event) comes only from the
+  <p>/telemetry/<name> and <p>/batch/<name>) and drops and counts every message whose tag is
+  missing or wrong, or whose key no publisher may write, and every sample of a batch whose
+  own key is not the batch publisher's. So a run_end (<p>/sim/event) comes only from the
   simulator: a companion's key cannot seal it.
 
 A recorded message can be replayed within the run (the seq accounting shows the repeat); a
@@ -36,10 +37,11 @@ def publisher_key(master: bytes, name: str) -> bytes:
 
 
 def publisher_of(keys: Keys, key_expr: str) -> str | None:
-    """The one publisher that may write `key_expr`, or None if none may."""
+    """The one publisher that may write `key_expr`, or None if none may. A batch key
+    <p>/batch/<name> is <name>'s (and every sample in it must be of a key <name> may write)."""
     m = keys.parse(key_expr)
     if m is None:
-        return None
+        return keys.batch_name(key_expr)
     if m.channel is Channel.PUBLISHER:
         return m.name
     if m.channel in (Channel.CONTROLLER, Channel.AM_EVENT):
@@ -48,8 +50,9 @@ def publisher_of(keys: Keys, key_expr: str) -> str | None:
 
 
 def _tag(key: bytes, key_expr: str, body: bytes) -> bytes:
-    mac = hmac.new(key, key_expr.encode("utf-8") + b"\0" + body, hashlib.sha256).hexdigest()
-    return mac[:TAG_HEX_CHARS].encode("ascii")
+    mac = hmac.new(key, key_expr.encode("utf-8") + b"\0", hashlib.sha256)
+    mac.update(body)  # not concatenated: a batch is tens of kB
+    return mac.hexdigest()[:TAG_HEX_CHARS].encode("ascii")
 
 
 def seal(key: bytes, key_expr: str, body: bytes) -> bytes:

@@ -5,15 +5,17 @@
     tele.publish(key, payload)              # stamps seq, enqueues; never blocks
     tele.close()                            # sends what is queued (bounded wait), closes
 
-The caller only stamps the per-key `seq` and appends to a bounded deque (~1 us; no lock,
-no wake-up of another thread). A sender thread opens the zenoh session (retrying if it
-cannot, e.g. client mode with no router), wakes every poll_period_s, JSON-encodes what is
-queued and puts it: one message per run of consecutive samples of a key, carrying them as
-JSON texts separated by newlines (docs/telemetry.md; a subscriber splits on newlines). At 1 kHz
-per AM that is a handful of samples per message instead of a message per sample, whose
-cost in zenoh, in the subscriber's callback and in the recorder is per message. When the
-queue is full the sample is dropped and counted; its seq number is used up, so the
-recorder sees the gap too.
+A payload is a dict (a JSON sample: the sender encodes it), bytes (a binary sample of
+telemetry.binary) or a (finish, pre-sample) pair of telemetry.capture (the sender calls
+finish(pre-sample) for the sample's bytes). The caller only takes the per-key
+`seq` and appends to a bounded deque (~1 us; no lock, no wake-up of another thread). A
+sender thread opens the zenoh session (retrying if it cannot, e.g. client mode with no
+router), wakes every poll_period_s, encodes what is queued and puts it: one message per run
+of consecutive samples of a key, carrying them as JSON texts separated by newlines or as
+length-prefixed binary frames (telemetry.wire; docs/telemetry.md). At 1 kHz per AM that is
+some twenty samples per message instead of a message per sample, whose cost in zenoh, in the
+subscriber's callback and in the recorder is per message. When the queue is full the sample
+is dropped and counted; its seq number is used up, so the recorder sees the gap too.
 
 The sender's zenoh puts use congestion control BLOCK by default: a slow recorder slows
 the sender (zenoh releases the GIL while it waits, so the caller is not held), the queue
@@ -30,6 +32,7 @@ from __future__ import annotations
 
 import collections
 import logging
+import math
 import os
 import re
 import socket
@@ -39,8 +42,10 @@ from dataclasses import dataclass
 from typing import Iterable, Mapping
 
 from .auth import seal
+from .binary import HEADER
 from .schema import encode, publisher_stats_sample
 from .session import ZenohOptions, build_config
+from . import wire
 
 log = logging.getLogger(__name__)
 
@@ -59,9 +64,9 @@ class PublisherStats:
     dropped_queue_full: int  # publish() found the queue full
     dropped_no_session: int  # queued, but the session never opened before close()
     dropped_at_close: int  # still queued (or in a put) when close() gave up waiting
-    encode_errors: int  # payload not JSON-serialisable (programming error; see last_error)
+    encode_errors: int  # payload not JSON-serialisable, nor binary (programming error; see last_error)
     send_errors: int  # zenoh put raised
-    nonfinite: int  # payloads whose NaN/inf were sent as null
+    nonfinite: int  # JSON payloads whose NaN/inf were sent as null (binary samples carry them as they are)
     session_open_failures: int
     connected: bool  # the zenoh session is open (not: a subscriber is listening)
     queued: int
@@ -73,13 +78,27 @@ class PublisherStats:
                 + self.send_errors)
 
 
+def _time_of(payload, default: float) -> float:
+    """A queued sample's simulation time "t" (for the stats sample's own t)."""
+    t = default
+    if type(payload) is dict:
+        t = payload.get("t", default)
+    else:
+        data = payload[1] if type(payload) is tuple and len(payload) == 2 else payload  # a pre-sample starts so too
+        if isinstance(data, (bytes, bytearray)) and len(data) >= HEADER.size:
+            t = HEADER.unpack_from(data)[0]
+    return t if isinstance(t, (int, float)) and math.isfinite(t) else default
+
+
 class TelemetryPublisher:
     """One process's telemetry sender. See the module docstring."""
 
     def __init__(self, options: ZenohOptions | None = None, *, name: str | None = None, queue_size: int = 8192,
-                 congestion: str = "block", poll_period_s: float = 0.02, reopen_period_s: float = 1.0,
+                 congestion: str = "block", poll_period_s: float = 0.1, reopen_period_s: float = 1.0,
                  stats_period_s: float = 1.0, max_batch: int = 256):
-        """name: this process in <prefix>/telemetry/<name> ('am4', 'simulator'; default host-pid)."""
+        """name: this process in <prefix>/telemetry/<name> ('am4', 'simulator'; default host-pid).
+        poll_period_s: how often the sender wakes; zenoh's cost is per message (~100 us of CPU
+        per put here, whatever its size), so at 1 kHz 0.1 s costs ~1 us per sample, 0.02 s ~5 us."""
         if congestion not in ("block", "drop"):
             raise ValueError(f"congestion {congestion!r} must be 'block' or 'drop'")
         if queue_size < 1:
@@ -89,6 +108,7 @@ class TelemetryPublisher:
         self._key = self.options.auth_key  # telemetry.auth: seal every message
         self.name = name or re.sub(r"[^A-Za-z0-9_\-]", "-", f"{socket.gethostname()}-{os.getpid()}")
         self._stats_key = self.keys.publisher(self.name)  # validates the name
+        self._batch_key = self.keys.batch(self.name)
         self._stats_period_s = stats_period_s
         self._last_t = 0.0
         self._queue_size = queue_size
@@ -155,27 +175,32 @@ class TelemetryPublisher:
         self.close()
 
     # ------------------------------------------------------------------ caller side
-    def publish(self, key: str, payload: dict) -> bool:
-        """Stamp payload["seq"] with this key's counter and queue it. Never blocks.
+    def publish(self, key: str, payload: dict | bytes) -> bool:
+        """Take this key's next seq number and queue the sample. Never blocks.
 
-        Returns False if the sample was dropped (queue full, telemetry disabled). The
-        payload must not be modified afterwards (the sender thread encodes it later)."""
-        if not self.enabled:
-            return False
-        if self._state != "open":
+        payload: a dict (JSON; payload["seq"] is stamped here), the bytes of a binary sample
+        (telemetry.binary) or a (finish, pre-sample) pair (telemetry.capture); the sender
+        stamps seq into a binary sample's frame. Returns False if
+        the sample was dropped (queue full, telemetry disabled). A dict must not be modified
+        afterwards (the sender thread encodes it later)."""
+        if self._state != "open" or not self.options.enabled:
+            if not self.options.enabled:
+                return False
             raise TelemetryStateError(f"publish() on a publisher that is {self._state}; call open() first")
-        n = self._seq.get(key, 0)
-        self._seq[key] = n + 1
-        payload["seq"] = n
-        self._last_t = payload.get("t", self._last_t)
-        if len(self._q) >= self._queue_size:
+        seq = self._seq  # key -> seq numbers issued so far (the next one)
+        n = seq.get(key, 0)
+        seq[key] = n + 1
+        if type(payload) is dict:
+            payload["seq"] = n
+        q = self._q
+        if len(q) >= self._queue_size:
             self._n["dropped_queue_full"] += 1
             return False
-        self._q.append((key, payload))
+        q.append((key, payload, n))
         self._n["published"] += 1
         return True
 
-    def publish_many(self, items: Iterable[tuple[str, dict]]) -> int:
+    def publish_many(self, items: Iterable[tuple[str, dict | bytes]]) -> int:
         """publish() each (key, payload); returns how many were queued."""
         return sum(self.publish(k, p) for k, p in items)
 
@@ -242,7 +267,7 @@ class TelemetryPublisher:
         return True
 
     def _take(self):
-        """Up to max_batch queued (key, payload) pairs, oldest first; None if there are none."""
+        """Up to max_batch queued (key, payload, seq), oldest first; None if there are none."""
         with self._lock:
             if self._abandoned or not self._q:
                 return None
@@ -251,16 +276,31 @@ class TelemetryPublisher:
             self._in_flight = len(items)
             return items
 
-    def _send(self, items: list[tuple[str, Mapping]]) -> None:
-        """Encode each sample and put each run of consecutive samples of one key as one
-        message: their JSON texts joined by newlines (JSON text has no raw newline). The
-        order of publish() calls is kept across keys too (the recorder merges keys into
-        shared topics such as /tf). A companion's stream is one key: one put per wake-up
-        instead of one per sample, and zenoh's, the subscriber's and the recorder's cost is
-        per message."""
+    def _send(self, items: list[tuple[str, Mapping | bytes, int]]) -> None:
+        """Encode the samples and put them, in publish order (the recorder merges keys into
+        shared topics such as /tf), as few messages as that order allows (telemetry.wire):
+        each run of JSON samples of one key as one message; each run of binary samples
+        between two JSON ones as one message of their key, or as one batch on this
+        publisher's batch key when they are of several keys (the simulator's interleaved
+        truth). A companion's stream is one key: one put per wake-up instead of one per
+        sample; zenoh's, the subscriber's and the recorder's cost is per message."""
         counts = dict.fromkeys(("sent", "encode_errors", "send_errors", "nonfinite"), 0)
-        runs: list[tuple[str, list[bytes]]] = []
-        for key, payload in items:
+        messages: list[tuple[str, str, list, list[bytes], list[int]]] = []  # key, form, keys (batch), samples, seqs
+        binary_run: tuple[list[str], list[bytes], list[int]] = ([], [], [])
+        for key, payload, seq in items:
+            if type(payload) is not dict:
+                try:
+                    data = payload[0](payload[1]) if type(payload) is tuple else payload  # telemetry.capture
+                    if not isinstance(data, (bytes, bytearray)) or len(data) < HEADER.size:
+                        raise TypeError(f"{type(data).__name__} is neither a dict nor a binary sample")
+                except Exception as exc:
+                    counts["encode_errors"] += 1
+                    self._last_error = f"{key}: cannot finish a binary sample: {exc}"
+                    continue
+                binary_run[0].append(key)
+                binary_run[1].append(data)
+                binary_run[2].append(seq)
+                continue
             try:
                 data, replaced = encode(payload)
             except (TypeError, ValueError) as exc:
@@ -268,26 +308,45 @@ class TelemetryPublisher:
                 self._last_error = f"{key}: cannot encode payload: {exc}"
                 continue
             counts["nonfinite"] += replaced
-            if runs and runs[-1][0] == key:
-                runs[-1][1].append(data)
+            if binary_run[0]:
+                messages.append(self._binary_run(*binary_run))
+                binary_run = ([], [], [])
+            if messages and messages[-1][0] == key and messages[-1][1] == "json":
+                messages[-1][3].append(data)
+                messages[-1][4].append(seq)
             else:
-                runs.append((key, [data]))
-        for key, texts in runs:
+                messages.append((key, "json", [], [data], [seq]))
+        if binary_run[0]:
+            messages.append(self._binary_run(*binary_run))
+        if items:
+            self._last_t = _time_of(items[-1][1], self._last_t)
+        for key, form, keys, samples, seqs in messages:
             try:
                 pub = self._publishers.get(key)
                 if pub is None:
                     pub = self._publishers[key] = self._session.declare_publisher(key, congestion_control=self._cc)
-                body = b"\n".join(texts)
+                if form == "batch":
+                    body = wire.batch_message(keys, samples, seqs)
+                elif form == "binary":
+                    body = wire.binary_message(samples, seqs)
+                else:
+                    body = wire.json_message(samples)
                 pub.put(body if self._key is None else seal(self._key, key, body))
-                counts["sent"] += len(texts)
+                counts["sent"] += len(samples)
             except Exception as exc:
-                counts["send_errors"] += len(texts)
+                counts["send_errors"] += len(samples)
                 self._last_error = f"{key}: put: {exc}"
         with self._lock:
             self._in_flight = 0
             if not self._abandoned:  # else close() counted them already
                 for name, k in counts.items():
                     self._n[name] += k
+
+    def _binary_run(self, keys: list[str], samples: list[bytes], seqs: list[int]):
+        """One message of a run of binary samples: on their key, or a batch if of several keys."""
+        if keys.count(keys[0]) == len(keys):
+            return keys[0], "binary", keys, samples, seqs
+        return self._batch_key, "batch", keys, samples, seqs
 
     def _send_stats(self, final: bool) -> None:
         with self._lock:

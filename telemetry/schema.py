@@ -11,6 +11,8 @@ Keys (prefix configurable, default "amstack"):
     <p>/sim/object                 simulator: object pose, twist      OBJECT_SCHEMA
     <p>/sim/event                  simulator: run start/end, phases   EVENT_SCHEMA
     <p>/telemetry/<name>           every publisher, 1 Hz and at close PUBLISHER_SCHEMA
+    <p>/batch/<name>               binary samples of several keys of publisher <name> in one
+                                   message (telemetry.wire; the simulator's interleaved truth)
 
 Every payload is one compact JSON object whose first two members are, in this order,
 "t" (simulation time [s]) and "seq" (per-key counter, 0, 1, 2, ... assigned by the
@@ -88,6 +90,18 @@ class Keys:
         if not is_key_chunk(name):
             raise ValueError(f"publisher name {name!r} must be one plain key chunk")
         return f"{self.prefix}/telemetry/{name}"
+
+    def batch(self, name: str) -> str:
+        """Where publisher `name` puts binary samples of several of its keys as one message."""
+        if not is_key_chunk(name):
+            raise ValueError(f"publisher name {name!r} must be one plain key chunk")
+        return f"{self.prefix}/batch/{name}"
+
+    def batch_name(self, key: str) -> str | None:
+        """The publisher of a batch key, or None if `key` is not one."""
+        p = self.prefix + "/batch/"
+        name = key[len(p):] if key.startswith(p) else ""
+        return name if is_key_chunk(name) else None
 
     @property
     def everything(self) -> str:
@@ -286,9 +300,8 @@ def am_truth_sample(t_s: float, sysid: int, am, seq: int = 0) -> dict:
     joints = getattr(am, "p_W_joints", ())
     if len(joints):
         out["p_W_joints"] = [_l(p) for p in joints]
-    for key in ("rotor_saturated_steps", "joint_saturated_steps"):
-        if hasattr(am, key):
-            out[key] = int(getattr(am, key))
+    for key in ("rotor_saturated_steps", "joint_saturated_steps"):  # 0 where the simulator does not count
+        out[key] = int(getattr(am, key, 0))
     return out
 
 
@@ -386,16 +399,17 @@ def encode(payload: Mapping) -> tuple[bytes, bool]:
     try:
         return json.dumps(payload, separators=(",", ":"), allow_nan=False).encode(), False
     except ValueError:
-        return json.dumps(_finite(payload), separators=(",", ":"), allow_nan=False).encode(), True
+        return json.dumps(finite_or_null(payload), separators=(",", ":"), allow_nan=False).encode(), True
 
 
-def _finite(x):
+def finite_or_null(x):
+    """x with every non-finite float (in nested dicts and lists) replaced by None."""
     if isinstance(x, float):
         return x if math.isfinite(x) else None
     if isinstance(x, dict):
-        return {k: _finite(v) for k, v in x.items()}
+        return {k: finite_or_null(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [_finite(v) for v in x]
+        return [finite_or_null(v) for v in x]
     return x
 
 

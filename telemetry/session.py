@@ -133,6 +133,10 @@ def config_items(opts: ZenohOptions) -> dict[str, Any]:
             "scouting/multicast/enabled": False,
             "scouting/gossip/enabled": False,
             "scouting/delay": 0,
+            # zenoh's shared-memory transport copies every message of 3 kB or more (a batch of
+            # samples) into a shared segment and runs two watchdog threads: ~5 us of CPU per
+            # 1 kHz sample in the publisher (benchmarks/bench_telemetry.py), for a few hundred kB/s
+            "transport/shared_memory/enabled": False,
             "connect/retry": {"period_init_ms": opts.retry_init_ms, "period_max_ms": opts.retry_max_ms,
                               "period_increase_factor": 2.0},
         })

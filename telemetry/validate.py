@@ -3,6 +3,9 @@
 `errors(value, schema)` lists every violation as 'path: reason' (empty: valid), with the
 JSON Schema 2020-12 validator of the `jsonschema` package (the test extra), plus one rule
 JSON itself implies and Python floats do not: every number is finite.
+`binary_errors(channel, data)` checks a binary sample the same way: it must be one whole
+message of the channel's layout, and its JSON view (telemetry.binary.to_dict) must satisfy
+the channel's JSON Schema.
 """
 from __future__ import annotations
 
@@ -10,6 +13,9 @@ import math
 from typing import Any
 
 from jsonschema import Draft202012Validator
+
+from .binary import to_dict
+from .schema import SCHEMAS, Channel
 
 _validators: dict[int, tuple[dict, Draft202012Validator]] = {}
 
@@ -40,3 +46,12 @@ def errors(value: Any, schema: dict, path: str = "$") -> list[str]:
     """Every violation of `schema` by `value`, as 'path: reason' strings (empty: valid)."""
     out = [f"{_where(path, e.absolute_path)}: {e.message}" for e in _validator(schema).iter_errors(value)]
     return out + _non_finite(value, path)
+
+
+def binary_errors(channel: Channel, data: bytes) -> list[str]:
+    """Every violation of a binary sample of `channel` (empty: valid)."""
+    try:
+        fields = to_dict(channel, data)
+    except (ValueError, KeyError) as exc:
+        return [f"$: not a {channel.value} sample: {exc}"]
+    return errors(fields, SCHEMAS[channel])

@@ -14,10 +14,23 @@ Companion main (after each `amcore.control.step`):
     am_tele.fault(t, "lost lockstep")                  # faults as events
 
 `tele` is a telemetry.publisher.TelemetryPublisher (or anything with publish(key, payload)).
+
+The hot samples (controller state, ground truth) go out binary by default (telemetry.binary:
+ROS 1 messages, copied on the caller's thread and finished on the publisher's sender thread
+by telemetry.capture; ~4x less CPU than JSON in all, benchmarks/bench_telemetry.py);
+encoding="json" sends them as JSON texts (telemetry.schema), as earlier versions did.
+Events are always JSON.
 """
 from __future__ import annotations
 
-from . import schema
+from . import capture, schema
+
+ENCODINGS = ("binary", "json")
+
+
+def _check_encoding(encoding: str) -> None:
+    if encoding not in ENCODINGS:
+        raise ValueError(f"telemetry encoding {encoding!r} is not one of {ENCODINGS}")
 
 
 def phase_at(t_s: float, phase_ends_s) -> str:
@@ -29,10 +42,14 @@ def phase_at(t_s: float, phase_ends_s) -> str:
 class SimulatorTelemetry:
     """Run start/end, phase changes and ground truth every `truth_every` physics steps."""
 
-    def __init__(self, publisher, spec, truth_every: int = 1, keys: schema.Keys | None = None):
+    def __init__(self, publisher, spec, truth_every: int = 1, keys: schema.Keys | None = None,
+                 encoding: str = "binary"):
         if truth_every < 1:
             raise ValueError("truth_every must be >= 1")
+        _check_encoding(encoding)
+        self._samples = capture.ground_truth if encoding == "binary" else schema.ground_truth_samples
         self.pub = publisher
+        self._on = getattr(publisher, "enabled", True)  # nothing to build for a disabled publisher (--no-telemetry)
         self.spec = spec
         self.keys = keys or getattr(publisher, "keys", None) or schema.Keys()
         self.truth_every = truth_every
@@ -50,8 +67,9 @@ class SimulatorTelemetry:
     def truth(self, gt) -> None:
         """Publish one GroundTruth (and a phase event if its time entered a new phase)."""
         self._track_phase(gt.time_s)
-        for key, payload in schema.ground_truth_samples(gt, self.keys):
-            self.pub.publish(key, payload)
+        if self._on:
+            for key, payload in self._samples(gt, self.keys):
+                self.pub.publish(key, payload)
 
     def fault(self, t_s: float, text: str, level: str = "error") -> None:
         self.pub.publish(self.keys.sim_event, schema.fault_event(t_s, text, "simulator", level))
@@ -69,10 +87,14 @@ class SimulatorTelemetry:
 class CompanionTelemetry:
     """One AM's controller state every `every` control steps, and its fault events."""
 
-    def __init__(self, publisher, sysid: int, every: int = 1, keys: schema.Keys | None = None):
+    def __init__(self, publisher, sysid: int, every: int = 1, keys: schema.Keys | None = None,
+                 encoding: str = "binary"):
         if every < 1:
             raise ValueError("every must be >= 1")
+        _check_encoding(encoding)
+        self._sample = capture.controller if encoding == "binary" else schema.controller_sample
         self.pub = publisher
+        self._on = getattr(publisher, "enabled", True)
         self.sysid = int(sysid)
         self.every = every
         self.keys = keys or getattr(publisher, "keys", None) or schema.Keys()
@@ -81,9 +103,9 @@ class CompanionTelemetry:
 
     def step(self, t_s: float, phase: str, result) -> None:
         """result: amcore.control.StepResult (diagnostics and command are read)."""
-        if self._n % self.every == 0:
-            self.pub.publish(self._key, schema.controller_sample(t_s, phase, result.diagnostics, result.command,
-                                                                 sysid=self.sysid))
+        if self._n % self.every == 0 and self._on:
+            self.pub.publish(self._key, self._sample(t_s, phase, result.diagnostics, result.command,
+                                                     sysid=self.sysid))
         self._n += 1
 
     def fault(self, t_s: float, text: str, level: str = "error") -> None:

@@ -13,7 +13,7 @@ from typing import Callable
 from amcore.control import ControllerMemory, ControllerParams, step
 from amcore.mission import am_mission
 from simulator.world import World
-from telemetry import schema
+from telemetry import capture, schema
 from telemetry.wiring import CompanionTelemetry, SimulatorTelemetry
 
 SHORT_MISSION = dict(approach_end_s=0.2, grasp_end_s=0.8, hover_end_s=2.0, approach_move_s=0.1,
@@ -27,21 +27,30 @@ def short_spec(spec, duration_s: float = 2.0):
 
 
 class _Sink:
+    """A publisher that hands each sample to fn(key, payload), binary ones finished (as the
+    sender thread puts them on the wire)."""
+
     def __init__(self, fn, keys):
-        self.publish, self.keys = fn, keys
+        self.fn, self.keys = fn, keys
+
+    def publish(self, key, payload):
+        self.fn(key, capture.finished(payload) if type(payload) is tuple else payload)
 
 
-def run(spec, model, duration_s: float, sink: Callable[[str, dict], object], keys: schema.Keys,
-        truth_every: int = 1, on_truth: Callable | None = None) -> int:
+def run(spec, model, duration_s: float, sink: Callable[[str, dict | bytes], object], keys: schema.Keys,
+        truth_every: int = 1, on_truth: Callable | None = None, on_step: Callable | None = None,
+        encoding: str = "binary") -> int:
     """Fly `duration_s` of the scenario, publishing through telemetry.wiring as the mains
-    do; sink(key, payload) receives every sample. Returns the number of steps."""
+    do; sink(key, payload) receives every sample (hot ones binary unless encoding="json");
+    on_truth(GroundTruth) and on_step(sysid, t, phase, StepResult) see what was published.
+    Returns the number of steps."""
     from amcore.model import create_data
 
     out = _Sink(sink, keys)
     missions = {a.sysid: am_mission(spec, a, model) for a in spec.ams}
     params = {s: ControllerParams.from_vehicle(spec.vehicle, m.frame) for s, m in missions.items()}
-    ams = {s: CompanionTelemetry(out, s) for s in missions}
-    sim = SimulatorTelemetry(out, spec, truth_every=truth_every)
+    ams = {s: CompanionTelemetry(out, s, encoding=encoding) for s in missions}
+    sim = SimulatorTelemetry(out, spec, truth_every=truth_every, encoding=encoding)
     data = create_data(model)
     memory = {s: ControllerMemory() for s in missions}
     n_steps = int(round(duration_s / spec.dt_s))
@@ -54,6 +63,8 @@ def run(spec, model, duration_s: float, sink: Callable[[str, dict], object], key
                 memory[s] = res.memory
                 world.apply(s, res.command.thrust_n, res.command.tau_B_nm, res.command.tau_q_nm)
                 ams[s].step(t, m.phase(t), res)
+                if on_step is not None:
+                    on_step(s, t, m.phase(t), res)
             if sim.due(world.step_index):
                 gt = world.ground_truth()
                 if on_truth is not None:

@@ -4,15 +4,16 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 from hypothesis import given, strategies as st
 
 from ground_station import contract as c
 from ground_station.contract import KeyStats, Translator
-from telemetry import schema
+from telemetry import binary, schema
 from telemetry.schema import Keys
 from telemetry.validate import errors
 
-from .conftest import stamped
+from .conftest import as_json, stamped, wire_form
 
 KEYS = Keys()
 
@@ -21,13 +22,20 @@ def _translate_all(samples, scene_rate_hz=20.0):
     tr = Translator(KEYS, scene_rate_hz=scene_rate_hz)
     outs = []
     for k, p in stamped(samples):
-        data, _ = schema.encode(p)
-        outs.extend(tr.translate(k, data))
+        outs.extend(tr.translate(k, *wire_form(p)))
     return tr, outs
 
 
-def test_real_run_maps_to_the_documented_topics_and_schemas(capture):
-    tr, outs = _translate_all(capture.samples)
+def _fields(o):
+    """An Out's message as a dict: a ros1 one decoded with its channel's layout."""
+    if o.encoding == c.ROS1:
+        return binary.json_shape(o.schema, c.ROS1_SCHEMAS[o.schema].decode(o.data))
+    return json.loads(o.data)
+
+
+@pytest.mark.parametrize("form", ["binary", "json"])
+def test_real_run_maps_to_the_documented_topics_and_schemas(capture, form):
+    tr, outs = _translate_all(capture.samples if form == "binary" else as_json(capture.samples))
     sysids = [a.sysid for a in capture.spec.ams]
     expected = {c.TF_TOPIC, c.SCENE_TOPIC, c.OBJECT_POSE_TOPIC, c.OBJECT_STATE_TOPIC, c.SIM_EVENT_TOPIC, c.EVENTS_TOPIC}
     expected |= {c.controller_topic(s) for s in sysids} | {c.contact_topic(s) for s in sysids}
@@ -35,7 +43,11 @@ def test_real_run_maps_to_the_documented_topics_and_schemas(capture):
     schema_of = {}
     for o in outs:
         assert schema_of.setdefault(o.topic, o.schema) == o.schema  # one schema per topic
-        assert errors(json.loads(o.data), c.SCHEMAS[o.schema]) == [], (o.topic, o.data[:200])
+        assert errors(_fields(o), c.json_schema(o.schema)) == [], (o.topic, o.data[:200])
+    hot = {c.controller_topic(s) for s in sysids} | {c.contact_topic(s) for s in sysids} | {c.OBJECT_STATE_TOPIC}
+    assert {o.topic for o in outs if o.encoding == c.ROS1} == (hot if form == "binary" else set())
+    if form == "binary":
+        assert schema_of[c.controller_topic(sysids[0])] == "amstack/ControllerState"
     last: dict[str, int] = {}
     for o in outs:
         assert o.log_time_ns >= last.get(o.topic, 0), o.topic
@@ -46,8 +58,9 @@ def test_real_run_maps_to_the_documented_topics_and_schemas(capture):
     assert tr.run_start is not None and tr.run_end is not None
 
 
-def test_ground_truth_reaches_tf_and_object_pose_unchanged(capture):
-    _, outs = _translate_all(capture.samples)
+@pytest.mark.parametrize("form", ["binary", "json"])
+def test_ground_truth_reaches_tf_and_object_pose_unchanged(capture, form):
+    _, outs = _translate_all(capture.samples if form == "binary" else as_json(capture.samples))
     gts = capture.truths
     tf = [json.loads(o.data) for o in outs if o.topic == c.TF_TOPIC]
     obj = [json.loads(o.data) for o in outs if o.topic == c.OBJECT_POSE_TOPIC]

@@ -7,11 +7,12 @@ import json
 import math
 import random
 import socket
+import struct
 
 import zenoh
 
 from ground_station.mcap_io import read_log
-from telemetry import schema
+from telemetry import schema, wire
 from telemetry.session import ZenohOptions, build_config
 
 from ..telemetry.zenoh_testing import free_endpoint
@@ -19,7 +20,13 @@ from .proc import RecorderProcess
 
 
 def _junk(rng: random.Random) -> bytes:
-    kind = rng.randrange(7)
+    kind = rng.randrange(10)
+    if kind == 7:  # binary framing, random content
+        return wire.MAGIC + rng.randbytes(rng.randrange(0, 600))
+    if kind == 8:  # well-framed binary samples of random bytes (some long enough for a t/seq header)
+        return wire.binary_message([rng.randbytes(rng.randrange(0, 700)) for _ in range(rng.randrange(1, 5))])
+    if kind == 9:  # a frame longer than the message
+        return wire.MAGIC + struct.pack("<I", 10**6) + rng.randbytes(50)
     if kind == 0:
         return rng.randbytes(rng.randrange(0, 2000))
     if kind == 1:

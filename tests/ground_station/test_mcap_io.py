@@ -118,3 +118,33 @@ def test_recorder_summary_counts_every_message_and_the_bytes_before_it(tmp_path)
     meta = log.metadata["recorder_summary"]
     assert int(meta["written"]) == log.message_count == final.written
     assert 0 < int(meta["bytes"]) < final.bytes == (tmp_path / "r.mcap").stat().st_size
+
+
+def test_binary_channels_decode_with_the_stored_schema_in_a_ros1_reader(capture, tmp_path):
+    """What Foxglove does with the log, done by the ROS 1 reference implementation (genpy, as
+    mcap-ros1-support ships it): every ros1 channel decodes with the .msg text stored in the
+    file alone, to the values our reader gives."""
+    ros1 = pytest.importorskip("mcap_ros1.decoder", reason="mcap-ros1-support (test extra) not installed")
+    from .conftest import write_mcap
+
+    p = tmp_path / "run.mcap"
+    write_mcap(p, capture.samples)
+    ours = read_log(p)
+    ros1_topics = {t for t, e in ours.encodings.items() if e == "ros1"}
+    assert len(ros1_topics) == 5  # the two controllers, the two contacts, the object state
+    seen: dict[str, int] = {}
+    with open(p, "rb") as f:
+        for schema, channel, message, msg in make_reader(f, decoder_factories=[ros1.DecoderFactory()]) \
+                .iter_decoded_messages(topics=sorted(ros1_topics)):
+            assert (schema.encoding, channel.message_encoding) == ("ros1msg", "ros1")
+            i = seen[channel.topic] = seen.get(channel.topic, -1) + 1
+            expected = ours.decoded(channel.topic)[i][1] if i < 3 or i % 97 == 0 else None
+            if expected is None:
+                continue
+            for name, value in expected.items():
+                got = getattr(msg, name)
+                if isinstance(value, list):
+                    assert list(got) == value, (channel.topic, name)
+                else:
+                    assert got == value, (channel.topic, name)
+    assert seen.keys() == ros1_topics and all(n > 100 for n in seen.values())

@@ -11,7 +11,8 @@ from amcore.so3 import Rz
 from ground_station.mcap_io import read_log
 from ground_station.plots import rpy_zyx, write_plots
 from ground_station.review import load_run, summarize
-from telemetry import schema
+from telemetry import capture, schema
+from telemetry.capture import finished
 from telemetry.schema import Keys
 
 from .conftest import write_mcap
@@ -46,7 +47,14 @@ def com_err(sysid, t):
     return np.array([0.01 * math.exp(-t), 0.0, 0.0]) if sysid == 4 else np.array([0.0, 0.02 * math.exp(-t), 0.0])
 
 
-def synthetic_samples(with_run_start=True):
+def synthetic_samples(with_run_start=True, form="binary"):
+    """The run's samples as the mains publish them (form "binary"), or all JSON as earlier
+    versions did (form "json": the recorder writes the log the old way)."""
+    if form == "binary":
+        controller = lambda *a, **kw: finished(capture.controller(*a, **kw))  # noqa: E731
+        truth = lambda gt, keys: [(k, finished(p)) for k, p in capture.ground_truth(gt, keys)]  # noqa: E731
+    else:
+        controller, truth = schema.controller_sample, schema.ground_truth_samples
     spec = NS(name="synthetic", rate_hz=100.0, duration_s=3.0, ams=[NS(sysid=4), NS(sysid=5)],
               mission=NS(approach_end_s=ENDS[0], grasp_end_s=ENDS[1], hover_end_s=ENDS[2]),
               object=NS(shape="box", mass_kg=1.0, position_m=tuple(P_O0), size_m=(0.2, 0.2, 0.2), radius_m=0.0,
@@ -64,7 +72,7 @@ def synthetic_samples(with_run_start=True):
                       wrench_W_filtered=np.array([normal(t), 0.0, 0.0, 0.0, 0.0, 0.0]), sigma_min_J3=0.55,
                       damping=0.0, com_err_saturated=False, y_err_saturated=False)
             cmd = NS(thrust_n=17.0, tau_B_nm=np.zeros(3), tau_q_nm=np.zeros(3))
-            out.append((KEYS.controller(s), schema.controller_sample(t, PHASE_OF(t), diag, cmd, sysid=s)))
+            out.append((KEYS.controller(s), controller(t, PHASE_OF(t), diag, cmd, sysid=s)))
             p_WE = p_WO + R_WO @ (OFFSET_O[s] + slip_O(s, t))
             n = normal(t)
             ams[s] = NS(p_WB=p_WE + np.array([0.0, 0.0, 0.2]), R_WB=np.eye(3), p_WE=p_WE, R_WE=R_WO,
@@ -73,16 +81,18 @@ def synthetic_samples(with_run_start=True):
                         pad_other_contacts=(), base_contacts=())
         gt = NS(time_s=t, ams=ams, object=NS(p_WO=p_WO, quat_WO_wxyz=np.array(schema.quat_wxyz(R_WO)),
                                              v_WO=np.zeros(3), w_WO=np.zeros(3), touching=("table",)))
-        out.extend(schema.ground_truth_samples(gt, KEYS))
+        out.extend(truth(gt, KEYS))
     out.append((KEYS.sim_event, schema.run_end_event(float(T[-1]))))
     return out
 
 
-@pytest.fixture(scope="module")
-def log(tmp_path_factory):
-    p = tmp_path_factory.mktemp("review") / "synthetic.mcap"
-    write_mcap(p, synthetic_samples())
-    return read_log(p)
+@pytest.fixture(scope="module", params=["binary", "json"])
+def log(request, tmp_path_factory):
+    p = tmp_path_factory.mktemp("review") / f"synthetic-{request.param}.mcap"
+    write_mcap(p, synthetic_samples(form=request.param))
+    log = read_log(p)
+    assert (log.encodings["/am/4/controller"] == "ros1") == (request.param == "binary")
+    return log
 
 
 def _window(name):
@@ -118,9 +128,24 @@ def test_per_phase_numbers_match_the_closed_form(log, phase):
         assert "ee_slip_m" not in p
 
 
-def test_phases_fall_back_to_controller_labels(tmp_path):
+def test_old_json_logs_and_binary_logs_review_the_same(tmp_path):
+    """A log written from JSON samples (as every log before the binary channels) and one
+    from binary samples give the same review, number for number."""
+    got = {}
+    for form in ("json", "binary"):
+        p = tmp_path / f"{form}.mcap"
+        write_mcap(p, synthetic_samples(form=form))
+        s = summarize(read_log(p))
+        del s["log"]["path"]
+        got[form] = s
+    assert got["json"] == got["binary"]
+    assert got["json"]["phases"]["hover"]["ams"]["4"]["samples"] > 0
+
+
+@pytest.mark.parametrize("form", ["binary", "json"])
+def test_phases_fall_back_to_controller_labels(tmp_path, form):
     p = tmp_path / "nostart.mcap"
-    write_mcap(p, synthetic_samples(with_run_start=False))
+    write_mcap(p, synthetic_samples(with_run_start=False, form=form))
     s = summarize(read_log(p))
     assert s["phase_source"] == "controller"
     assert s["phase_ends_s"][:2] == [ENDS[0], ENDS[1]]

@@ -13,12 +13,14 @@ from ground_station import contract as c
 from ground_station.cli import main as cli_main
 from ground_station.mcap_io import read_log
 from ground_station.review import summarize
+from telemetry import binary
 from telemetry.publisher import TelemetryPublisher
-from telemetry.schema import Keys
+from telemetry.schema import Channel, Keys
 from telemetry.session import ZenohOptions
 from telemetry.validate import errors
 from tests.telemetry.zenoh_testing import free_endpoint
 
+from .conftest import sample_time
 from .proc import RecorderProcess
 
 KEYS = Keys()
@@ -39,11 +41,15 @@ def recorded(capture, tmp_path_factory):
     with RecorderProcess(path, ep) as rec:
         pub = _publisher(ep, len(capture.samples))
         for k, p in capture.samples:
-            pub.publish(k, dict(p))
+            pub.publish(k, _copy(p))
         pst = pub.close(timeout_s=20.0)
         code, out = rec.wait(timeout_s=30.0)
     assert code == 0, rec.stderr_lines
     return path, pst, json.loads(out), rec.stderr_lines
+
+
+def _copy(payload):
+    return payload if isinstance(payload, bytes) else dict(payload)
 
 
 def test_recorder_got_everything_and_stopped_at_run_end(recorded, capture):
@@ -65,12 +71,15 @@ def test_log_holds_every_documented_topic_with_valid_schemas_and_monotonic_time(
                   c.SIM_EVENT_TOPIC, c.EVENTS_TOPIC, c.publisher_topic("simrun")}
     documented |= {c.controller_topic(s) for s in sysids} | {c.contact_topic(s) for s in sysids}
     assert set(log.messages) == documented
+    hot = {c.controller_topic(s) for s in sysids} | {c.contact_topic(s) for s in sysids} | {c.OBJECT_STATE_TOPIC}
+    assert {t for t, e in log.encodings.items() if e == c.ROS1} == hot  # the binary channels, with their .msg
     for topic, msgs in log.messages.items():
-        schema = log.schemas[log.channels[topic]]  # the schema as stored in the file
+        # the JSON Schema as stored in the file, or the payload's for a ros1 channel (decoded with the stored .msg)
+        schema = log.schemas.get(log.channels[topic]) or c.json_schema(log.channels[topic])
         times = [ns for ns, _ in msgs]
         assert times == sorted(times), topic
-        for _, data in msgs[:: max(1, len(msgs) // 200)]:
-            assert errors(json.loads(data), schema) == [], topic
+        for _, fields in log.decoded(topic)[:: max(1, len(msgs) // 200)]:
+            assert errors(fields, schema) == [], topic
     counts = {}
     for k, _ in capture.samples:
         counts[k] = counts.get(k, 0) + 1
@@ -125,12 +134,12 @@ def test_sigkill_loses_at_most_the_last_flush_period_and_review_salvages(capture
         pub = _publisher(ep, len(capture.samples))
         t0 = time.monotonic()
         for k, p in capture.samples:
-            lag = 2.0 * p["t"] - (time.monotonic() - t0)  # 2 s of wall time per simulated second
+            lag = 2.0 * sample_time(p) - (time.monotonic() - t0)  # 2 s of wall time per simulated second
             if lag > 0:
                 time.sleep(lag)
             if time.monotonic() - t0 >= 2.2:
                 break
-            pub.publish(k, dict(p))
+            pub.publish(k, _copy(p))
             sent_at.setdefault(k, []).append(time.monotonic())
         rec.proc.send_signal(signal.SIGKILL)
         killed_at = time.monotonic()
@@ -142,7 +151,7 @@ def test_sigkill_loses_at_most_the_last_flush_period_and_review_salvages(capture
     topic_of.update({KEYS.contact(s): c.contact_topic(s) for s in (4, 5)})
     topic_of[KEYS.object] = c.OBJECT_STATE_TOPIC
     for key, topic in topic_of.items():
-        seqs = [json.loads(d)["seq"] for _, d in log.messages.get(topic, [])]
+        seqs = [p["seq"] for _, p in log.decoded(topic)]
         assert seqs == list(range(len(seqs))), f"{topic}: salvaged samples are not a gap-free prefix"
         must_have = sum(1 for w in sent_at[key] if w < killed_at - flush_s - slack_s)
         assert must_have > 0 and len(seqs) >= must_have, (topic, len(seqs), must_have, len(sent_at[key]))
@@ -170,8 +179,12 @@ def test_a_keyed_recorder_ignores_a_forged_run_end_and_forged_samples_over_zenoh
         assert forger.wait_for_subscriber(KEYS.sim_event, 15.0)
         forger.publish(KEYS.sim_event, {"t": 0.2, "seq": 0, "source": "simulator", "kind": "run_end",
                                         "level": "info", "text": "forged"})
-        forger.publish(KEYS.object, {"t": 0.2, "seq": 0, "p_WO": [0.0, 0.0, 1000.0], "q_WO": [1.0, 0.0, 0.0, 0.0],
-                                     "v_WO": [0.0, 0.0, 0.0], "w_WO": [0.0, 0.0, 0.0], "touching": []})
+        up = {"t": 0.2, "seq": 0, "p_WO": [0.0, 0.0, 1000.0], "q_WO": [1.0, 0.0, 0.0, 0.0],
+              "v_WO": [0.0, 0.0, 0.0], "w_WO": [0.0, 0.0, 0.0], "touching": []}
+        forger.publish(KEYS.object, dict(up))
+        forger.publish(KEYS.sim_event, {"t": 0.2, "seq": 0, "source": "simulator", "kind": "info",
+                                        "level": "info", "text": "between the two objects"})
+        forger.publish(KEYS.object, binary.from_dict(Channel.OBJECT, up))  # binary, in a message of its own
         forger.close(timeout_s=10.0)
         time.sleep(1.0)  # past the recorder's linger, had it taken the forged run_end
         pub = TelemetryPublisher(ZenohOptions(connect=(ep,), auth_key=publisher_key(master, "simulator")),
@@ -180,12 +193,12 @@ def test_a_keyed_recorder_ignores_a_forged_run_end_and_forged_samples_over_zenoh
         assert pub.wait_for_subscriber(KEYS.sim_event, 15.0)
         for k, p in capture.samples:
             if k.startswith(f"{KEYS.prefix}/sim/"):  # the simulator's own keys
-                pub.publish(k, dict(p))
+                pub.publish(k, _copy(p))
         pub.close(timeout_s=20.0)
         code, out = rec.wait(timeout_s=30.0)
     assert code == 0, rec.stderr_lines
     summary = json.loads(out)
-    assert summary["stop_reason"] == "run_end" and summary["rejected"] >= 2  # the two forged samples (+ am4's stats)
+    assert summary["stop_reason"] == "run_end" and summary["rejected"] >= 4  # the four forged samples (+ am4's stats)
     log = read_log(path)
     ends = [p["t"] for _, p in log.decoded(c.SIM_EVENT_TOPIC) if p["kind"] == "run_end"]
     assert len(ends) == 1 and ends[0] > 1.0  # the run's own, at the end of the 1.3 s capture

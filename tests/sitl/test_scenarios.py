@@ -146,8 +146,8 @@ def test_two_am_comp_log_holds_the_topic_contract_and_agrees_with_ground_truth(c
 
     mcap = comp.run_dir / "run.mcap"
     log = read_log(mcap)
-    for topic, schema in [("/sim/object/pose", "foxglove.PoseInFrame"), ("/am/4/controller", "amstack.ControllerState"),
-                          ("/am/5/controller", "amstack.ControllerState"), ("/sim/am/4/contact", "amstack.PadContact"),
+    for topic, schema in [("/sim/object/pose", "foxglove.PoseInFrame"), ("/am/4/controller", "amstack/ControllerState"),
+                          ("/am/5/controller", "amstack/ControllerState"), ("/sim/am/4/contact", "amstack/PadContact"),
                           ("/tf", "foxglove.FrameTransforms"), ("/scene", "foxglove.SceneUpdate"),
                           ("/events", "foxglove.Log")]:
         assert log.channels.get(topic) == schema, (topic, log.channels.get(topic))

@@ -18,6 +18,9 @@ def test_each_key_has_one_publisher():
     assert publisher_of(KEYS, KEYS.am_truth(4)) == publisher_of(KEYS, KEYS.contact(4)) == "simulator"
     assert publisher_of(KEYS, KEYS.controller(4)) == publisher_of(KEYS, KEYS.am_event(4)) == "am4"
     assert publisher_of(KEYS, KEYS.publisher("am5")) == "am5"
+    assert publisher_of(KEYS, KEYS.batch("simulator")) == "simulator" and publisher_of(KEYS, KEYS.batch("am4")) == "am4"
+    assert publisher_of(KEYS, f"{KEYS.prefix}/batch/a/b") is None
+    assert publisher_of(KEYS, f"{KEYS.prefix}/batch/") is None
     assert publisher_of(KEYS, "amstack/other/thing") is None and publisher_of(KEYS, "elsewhere/sim/event") is None
 
 

@@ -8,12 +8,14 @@ from __future__ import annotations
 import json
 import os
 import signal
+import struct
 import threading
 import time
 
 import pytest
 import zenoh
 
+from telemetry import binary, wire
 from telemetry.publisher import TelemetryPublisher, TelemetryStateError
 from telemetry.schema import Keys, samples_of
 from telemetry.session import ZenohOptions, build_config
@@ -90,6 +92,65 @@ def test_live_subscriber_receives_every_sample_in_order():
     assert st.sent == n and st.dropped == 0
     assert [json.loads(g)["seq"] for g in got] == list(range(n))
     assert messages[0] < n  # a burst goes out batched, several samples per message
+
+
+def test_binary_and_json_samples_arrive_framed_batched_and_in_publish_order():
+    """Binary samples (bytes) go out as length-prefixed frames with the publisher's seq stamped
+    in, interleaved keys as one batch message; a key's samples change form mid-stream and the
+    order across keys and forms is kept."""
+    ep = free_endpoint()
+    got: list[tuple[str, bool, int]] = []  # key, binary, seq
+    batches, forms = [], set()
+    n = 600
+    done = threading.Event()
+    with zenoh.open(build_config(ZenohOptions(role="recorder", listen=(ep,)))) as s:
+        def on_sample(sample):
+            key = str(sample.key_expr)
+            if key == KEYS.publisher("mixed"):
+                return
+            batch = wire.split(sample.payload.to_bytes())
+            batches.append(len(batch.samples))
+            forms.add("batch" if batch.keys is not None else "binary" if batch.binary else "json")
+            assert not batch.error and (batch.keys is not None) == (key == KEYS.batch("mixed"))
+            for k, d in zip(batch.keys or [key] * len(batch.samples), batch.samples):
+                got.append((k, batch.binary, binary.header(d)[1] if batch.binary else json.loads(d)["seq"]))
+            if len(got) == n:
+                done.set()
+
+        sub = s.declare_subscriber(KEYS.everything, on_sample)
+        pub = TelemetryPublisher(ZenohOptions(connect=(ep,)), name="mixed", queue_size=n)
+        pub.open()
+        assert pub.wait_for_subscriber(KEYS.controller(4), 10.0)
+        sent = []
+        for i in range(n):
+            key = KEYS.controller(4) if i % 3 or 300 <= i < 400 else KEYS.object  # one key only in 300..399
+            as_binary = not (key == KEYS.controller(4) and 200 <= i < 260) and i not in (299, 400)  # JSON there
+            data = struct.pack("<dQ", i * 1e-3, 0) + b"x" * (i % 50) if as_binary else {"t": i * 1e-3, "seq": 0}
+            if as_binary and i % 2:  # half of them as the sender's to finish (telemetry.capture)
+                data = (lambda pre: pre[:-1], data + b"!")
+            pub.publish(key, data)
+            sent.append((key, as_binary))
+        st = pub.close(timeout_s=10.0)
+        assert done.wait(10.0), f"received {len(got)} of {n}"
+        sub.undeclare()
+    assert st.sent == n and st.dropped == 0 and st.encode_errors == 0
+    per_key: dict[str, int] = {}
+    expected = []
+    for key, as_binary in sent:
+        expected.append((key, as_binary, per_key.setdefault(key, 0)))
+        per_key[key] += 1
+    assert got == expected
+    assert max(batches) > 1 and forms == {"batch", "binary", "json"}  # batched, in every form
+
+
+def test_a_payload_that_is_neither_json_nor_binary_is_an_encode_error():
+    pub = TelemetryPublisher(ZenohOptions(connect=(free_endpoint(),)))
+    pub.open()
+    pub.publish(KEYS.object, b"short")  # not even a t/seq header
+    pub.publish(KEYS.object, (lambda pre: pre[99], b"\0" * 16))  # a capture whose finish fails
+    pub.publish(KEYS.object, "text")
+    st = pub.close(5.0)
+    assert st.encode_errors == 3 and "neither" in st.last_error
 
 
 @pytest.mark.skipif(not hasattr(signal, "SIGSTOP"), reason="needs SIGSTOP")

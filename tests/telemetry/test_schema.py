@@ -25,6 +25,8 @@ def test_every_key_parses_back_to_its_channel_and_sysid():
             assert m is not None and (m.channel, m.sysid) == (ch, sysid), key
         assert k.parse(k.publisher("sim-1")).name == "sim-1"
     k = Keys()
+    assert k.batch_name(k.batch("simulator")) == "simulator" and k.parse(k.batch("simulator")) is None
+    assert k.batch_name(k.publisher("am4")) is None and k.batch_name("other/batch/am4") is None
     for foreign in ("other/am/4/controller", "amstack/am/x/controller", "amstack/am/4/controllers",
                     "amstack/sim/am/4", "amstack/sim/objects", "amstack", "amstack/am/-1/event",
                     "amstack/telemetry", "amstack/telemetry/a/b"):
