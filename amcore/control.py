@@ -165,7 +165,7 @@ _DIAGNOSTICS_OPTIONAL = (
     "Lambda_y_dot",  # with options.compensate_Lambda_y_dot
     "wrench_W_filtered",  # filtered [f; m] of F_e in W axes, moment about {e} [N, N m]
     "q_d",  # R_d as a unit quaternion (w, x, y, z), w >= 0
-    "terms",  # StepTerms
+    "terms",  # StepTerms: the model and task terms the step evaluated (also as .decoupled and .task)
 )
 
 
@@ -207,6 +207,16 @@ class Diagnostics:
         d = object.__new__(cls)
         d.__dict__.update(given, _packed=packed, _readers=_readers(n))
         return d
+
+    @property
+    def decoupled(self) -> StepTerms | None:
+        """The model terms the step evaluated (M_inv, T_inv, Lambda_w, Gamma_xi_xi): `terms`."""
+        return self.terms
+
+    @property
+    def task(self) -> StepTerms | None:
+        """The task terms the step evaluated (J_y, J_e_xi): `terms`."""
+        return self.terms
 
     def __repr__(self) -> str:
         return "Diagnostics(" + ", ".join(f"{k}={getattr(self, k)!r}" for k in self.FIELDS) + ")"

@@ -246,3 +246,19 @@ def test_carried_quaternion_gives_the_same_step(model, mission, params):
         b = step(model, create_data(model), params, st_q, ref, np.ones(6), ControllerMemory(), t)
         assert np.abs(a.diagnostics.tau - b.diagnostics.tau).max() < 1e-12 * np.abs(a.diagnostics.tau).max()
         assert np.array_equal(st_q.pin_q()[3:7], [-x, -y, -z, -w])
+
+
+def test_diagnostics_keep_their_field_names(model, mission, params):
+    """Every field the diagnostics had before the compiled law, by name, on a real step."""
+    names = ("r_c r_c_d r_c_err rdot_c e_R e_w R_WB R_d w_bd wdot_bd Omega_d f_d y y_d y_err ydot F_y F_rc "
+             "wrench_E_filtered sigma_min_J3 damping com_err_saturated y_err_saturated u tau Lambda_y Lambda_y_dot "
+             "wrench_W_filtered decoupled task").split()
+    st = mission.initial_state()
+    d = step(model, create_data(model), params, st, mission.reference(1.0), np.zeros(6), ControllerMemory(), 1.0).diagnostics
+    for name in names:
+        getattr(d, name)  # AttributeError names a lost field
+    assert d.decoupled.T_inv.shape == (model.nv, model.nv) and d.task.J_y.shape == (model.n, model.nv)
+    n = model.n
+    for name, shape in (("r_c", (3,)), ("R_d", (3, 3)), ("y", (n,)), ("u", (n + 6,)), ("tau", (n + 6,)),
+                        ("Lambda_y", (n, n)), ("wrench_W_filtered", (6,)), ("q_d", (4,))):
+        assert np.shape(getattr(d, name)) == shape, name
