@@ -590,7 +590,6 @@ def control_law(m, g, R, p_WB, w_B, V, Jcom, M_inv, C, H_WE, J_e, Jdot_e,
     filter's state (world-aligned [f; m] at {e}), or empty arrays on the first step; Phi: its
     transition over this step's dt. Returns one array: tau = T^T u first, then everything
     `amcore.control.Diagnostics` reads, in the order of `amcore.control.PACKED`."""
-    n = axes.shape[0]
     T, T_inv, Tdot_V, Lambda_w, G, r_c, rdot_c, _, _, _ = decoupled(m, R, p_WB, w_B, V, Jcom, M_inv, C)
     y, J_y, ydot, _, Jdot_xi, J_e_xi, _, _ = task(H_TW, H_WE, J_e, Jdot_e, V, T_inv, Tdot_V, axes)
 

@@ -1,8 +1,8 @@
 """Closed-form dense linear algebra for 3x3 matrices, with a generic fallback.
 
-The controller inverts and solves with several 3x3 blocks per step (A = Z M Z^T of
-eq. new_coord, Lambda_w, Lambda_y, Jbar_3 of eq. u3); the first three are symmetric (inv_sym). np.linalg spends 5-15 us per call on
-argument handling at this size; the cofactor formulas below take 1-3 us. Any other size
+The numpy laws built beside the compiled one solve with small blocks every step (the
+baseline's damped IK, amcore.offboard's joint torques for a body torque). np.linalg spends
+5-15 us per call on argument handling at this size; the cofactor formulas below take 1-3 us. Any other size
 goes to np.linalg unchanged (the task dimension is the arm's joint count).
 
 Accuracy: with singular values s1 >= s2 >= s3, the cofactors carry absolute errors

@@ -31,33 +31,10 @@ def quat_wxyz_to_R(qwxyz: np.ndarray) -> np.ndarray:
 
 def quat_xyzw_of_R(R: np.ndarray) -> list[float]:
     """Unit quaternion [x, y, z, w] of a rotation matrix, as Eigen (and so pinocchio) builds
-    it from a matrix, on Python floats (half the cost of pin.Quaternion(R) for a 3x3)."""
-    return quat_xyzw_of_rows(R.tolist())
+    it from a matrix (amcore.law.quaternion_xyzw, compiled)."""
+    from . import law  # law imports nothing of so3; imported here to keep so3 light
 
-
-def quat_xyzw_of_rows(m) -> list[float]:
-    """quat_xyzw_of_R for a rotation matrix given by its rows (R.tolist())."""
-    (m00, _, _), (_, m11, _), (_, _, m22) = m
-    t = m00 + m11 + m22
-    if t > 0.0:
-        t = math.sqrt(t + 1.0)
-        w = 0.5 * t
-        t = 0.5 / t
-        x, y, z = (m[2][1] - m[1][2]) * t, (m[0][2] - m[2][0]) * t, (m[1][0] - m[0][1]) * t
-    else:
-        q = [0.0, 0.0, 0.0, 0.0]
-        i = 1 if m11 > m00 else 0
-        i = 2 if m22 > m[i][i] else i
-        j, k = (i + 1) % 3, (i + 2) % 3
-        t = math.sqrt(m[i][i] - m[j][j] - m[k][k] + 1.0)
-        q[i] = 0.5 * t
-        t = 0.5 / t
-        q[3] = (m[k][j] - m[j][k]) * t
-        q[j] = (m[j][i] + m[i][j]) * t
-        q[k] = (m[k][i] + m[i][k]) * t
-        x, y, z, w = q
-    n = math.sqrt(x * x + y * y + z * z + w * w)
-    return [x / n, y / n, z / n, w / n]
+    return law.quaternion_xyzw(np.asarray(R, dtype=float)).tolist()
 
 
 def R_to_quat_wxyz(R: np.ndarray) -> np.ndarray:
