@@ -15,6 +15,11 @@ a companion's resident memory at the end: rss (shared libraries counted whole in
 process), pss (shared pages divided among the processes sharing them: what N companions
 really add up to) and uss (its own pages). Target for a companion: <= 120 MiB (goal 80).
 
+"CPU cap": the real-time factor at which the simulator's and the N companions' CPU per step
+(the two columns above; the recorder's not counted) would fill every core of this machine:
+cores x step / (sim CPU + N x companion CPU). The lockstep cannot run faster than that however
+the processes are scheduled, so a target above it needs less CPU per step, not better waiting.
+
 More columns take the whole apart, measured in the same run:
 - "echo": the same simulator and lockstep with `echo_companion.py` in place of each
   companion (same client, codec and signing; it answers every frame at once with a fixed
@@ -178,6 +183,13 @@ def udp_rtf(n: int, steps: int = 3000) -> float:
     return steps * 1e-3 / wall
 
 
+def cpu_cap(sim_cpu_us: float, comp_cpu_us: float, n: int, step_us: float, cores: int | None = None) -> float:
+    """The real-time factor at which the simulator's and n companions' CPU per step fill every
+    core (see the module doc): cores * step / (sim + n * companion)."""
+    cores = os.cpu_count() if cores is None else cores
+    return cores * step_us / (sim_cpu_us + n * comp_cpu_us)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--duration", type=float, default=3.0)
@@ -190,8 +202,8 @@ def main() -> None:
     spin = a.echo_spin_us
     spin_head = f" {'echo+' + format(spin, 'g') + 'us':>12}" if spin is not None else ""
     print(f"{'N':>3} {'SITL':>7} {'echo':>7}{spin_head} {'UDP':>7} {'bare PyBullet':>14} {'bare/SITL':>10} "
-          f"{'wall incl. start-up':>20} | {'sim CPU/step':>12} {'comp CPU/step':>13} {'comp rss':>9} {'pss':>6} "
-          f"{'uss':>6}")
+          f"{'wall incl. start-up':>20} | {'sim CPU/step':>12} {'comp CPU/step':>13} {'CPU cap':>8} {'comp rss':>9} "
+          f"{'pss':>6} {'uss':>6}")
     with tempfile.TemporaryDirectory() as tmp:
         for n in a.n:
             path = scenario_with(n, Path(tmp))
@@ -200,8 +212,10 @@ def main() -> None:
             echo = echo_rtf(path, a.duration, Path(tmp) / f"echo{n}")
             spun = f" {echo_rtf(path, a.duration, Path(tmp) / f'spin{n}', spin):12.2f}" if spin is not None else ""
             udp = udp_rtf(n)
+            cap = cpu_cap(proc["sim_cpu_us"], proc["comp_cpu_us"], n, 1e6 / load_scenario(path).rate_hz)
             print(f"{n:>3} {rtf:7.2f} {echo:7.2f}{spun} {udp:7.1f} {bare:14.1f} {bare / rtf:10.0f} {wall:19.1f}s | "
-                  f"{proc['sim_cpu_us']:10.0f}us {proc['comp_cpu_us']:11.0f}us {proc['rss']:6.0f}MiB {proc['pss']:6.0f} "
+                  f"{proc['sim_cpu_us']:10.0f}us {proc['comp_cpu_us']:11.0f}us {cap:7.2f}x {proc['rss']:6.0f}MiB "
+                  f"{proc['pss']:6.0f} "
                   f"{proc['uss']:6.0f}", flush=True)
     print("SITL: the product (am-run, telemetry on). echo: same lockstep, companions without a controller"
           + (f" (echo+{spin:g}us: each busy-waits {spin:g} us per step)" if spin is not None else "") + ".\n"

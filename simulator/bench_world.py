@@ -4,7 +4,17 @@ Run: python -m simulator.bench_world [--steps 2000]
 
 "bare step" is `World.step()` alone (it re-applies the stored commands); "full loop" adds
 what a lockstep server does per step: `apply`, `state` and `wrench_ee` for every AM;
-"ground truth" is one `ground_truth()` call. The 10-AM layout: cylinder of radius 0.6 m
+"ground truth" is one `ground_truth()` call.
+
+"per AM" times, back to back (hot caches), the lockstep simulator's own work for one AM and
+step as `simulator.core` and `amlink.server` do it: read the sensors (`sensor_values`, the
+frame's value type), frame and sign the sensor batch (4 MAVLink 2 frames), verify and decode
+the answer (TorqueSetpoint + SET_ATTITUDE_TARGET, 2 signed frames), apply it (mixer, joint
+limits) and re-apply it in the step (3 PyBullet setters). "floor" is what the same work
+costs in calls that no Python code around them can avoid: the PyBullet getters and setters
+it makes and one SHA-256 per signed frame (hashlib), back to back. In a running SITL every
+figure is ~3x this (the caches are cold after the other processes ran; see
+docs/benchmarks.md). The 10-AM layout: cylinder of radius 0.6 m
 and 5 kg, AMs 36 deg apart, each facing the object (yaw = azimuth + 180 deg), arm at
 q = [1.0472, -1.0472, 0], pad face 2 cm outside the surface, ee at the object's centre height.
 """
@@ -12,11 +22,19 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import hashlib
 import time
+import timeit
+from itertools import cycle
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
+import pybullet as pb
+
+from amlink import fastcodec, wire
+from amlink.udp import SIM_COMPID, SIM_SYSID
+from amlink.types import AttitudeTarget, TorqueSetpoint, sensor_frame_from_wire
 
 from amcore.config import AmSpec, ObjectSpec, ScenarioSpec, load_scenario
 from amcore.model import AmState, build_model
@@ -27,6 +45,7 @@ from .world import World
 SCENARIO = Path(__file__).resolve().parents[1] / "configs" / "scenarios" / "two_am_comp.toml"
 Q_BENCH = np.array([1.0472, -1.0472, 0.0])
 GAP_M = 0.02
+KEY = bytes(range(32))  # a signing key for the per-AM figures
 
 
 def ee_offset_B(spec: ScenarioSpec, q: np.ndarray) -> np.ndarray:
@@ -90,6 +109,67 @@ def bench(spec: ScenarioSpec, steps: int) -> dict[str, float]:
     return {"bare": bare, "full": full, "truth": truth}
 
 
+def _us(fn, number: int = 2000, repeat: int = 7) -> float:
+    """Median over `repeat` rounds of fn's time per call [us]."""
+    return 1e6 * float(np.median(timeit.repeat(fn, number=number, repeat=repeat))) / number
+
+
+def per_am(spec: ScenarioSpec) -> dict[str, float]:
+    """The lockstep simulator's per-AM work and its floor, [us] per AM and step (module doc)."""
+    world = World(spec, ring_placement(spec, Q_BENCH, GAP_M))
+    world.connect()
+    try:
+        s = world.sysids[0]
+        T = world.total_mass_kg(s) * spec.vehicle.gravity_mps2
+        for _ in range(10):
+            world.step()
+        am, c, n = world._ams[s], world._client, spec.vehicle.n_joints
+        enc = wire.Encoder(SIM_SYSID, SIM_COMPID, signing_key=KEY, link_id=1)
+        frame = sensor_frame_from_wire(7, 0.007, world.sensor_values(s), n, 0)
+        sp = TorqueSetpoint(step=7, thrust_n=T, tau_B_nm=np.zeros(3), tau_q_nm=np.zeros(n))
+        att = AttitudeTarget(7, quat_wxyz=np.array([1.0, 0.0, 0.0, 0.0]), rates_rad_s=np.zeros(3),
+                             thrust_normalized=0.5)
+        am_enc = wire.Encoder(s, 191, signing_key=KEY, link_id=2)
+        answers = cycle([am_enc.pack_payloads(fastcodec.setpoint_payloads(sp, att)) for _ in range(50000)])
+        dec = wire.Decoder({s: KEY}, readers=fastcodec.READERS)
+        asm = fastcodec.SetpointAssembler()
+
+        def receive():
+            for mid, _sysid, _compid, body in dec.feed_records(next(answers)):
+                asm.push(mid, body)
+
+        def reapply():  # the per-AM part of World.step
+            pb.applyExternalForce(am.body_id, -1, [0.0, 0.0, T], [0.0, 0.0, 0.0], pb.LINK_FRAME, physicsClientId=c)
+            pb.applyExternalTorque(am.body_id, -1, [0.0, 0.0, 0.0], pb.LINK_FRAME, physicsClientId=c)
+            pb.setJointMotorControlArray(am.body_id, world._arm_ids[s], pb.TORQUE_CONTROL, forces=[0.0] * n,
+                                         physicsClientId=c)
+
+        links, arm = world._sensed_links[s], world._arm_ids[s]
+        frames = [bytes(200)] * 6  # 4 sensor frames out, 2 setpoint frames in
+
+        def floor():
+            pb.getBasePositionAndOrientation(am.body_id, physicsClientId=c)
+            pb.getBaseVelocity(am.body_id, physicsClientId=c)
+            pb.getJointStates(am.body_id, arm, physicsClientId=c)
+            pb.getJointState(am.body_id, am.ft_joint_id, physicsClientId=c)
+            pb.getLinkStates(am.body_id, links, computeForwardKinematics=1, physicsClientId=c)
+            for f in frames:
+                hashlib.sha256(KEY + f).digest()
+            reapply()
+
+        out = {
+            "sense": _us(lambda: sensor_frame_from_wire(7, 0.007, world.sensor_values(s), n, 0)),
+            "frame and sign": _us(lambda: enc.pack_payloads(fastcodec.sensor_frame_payloads(frame))),
+            "verify and decode": _us(receive),
+            "apply": _us(lambda: (world.apply(s, T, np.zeros(3), np.zeros(n)), reapply())),
+        }
+        out["sum"] = sum(out.values())
+        out["floor"] = _us(floor)
+    finally:
+        world.close()
+    return out
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     parser.add_argument("--steps", type=int, default=2000)
@@ -100,6 +180,11 @@ def main(argv: list[str] | None = None) -> None:
         rt = spec.dt_s / r["full"]
         print(f"{label:28s} bare step {1e3 * r['bare']:.3f} ms | full loop {1e3 * r['full']:.3f} ms "
               f"({rt:.2f}x real time at {spec.rate_hz:.0f} Hz) | ground_truth {1e3 * r['truth']:.3f} ms")
+    p = per_am(base)
+    print("per AM and step, the lockstep simulator's own work [us, median, hot]: "
+          + ", ".join(f"{k} {v:.1f}" for k, v in p.items() if k != "floor"))
+    print(f"floor of that work (its PyBullet calls and SHA-256s alone): {p['floor']:.1f} us; "
+          f"target (issue 15) <= 12 us, goal 6")
 
 
 if __name__ == "__main__":

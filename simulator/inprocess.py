@@ -23,7 +23,7 @@ from amcore import cliargs
 from amcore.config import ConfigError, ScenarioSpec, check_duration, load_scenario
 from amlink import fastcodec
 from amlink.limits import SetpointLimits
-from amlink.types import AttitudeSetpoint, SensorFrame, TorqueSetpoint
+from amlink.types import AttitudeSetpoint, SensorFrame, TorqueSetpoint, sensor_frame_from_wire
 from companion import jitcache
 from companion.pilot import Pilot
 
@@ -32,11 +32,12 @@ from .verdict import MISSION_FAILED
 
 
 def as_on_the_wire(f: SensorFrame) -> SensorFrame:
-    """The frame a companion decodes: base state through float32 (MAVLink ODOMETRY)."""
-    f32 = lambda a: np.asarray(a, dtype=np.float32).astype(np.float64)  # noqa: E731
-    return SensorFrame(step=f.step, time_s=round(f.time_s * 1e6) / 1e6, p_WB=f32(f.p_WB),
-                       quat_WB_wxyz=f32(f.quat_WB_wxyz), v_B=f32(f.v_B), w_B=f32(f.w_B), q=f.q, qdot=f.qdot,
-                       wrench_E=f.wrench_E, flags=f.flags)
+    """The frame a companion decodes: base state through float32 (MAVLink ODOMETRY), time
+    in microseconds, built as the companion's decoder builds it (`sensor_frame_from_wire`)."""
+    base = np.concatenate((f.p_WB, f.quat_WB_wxyz, f.v_B, f.w_B)).astype(np.float32).tolist()
+    return sensor_frame_from_wire(f.step, round(f.time_s * 1e6) / 1e6,
+                                  base + f.q.tolist() + f.qdot.tolist() + f.wrench_E.tolist(), f.q.shape[0],
+                                  int(f.flags))
 
 
 def setpoint_as_on_the_wire(sp: TorqueSetpoint | AttitudeSetpoint) -> TorqueSetpoint | AttitudeSetpoint:
