@@ -32,13 +32,12 @@ import numpy as np
 import pinocchio as pin
 import pybullet as pb
 
-from amlink import fastcodec, wire
-from amlink.udp import SIM_COMPID, SIM_SYSID
-from amlink.types import AttitudeTarget, TorqueSetpoint, sensor_frame_from_wire
-
 from amcore.config import AmSpec, ObjectSpec, ScenarioSpec, load_scenario
 from amcore.model import AmState, build_model
 from amcore.so3 import Rz
+from amlink import fastcodec, wire
+from amlink.types import AttitudeTarget, TorqueSetpoint, sensor_frame_from_wire
+from amlink.udp import SIM_COMPID, SIM_SYSID
 
 from .world import World
 
