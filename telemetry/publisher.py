@@ -7,7 +7,7 @@
 
 A payload is a dict (a JSON sample: the sender encodes it), bytes (a binary sample of
 telemetry.binary) or a (finish, pre-sample) pair of telemetry.capture (the sender calls
-finish(pre-sample) for the sample's bytes). The caller only takes the per-key
+finish.many(pre-samples) once per finisher for a wake-up's samples, or finish(pre-sample)). The caller only takes the per-key
 `seq` and appends to a bounded deque (~1 us; no lock, no wake-up of another thread). A
 sender thread opens the zenoh session (retrying if it cannot, e.g. client mode with no
 router), wakes every poll_period_s, encodes what is queued and puts it: one message per run
