@@ -2,6 +2,7 @@
 
     python benchmarks/bench_telemetry.py [--ams 10] [--rate 1000] [--truth-every 1] [--seconds 5]
         [--encoding binary|json] [--skip-cpu] [--skip-caller] [--skip-throughput] [--cpu-steps 3000] [--cpu-rounds 3]
+        [--before REV] [--cpu-setups "binary,binary (before)"]
 
 0. Telemetry CPU per step of a companion (its controller sample) and of the simulator (truth
    and contact of 2 AMs and the object), JSON and binary samples in the same run, alternating,
@@ -11,7 +12,10 @@
    a per-run key, to a live `ground-station record`. Counted: the telemetry call's time on
    the loop's thread, plus every other thread's CPU time (the sender's, zenoh's) until the
    queue is drained. Medians over rounds. (The same calls back to back, with hot caches, cost
-   a third as much: printed too, they are what a microbenchmark says.)
+   a third as much: printed too, they are what a microbenchmark says.) With --before REV,
+   one more setup, "binary (before)": the telemetry package as it was at git revision REV
+   (its publisher, capture and wiring, loaded from `git archive` under another name), in the
+   same run, alternating with the others.
 1. Caller-side cost of one controller sample, paced at 1 kHz like a control loop, with
    no subscriber, with a live recorder, and with a frozen (SIGSTOP) recorder, for
    (a) TelemetryPublisher.publish (stamp + bounded queue; a thread encodes and puts) and
@@ -57,6 +61,7 @@ FORMS = ("json", "binary")
 # part 0's publishers: JSON and binary as they are, and JSON as it was before the binary channels
 # (the sender woke every 20 ms; zenoh's shared-memory transport was on)
 SETUPS = {"json (before)": "json", "json": "json", "binary": "binary"}
+IMPLS: dict = {}  # setup -> (TelemetryPublisher, CompanionTelemetry, SimulatorTelemetry) if not today's (--before)
 BEFORE_ZENOH = """{scouting: {multicast: {enabled: false}, gossip: {enabled: false}, delay: 0},
                    transport: {shared_memory: {enabled: true}}}"""
 
@@ -116,6 +121,24 @@ class _KeyedRecorder:
         return json.loads(self.proc.communicate(timeout=60)[0])
 
 
+def load_before(rev: str) -> None:
+    """Add the setup "binary (before)": the telemetry package at git revision `rev`, imported
+    as the package `telemetry_before` (its imports of itself are relative)."""
+    import importlib
+    import io
+    import tarfile
+
+    out = Path(tempfile.mkdtemp(prefix="telemetry-before-"))
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "telemetry"], check=True,
+                             capture_output=True).stdout
+    tarfile.open(fileobj=io.BytesIO(archive)).extractall(out)
+    (out / "telemetry").rename(out / "telemetry_before")
+    sys.path.insert(0, str(out))
+    pub, wiring = (importlib.import_module(f"telemetry_before.{m}") for m in ("publisher", "wiring"))
+    SETUPS["binary (before)"] = "binary"
+    IMPLS["binary (before)"] = (pub.TelemetryPublisher, wiring.CompanionTelemetry, wiring.SimulatorTelemetry)
+
+
 def _drain(pub: TelemetryPublisher, timeout_s: float = 20.0) -> None:
     """Until the sender thread has handed every queued sample to zenoh."""
     deadline = time.monotonic() + timeout_s
@@ -167,22 +190,23 @@ def _cpu_round(loop: _Loop, setup: str, n: int, templates: dict, recorder, sysid
     preempted). Background: the process's CPU time (every thread) minus the loop thread's
     own, from before the first sample until the queue is drained: the sender thread and zenoh's."""
     name = "simulator" if loop.kind == "simulator" else f"am{sysid}"
-    form, before = SETUPS[setup], setup.endswith("(before)")
+    form = SETUPS[setup]
     config = None
-    if before:
+    if setup == "json (before)":
         config = tmp / "before.json5"
         config.write_text(BEFORE_ZENOH)
-    pub = TelemetryPublisher(ZenohOptions(connect=(recorder.endpoint,), auth_key=publisher_key(MASTER, name),
-                                          config_file=config),
-                             name=name, queue_size=20000, poll_period_s=0.02 if before else 0.1)
+    publisher, companion, simulator = IMPLS.get(setup, (TelemetryPublisher, CompanionTelemetry, SimulatorTelemetry))
+    pub = publisher(ZenohOptions(connect=(recorder.endpoint,), auth_key=publisher_key(MASTER, name),
+                                 config_file=config),
+                    name=name, queue_size=20000, poll_period_s=0.02 if setup == "json (before)" else 0.1)
     pub.open()
     if not pub.wait_for_subscriber(KEYS.sim_event if loop.kind == "simulator" else KEYS.controller(sysid), 20.0):
         raise RuntimeError("recorder not reachable")
     if loop.kind == "simulator":
-        tele = SimulatorTelemetry(pub, templates["spec"], encoding=form)
+        tele = simulator(pub, templates["spec"], encoding=form)
         call = lambda t, out: tele.truth(out)  # noqa: E731
     else:
-        tele = CompanionTelemetry(pub, sysid, encoding=form)
+        tele = companion(pub, sysid, encoding=form)
         call = lambda t, out: tele.step(t, out[0], out[1])  # noqa: E731
     time.sleep(0.3)
     ts = np.empty(n)
@@ -237,10 +261,10 @@ def cpu_per_step(templates: dict, n: int, rounds: int) -> None:
             total[f] = float(np.median([sum(r) for r in rows]))
             print(f"    {f:13s} caller {caller:6.1f} + background {bg:6.1f} = {total[f]:6.1f} us/step   "
                   f"(rounds: {', '.join(f'{sum(r):.1f}' for r in rows)})")
-        print(f"    binary/JSON: {total['binary'] / total['json']:.2f} "
-              f"({total['json'] / total['binary']:.1f}x less CPU); "
-              f"binary/JSON (before): {total['binary'] / total['json (before)']:.2f} "
-              f"({total['json (before)'] / total['binary']:.1f}x less)")
+        for other in ("json", "json (before)", "binary (before)"):
+            if other in total:
+                print(f"    binary/{other}: {total['binary'] / total[other]:.2f} "
+                      f"({total[other] / total['binary']:.1f}x less CPU)")
         if kind == "companion":
             print(f"    target <= 10 us: {'met' if total['binary'] <= 10 else 'NOT met'}; "
                   f"goal <= 5 us: {'met' if total['binary'] <= 5 else 'not met'}")
@@ -486,6 +510,8 @@ def main() -> None:
     ap.add_argument("--encoding", choices=FORMS, default="binary", help="samples of parts 2 and 3")
     ap.add_argument("--cpu-steps", type=int, default=3000, help="part 0: steps per round")
     ap.add_argument("--cpu-rounds", type=int, default=3)
+    ap.add_argument("--before", metavar="REV", help="part 0: also the telemetry package at git revision REV")
+    ap.add_argument("--cpu-setups", help="part 0: a comma-separated subset of the setups (default: all)")
     ap.add_argument("--skip-cpu", action="store_true")
     ap.add_argument("--skip-caller", action="store_true")
     ap.add_argument("--skip-throughput", action="store_true")
@@ -502,6 +528,12 @@ def main() -> None:
     t0 = time.perf_counter()
     templates = capture_real_run(1.0)
     print(f"captured 1 s of the two-AM scenario for payload templates in {time.perf_counter() - t0:.1f} s")
+    if a.before:
+        load_before(a.before)
+    if a.cpu_setups:
+        keep = a.cpu_setups.split(",")
+        for name in [k for k in SETUPS if k not in keep]:
+            del SETUPS[name]
     if not a.skip_cpu:
         cpu_per_step(templates, a.cpu_steps, a.cpu_rounds)
     if not a.skip_caller:

@@ -1,6 +1,6 @@
 """Compiling the control law once per machine, not once per process.
 
-amcore.law is compiled by numba on its first call and cached on disk (amcore.jit). Ten
+amcore.law (and telemetry.kernels) is compiled by numba on its first call and cached on disk (amcore.jit). Ten
 companions starting together would otherwise all find the cache empty and compile at once
 (each for tens of seconds, on a 2-core machine for minutes). `warm` makes the first call
 while holding an exclusive lock on a file beside the cache: the first process compiles and
@@ -20,6 +20,7 @@ from pathlib import Path
 
 from amcore import law
 from amcore.jit import kernels
+from telemetry import kernels as telemetry_kernels
 
 
 def cache_dir() -> Path:
@@ -61,12 +62,14 @@ class CompileReport:
 
 
 def warm(first_call) -> CompileReport:
-    """Run `first_call()` (a first call into amcore.law, e.g. Pilot.warm_up) holding the
-    machine-wide lock; report how many kernels this process compiled."""
+    """Run `first_call()` (a first call into amcore.law, e.g. Pilot.warm_up) and the telemetry
+    kernels' (telemetry.kernels.warm_up) holding the machine-wide lock; report how many
+    kernels this process compiled."""
     t0 = time.perf_counter()
-    ks = kernels(law)
+    ks = kernels(law) + kernels(telemetry_kernels)
     with _exclusive(cache_dir() / "amstack-jit.lock"):
         before = sum(sum(k.stats.cache_misses.values()) for k in ks)
         first_call()
+        telemetry_kernels.warm_up()
         compiled = sum(sum(k.stats.cache_misses.values()) for k in ks) - before
     return CompileReport(compiled=compiled, seconds=time.perf_counter() - t0)

@@ -7,7 +7,7 @@
 
 A payload is a dict (a JSON sample: the sender encodes it), bytes (a binary sample of
 telemetry.binary) or a (finish, pre-sample) pair of telemetry.capture (the sender calls
-finish(pre-sample) for the sample's bytes). The caller only takes the per-key
+finish.many(pre-samples) once per finisher for a wake-up's samples, or finish(pre-sample)). The caller only takes the per-key
 `seq` and appends to a bounded deque (~1 us; no lock, no wake-up of another thread). A
 sender thread opens the zenoh session (retrying if it cannot, e.g. client mode with no
 router), wakes every poll_period_s, encodes what is queued and puts it: one message per run
@@ -88,6 +88,45 @@ def _time_of(payload, default: float) -> float:
         if isinstance(data, (bytes, bytearray)) and len(data) >= HEADER.size:
             t = HEADER.unpack_from(data)[0]
     return t if isinstance(t, (int, float)) and math.isfinite(t) else default
+
+
+def _finished(payloads: list) -> list:
+    """The binary samples of queued binary payloads, in order: bytes as they are, and each
+    telemetry.capture pre-sample finished, one call per finisher for all of its pre-samples
+    (`finish.many`, one compiled call for a wake-up's ~100) where it has one. What cannot be
+    finished (or is not a binary sample) is left as an exception in its place."""
+    out = list(payloads)
+    groups: dict = {}
+    for i, p in enumerate(payloads):
+        if type(p) is tuple and len(p) == 2:
+            try:
+                groups.setdefault(p[0], []).append(i)
+            except TypeError as exc:  # not hashable
+                out[i] = exc
+        elif not isinstance(p, (bytes, bytearray)) or len(p) < HEADER.size:
+            out[i] = TypeError(f"{type(p).__name__} is neither a dict nor a binary sample")
+        else:
+            out[i] = bytes(p)
+    for finish, at in groups.items():
+        many = getattr(finish, "many", None)
+        if many is not None:
+            try:
+                done = many([payloads[i][1] for i in at])
+                if len(done) == len(at):
+                    for i, d in zip(at, done):
+                        out[i] = d
+                    continue
+            except Exception:  # one at a time below: only those that fail are lost
+                pass
+        for i in at:
+            try:
+                d = finish(payloads[i][1])
+                if not isinstance(d, (bytes, bytearray)) or len(d) < HEADER.size:
+                    raise TypeError(f"{type(d).__name__} is not a binary sample")
+                out[i] = bytes(d)
+            except Exception as exc:
+                out[i] = exc
+    return out
 
 
 class TelemetryPublisher:
@@ -286,19 +325,11 @@ class TelemetryPublisher:
         sample; zenoh's, the subscriber's and the recorder's cost is per message."""
         counts = dict.fromkeys(("sent", "encode_errors", "send_errors", "nonfinite"), 0)
         messages: list[tuple[str, str, list, list[bytes], list[int]]] = []  # key, form, keys (batch), samples, seqs
-        binary_run: tuple[list[str], list[bytes], list[int]] = ([], [], [])
+        binary_run: tuple[list[str], list, list[int]] = ([], [], [])  # keys, payloads (bytes or (finish, pre)), seqs
         for key, payload, seq in items:
             if type(payload) is not dict:
-                try:
-                    data = payload[0](payload[1]) if type(payload) is tuple else payload  # telemetry.capture
-                    if not isinstance(data, (bytes, bytearray)) or len(data) < HEADER.size:
-                        raise TypeError(f"{type(data).__name__} is neither a dict nor a binary sample")
-                except Exception as exc:
-                    counts["encode_errors"] += 1
-                    self._last_error = f"{key}: cannot finish a binary sample: {exc}"
-                    continue
                 binary_run[0].append(key)
-                binary_run[1].append(data)
+                binary_run[1].append(payload)
                 binary_run[2].append(seq)
                 continue
             try:
@@ -309,7 +340,7 @@ class TelemetryPublisher:
                 continue
             counts["nonfinite"] += replaced
             if binary_run[0]:
-                messages.append(self._binary_run(*binary_run))
+                messages += self._binary_run(*binary_run, counts)
                 binary_run = ([], [], [])
             if messages and messages[-1][0] == key and messages[-1][1] == "json":
                 messages[-1][3].append(data)
@@ -317,7 +348,7 @@ class TelemetryPublisher:
             else:
                 messages.append((key, "json", [], [data], [seq]))
         if binary_run[0]:
-            messages.append(self._binary_run(*binary_run))
+            messages += self._binary_run(*binary_run, counts)
         if items:
             self._last_t = _time_of(items[-1][1], self._last_t)
         for key, form, keys, samples, seqs in messages:
@@ -342,11 +373,22 @@ class TelemetryPublisher:
                 for name, k in counts.items():
                     self._n[name] += k
 
-    def _binary_run(self, keys: list[str], samples: list[bytes], seqs: list[int]):
-        """One message of a run of binary samples: on their key, or a batch if of several keys."""
+    def _binary_run(self, keys: list[str], payloads: list, seqs: list[int], counts: dict) -> list[tuple]:
+        """The message of a run of binary samples (none if none could be finished): on their
+        key, or a batch if of several keys."""
+        data = _finished(payloads)
+        if any(type(d) is not bytes for d in data):
+            ok = [i for i, d in enumerate(data) if type(d) is bytes]
+            for d, key in zip(data, keys):
+                if type(d) is not bytes:
+                    counts["encode_errors"] += 1
+                    self._last_error = f"{key}: cannot finish a binary sample: {d}"
+            keys, data, seqs = [keys[i] for i in ok], [data[i] for i in ok], [seqs[i] for i in ok]
+            if not keys:
+                return []
         if keys.count(keys[0]) == len(keys):
-            return keys[0], "binary", keys, samples, seqs
-        return self._batch_key, "batch", keys, samples, seqs
+            return [(keys[0], "binary", keys, data, seqs)]
+        return [(self._batch_key, "batch", keys, data, seqs)]
 
     def _send_stats(self, final: bool) -> None:
         with self._lock:

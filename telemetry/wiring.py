@@ -17,13 +17,13 @@ Companion main (after each `amcore.control.step`):
 
 The hot samples (controller state, ground truth) go out binary by default (telemetry.binary:
 ROS 1 messages, copied on the caller's thread and finished on the publisher's sender thread
-by telemetry.capture; ~4x less CPU than JSON in all, benchmarks/bench_telemetry.py);
+by telemetry.capture, whose compiled kernels the constructors load or compile first; ~4x less CPU than JSON in all, benchmarks/bench_telemetry.py);
 encoding="json" sends them as JSON texts (telemetry.schema), as earlier versions did.
 Events are always JSON.
 """
 from __future__ import annotations
 
-from . import capture, schema
+from . import capture, kernels, schema
 
 ENCODINGS = ("binary", "json")
 
@@ -50,6 +50,8 @@ class SimulatorTelemetry:
         self._samples = capture.ground_truth if encoding == "binary" else schema.ground_truth_samples
         self.pub = publisher
         self._on = getattr(publisher, "enabled", True)  # nothing to build for a disabled publisher (--no-telemetry)
+        if self._on and encoding == "binary":
+            kernels.warm_up()  # now, at start-up: not in the sender thread, holding the GIL in the loop
         self.spec = spec
         self.keys = keys or getattr(publisher, "keys", None) or schema.Keys()
         self.truth_every = truth_every
@@ -95,6 +97,8 @@ class CompanionTelemetry:
         self._sample = capture.controller if encoding == "binary" else schema.controller_sample
         self.pub = publisher
         self._on = getattr(publisher, "enabled", True)
+        if self._on and encoding == "binary":
+            kernels.warm_up()  # loaded from the cache that companion.jitcache.warm filled
         self.sysid = int(sysid)
         self.every = every
         self.keys = keys or getattr(publisher, "keys", None) or schema.Keys()

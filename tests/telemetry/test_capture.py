@@ -120,3 +120,70 @@ def test_non_finite_numbers_travel_as_they_are():
     assert math.isnan(back["e_R"][0]) and back["e_R"][1:] == [math.inf, -math.inf] and math.isnan(back["damping"])
     data, replaced = schema.encode(schema.controller_sample(0.5, "grasp", diag, cmd, sysid=4))
     assert replaced and json.loads(data)["e_R"] == [None, None, None] and json.loads(data)["damping"] is None
+
+# ----------------------------------------------------------------------------- the law's packed array
+def test_a_step_of_the_compiled_law_is_copied_from_its_packed_array(step_result):
+    """The packed path (one copy of the array's prefix) gives the bytes of the field-by-field
+    path and of the literal path, and reading fields first changes nothing."""
+    d, c = step_result.diagnostics, step_result.command
+    pending = capture.controller(0.7, "grasp", d, c, sysid=4)
+    assert pending[0] is capture._packed_layouts[(d._packed.size, len(d.y_d), len(c.tau_q_nm), "grasp")].finisher
+    literal = binary.from_dict(Channel.CONTROLLER, schema.controller_sample(0.7, "grasp", d, c, sysid=4))
+    fields = NS(**{k: getattr(d, k) for k in DIAGNOSTICS})
+    assert finished(pending) == finished(capture.controller(0.7, "grasp", fields, c, sysid=4)) == literal
+    assert finished(capture.controller(0.7, "grasp", d, c, sysid=4)) == literal  # all fields now read (cached views)
+
+
+def test_a_reassigned_field_is_sent_as_reassigned(spec, model):
+    from amcore.control import ControllerMemory, ControllerParams, step
+    from amcore.mission import am_mission
+    from amcore.model import create_data
+
+    m = am_mission(spec, spec.ams[0], model)
+    res = step(model, create_data(model), ControllerParams.from_vehicle(spec.vehicle, m.frame), m.initial_state(),
+               m.reference(0.3), np.zeros(6), ControllerMemory(), 0.3)
+    d, c = res.diagnostics, res.command
+    d.e_R = np.array([1.0, 2.0, 3.0])  # another array: no longer the packed array's
+    d.damping = 0.25
+    d.R_d = np.eye(3)
+    back = binary.to_dict(Channel.CONTROLLER, finished(capture.controller(0.3, "hover", d, c, sysid=4)))
+    assert back["e_R"] == [1.0, 2.0, 3.0] and back["damping"] == 0.25 and back["q_WB_d"] == [1.0, 0.0, 0.0, 0.0]
+    d.y_err[:] = 7.0  # written into the array's own view: the packed path sends it too
+    pending = capture.controller(0.3, "hover", d, c, sysid=4)
+    assert binary.to_dict(Channel.CONTROLLER, finished(pending))["y_err"] == [7.0] * len(d.y_err)
+
+
+def test_real_runs_samples_in_one_batch_are_the_literal_paths_bytes(spec, model):
+    """Every controller and truth sample of a short two-AM run, finished as the sender does
+    (one call per layout for the whole batch), is byte for byte the literal path's."""
+    from tests.ground_station import simrun
+
+    steps, truths = [], []
+    simrun.run(simrun.short_spec(spec, 0.3), model, 0.3, lambda k, p: None, KEYS,
+               on_step=lambda s, t, phase, res: steps.append((s, t, phase, res)), on_truth=truths.append)
+    pending = [(capture.controller(t, phase, res.diagnostics, res.command, sysid=s),
+                binary.from_dict(Channel.CONTROLLER, schema.controller_sample(t, phase, res.diagnostics,
+                                                                              res.command, sysid=s)))
+               for s, t, phase, res in steps]
+    for gt in truths:
+        for (key, p), (_, payload) in zip(capture.ground_truth(gt, KEYS), schema.ground_truth_samples(gt, KEYS)):
+            if type(p) is tuple:
+                pending.append((p, binary.from_dict(KEYS.parse(key).channel, payload)))
+    by_layout: dict = {}
+    for (f, pre), literal in pending:
+        by_layout.setdefault(f, []).append((pre, literal))
+    assert len(pending) > 1000 and len(by_layout) >= 2  # controller (its phases) and truth layouts
+    for f, group in by_layout.items():
+        assert f.many([pre for pre, _ in group]) == [literal for _, literal in group]
+
+
+def test_the_laws_q_d_is_the_same_rotation_not_the_same_bits(step_result):
+    """q_WB_d is computed from R_d as the literal path does (schema.quat_wxyz), not taken from
+    the law's q_d: both are (w, x, y, z) with w >= 0 of the same matrix, but Eigen's
+    arithmetic (law.quaternion_xyzw) rounds differently in the last bits."""
+    d = step_result.diagnostics
+    q = np.array(schema.quat_wxyz(d.R_d))
+    assert d.q_d[0] >= 0.0 and q[0] >= 0.0
+    assert np.allclose(d.q_d, q, rtol=0.0, atol=4 * np.finfo(float).eps)
+    sent = binary.to_dict(Channel.CONTROLLER, finished(capture.controller(0.7, "grasp", d, step_result.command)))
+    assert sent["q_WB_d"] == q.tolist()

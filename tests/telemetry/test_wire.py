@@ -94,3 +94,14 @@ def test_junk_batches_never_raise():
     for _ in range(3000):
         batch = wire.split(wire.BATCH_MAGIC + rng.randbytes(rng.randrange(0, 80)))
         assert batch.binary and len(batch.keys) == len(batch.samples)
+
+
+@given(st.integers(16, 600), st.integers(2, 30), st.integers(0, 2**64 - 40))
+def test_samples_of_one_length_are_framed_as_one_by_one(size, k, seq0):
+    """Equal-length samples take the array path: the same bytes as framing them one at a time."""
+    ss = [_sample(i * 0.5, size - 16) for i in range(k)]
+    seqs = list(range(seq0, seq0 + k))
+    one_by_one = wire.MAGIC + b"".join(struct.pack("<I", size) + s[:8] + struct.pack("<Q", q) + s[16:]
+                                       for s, q in zip(ss, seqs))
+    assert wire.binary_message(ss, seqs) == one_by_one
+    assert wire.binary_message(ss) == wire.MAGIC + b"".join(struct.pack("<I", size) + s for s in ss)
