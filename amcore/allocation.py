@@ -175,7 +175,7 @@ class Allocation:
         out = tuple(min(max(x, m), hi) for x, m in zip(out, lo))
         allocated = tuple(sum(e * x for e, x in zip(row, out)) for row in self._eff)
         unallocated = (roll - allocated[0], pitch - allocated[1], yaw - allocated[2], thrust - allocated[3])
-        axes = tuple(abs(u) > SATURATION_TOL for u in unallocated)
+        axes = tuple(bool(abs(u) > SATURATION_TOL) for u in unallocated)
         return AllocationResult(out, allocated, unallocated, any(axes), axes)
 
     # ------------------------------------------------------------------ physical units

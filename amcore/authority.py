@@ -47,6 +47,8 @@ class OperatingPoint:
     rotor_fractions: tuple[float, ...]
     feasible: bool
     authority_nm: dict[str, tuple[float, float]]
+    joint_torques_nm: tuple[float, ...] = ()  # what the arm's joints hold, g_q - (J_E^T W)_q [N m]
+    joint_fractions: tuple[float, ...] = ()  # each |torque| over its joint's limit
 
 
 @dataclass(frozen=True)
@@ -84,11 +86,19 @@ def operating_point(vehicle: VehicleParams, model: AmModel, q: np.ndarray, squee
     z_W, x_W = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])
     M = np.cross(R @ c_B, -m * g * z_W) + np.cross(R @ p_B, -squeeze_n * x_W - load_kg * g * z_W)
     tau_B = -(R.T @ M)
+    # the joints: tau = g(q) - J_E^T W (static), W the pad's wrench from the object, at E, in W axes
+    q_pin = np.concatenate([[0.0, 0.0, 0.0], pin.Quaternion(R).coeffs(), q])
+    grav = pin.computeGeneralizedGravity(model.pin_model, data, q_pin)
+    J_E = pin.computeFrameJacobian(model.pin_model, data, q_pin, model.ee_frame_id, pin.LOCAL_WORLD_ALIGNED)
+    W = np.concatenate([-squeeze_n * x_W - load_kg * g * z_W, np.zeros(3)])
+    tau_q = (grav - J_E.T @ W)[6:]
     a = alloc.allocate_wrench(thrust, tau_B)
     f_min, f_max = np.array(vehicle.rotors.thrust_min()), np.array(vehicle.rotors.thrust_max())
     frac = (np.array(a.rotor_thrusts_n) - f_min) / (f_max - f_min)
     return OperatingPoint(squeeze_n, load_kg, thrust, tuple(tau_B.tolist()), theta, a.rotor_thrusts_n,
-                          tuple(frac.tolist()), not a.saturated, alloc.authority(thrust, tau_B))
+                          tuple(frac.tolist()), not a.saturated, alloc.authority(thrust, tau_B),
+                          tuple(tau_q.tolist()),
+                          tuple((np.abs(tau_q) / np.array(vehicle.joint_torque_max_nm)).tolist()))
 
 
 def _hold_pad(model: AmModel, data, q0: np.ndarray, R_WB: np.ndarray) -> np.ndarray:
@@ -144,6 +154,8 @@ def report_lines(va: VehicleAuthority) -> list[str]:
         for ax in AXES[:3]:
             down, up = op.authority_nm[ax]
             lines.append(f"  {ax:5s} torque it can add: -{down:.3f} / +{up:.3f} N m")
+        lines.append(f"  arm joints hold [N m]: {', '.join(f'{t:+.2f}' for t in op.joint_torques_nm)}; the busiest at "
+                     f"{max(op.joint_fractions) * 100:.0f} % of its limit")
     lo, hi = va.hover.authority_nm["yaw"]
     lines.append(f"yaw authority at hover: {min(lo, hi):.3f} N m")
     return lines

@@ -69,7 +69,7 @@ class RunOutcome:
         a.rotor_saturated_steps += rotors
         a.joint_saturated_steps += joints
         for k, x in enumerate(axes):
-            a.axis_saturated_steps[k] += x
+            a.axis_saturated_steps[k] += bool(x)
         if a.first_saturation_s is None:
             a.first_saturation_s = t
             return True
