@@ -239,7 +239,9 @@ def main(argv: list[str] | None = None) -> int:
             status = f"run complete; {verdict['text']}"
         if verdict["status"] == "failed":
             code = MISSION_FAILED
-            told = f"mission failed: {verdict['failure_class']}"
+            first = verdict["failures"][0]
+            # a GCS command is said as it happened ("mission failed: aborted by the GCS at t = 7.02 s")
+            told = f"mission failed: {first['reason'] if first['class'] == 'commanded' else first['class']}"
     except _Stop as stop:
         status, code = f"interrupted by {stop}", 130
         told = status
