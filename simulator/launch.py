@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("scenario", nargs="?", type=Path, default=DEFAULT_SCENARIO, help="scenario TOML")
     ap.add_argument("--run-dir", type=cliargs.output_dir, default=None, help="run folder (default runs/<name>-<time>)")
     ap.add_argument("--duration", type=cliargs.seconds, default=None, help="override the scenario's duration [s]")
-    ap.add_argument("--no-progress", action="store_true", help="no progress display")
+    ap.add_argument("--no-progress", action="store_true", help="no progress display (there is one on a terminal only)")
     ap.add_argument("--no-telemetry", action="store_true", help="no Zenoh telemetry, no MCAP log, no review")
     ap.add_argument("--startup-timeout", type=cliargs.seconds, default=120.0, help="seconds for all processes to connect")
     ap.add_argument("--gcs", default=DEFAULT_GCS, metavar="ENDPOINT",
@@ -99,7 +99,8 @@ def main(argv: list[str] | None = None) -> int:
     mcap = run_dir / "run.mcap"
     procs: dict[str, subprocess.Popen] = {}
     logs = []
-    bar = SimBar(spec.duration_s if a.duration is None else a.duration, disabled=a.no_progress)
+    # a bar on a terminal only, as the simulator's own default: redirected output gets the summary lines
+    bar = SimBar(spec.duration_s if a.duration is None else a.duration, disabled=a.no_progress or not sys.stderr.isatty())
     print(f"am-run: scenario '{spec.name}' with {len(spec.ams)} AMs; run folder {run_dir}; GCS link {a.gcs}",
           file=sys.stderr)
     try:

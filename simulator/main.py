@@ -204,8 +204,9 @@ def main(argv: list[str] | None = None) -> int:
                        sysids=sysids)
         print(f"simulator: '{spec.name}' on {', '.join(bound)}, waiting for sysids {sysids}; GCS link "
               f"{gcs_endpoint or 'none'}", file=sys.stderr, flush=True)
-        server.wait_for_peers(a.peer_timeout)
-        server.wait_for_armed(a.peer_timeout)
+        said = _Throttled(lambda text: print(f"simulator: {text}", file=sys.stderr, flush=True))
+        server.wait_for_peers(a.peer_timeout, on_waiting=said)
+        server.wait_for_armed(a.peer_timeout, on_waiting=said)
         if not tele.await_recorder(tele.keys.sim_event, a.telemetry_wait):
             print(f"simulator: warning: telemetry: no subscriber (recorder) after {a.telemetry_wait:g} s; "
                   f"publishing anyway", file=sys.stderr, flush=True)
@@ -277,9 +278,26 @@ def main(argv: list[str] | None = None) -> int:
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "outcome.json").write_text(json.dumps(result, indent=1))
     progress.event(event="done", status=status, exit_code=code, outcome=str(run_dir / "outcome.json"))
-    print(f"simulator: {status}; {sim_time:.3f} s simulated in {wall:.1f} s; outcome in {run_dir / 'outcome.json'}",
+    verdict_text = result.get("verdict", {}).get("text", "")  # "mission success", as am-run says it
+    said = status if not verdict_text or verdict_text in status else f"{status}; {verdict_text}"
+    print(f"simulator: {said}; {sim_time:.3f} s simulated in {wall:.1f} s; outcome in {run_dir / 'outcome.json'}",
           file=sys.stderr)
     return code
+
+
+class _Throttled:
+    """Prints a waiting notice when whom or what it waits for changes, else every `every_s`."""
+
+    def __init__(self, say, every_s: float = 10.0) -> None:
+        self.say, self.every_s = say, every_s
+        self._last, self._t = "", -float("inf")
+
+    def __call__(self, text: str) -> None:
+        who = text.split(" more ", 1)[-1]  # "waiting 58 s more for ARM from sysid 5" -> what and whom
+        now = time.monotonic()
+        if who != self._last or now - self._t >= self.every_s:
+            self.say(text)
+            self._last, self._t = who, now
 
 
 if __name__ == "__main__":

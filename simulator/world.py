@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
-import pybullet as pb
+from .bullet import pb
 
 from amcore.config import ScenarioSpec
 from amcore.model import AmState

@@ -285,6 +285,9 @@ def test_am_run_keeps_flying_when_a_companion_dies_and_reports_it(tmp_path):
             p.kill()
     assert p.returncode == 1
     assert "companion 5 exited" in err and "failsafe" in err
+    # redirected output: no progress bar, and no process says PyBullet's build time
+    assert "s sim [" not in err and "pybullet build time" not in err, err
+    assert not any("pybullet build time" in f.read_text() for f in run_dir.glob("*.log"))
     o = json.loads((run_dir / "outcome.json").read_text())
     assert o["steps"] == 4000 and o["failsafe_at_end"] == [5]  # the run was not torn down
 
