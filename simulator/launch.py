@@ -28,7 +28,7 @@ from pathlib import Path
 from amcore import cliargs
 from amcore.config import DEFAULT_SCENARIO, ConfigError, check_duration, load_scenario
 from amlink.endpoint import DEFAULT_GCS, EndpointError, parse_endpoint
-from telemetry.auth import publisher_key
+from telemetry.keyfiles import write_run_keys, write_secret
 
 from .progress import SimBar
 from .verdict import MISSION_FAILED
@@ -216,11 +216,7 @@ def _telemetry_keys(spec, run_dir: Path) -> dict[str, str]:
     """A random telemetry master key for this run for the recorder, and each publisher's own
     key derived from it (telemetry.auth), each in a 0600 file of the run folder: the recorder
     keeps only what the run's simulator and companions sealed."""
-    master = os.urandom(32)
-    files = {"recorder": str(_secret_file(run_dir / "telemetry.key", master.hex()))}
-    for name in ["simulator"] + [f"am{am.sysid}" for am in spec.ams]:
-        files[name] = str(_secret_file(run_dir / f"telemetry-{name}.key", publisher_key(master, name).hex()))
-    return files
+    return {name: str(path) for name, path in write_run_keys(run_dir, [am.sysid for am in spec.ams]).items()}
 
 
 def _gcs_key(spec, run_dir: Path) -> list[str]:
@@ -231,12 +227,7 @@ def _gcs_key(spec, run_dir: Path) -> list[str]:
     return ["--gcs-key-file", str(_secret_file(run_dir / "gcs.key", os.urandom(16).hex()))]
 
 
-def _secret_file(path: Path, text: str) -> Path:
-    """`text` and a newline in a file only its owner can read or write (mode 0600)."""
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "w") as fh:
-        fh.write(text + "\n")
-    return path
+_secret_file = write_secret
 
 
 def _free_tcp_port() -> int:

@@ -145,6 +145,11 @@ def main(argv: list[str] | None = None) -> int:
         check_duration(spec, duration, "--duration")
     except ConfigError as exc:
         return cliargs.fail("simulator", str(exc))
+    try:  # a missing telemetry key, like a bad configuration, stops it before anything is written
+        tele_opts = options_from_args(a)
+    except (TelemetryConfigError, ValueError) as exc:
+        print(f"simulator: error: telemetry: {exc}", file=sys.stderr)
+        return 2
     mode = a.progress or ("bar" if sys.stderr.isatty() else "none")
     run_dir = a.run_dir or Path("runs") / f"{spec.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     try:  # before the run: a run folder that cannot be written must not lose the outcome afterwards
@@ -161,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGINT, _on_signal)
 
     try:
-        tele = TelemetryPublisher(options_from_args(a), name="simulator")
+        tele = TelemetryPublisher(tele_opts, name="simulator")
     except (TelemetryConfigError, ValueError) as exc:
         print(f"simulator: error: telemetry: {exc}", file=sys.stderr)
         return 2

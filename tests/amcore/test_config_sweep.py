@@ -191,7 +191,7 @@ def test_implausible_values_exit_2_naming_file_key_and_range(tmp_path, capsys, t
     from simulator.main import main
 
     path = _scenario(tmp_path, table, key, value)
-    assert main(["--config", str(path), "--run-dir", str(tmp_path / "run"), "--gcs", "none"]) == 2
+    assert main(["--config", str(path), "--run-dir", str(tmp_path / "run"), "--gcs", "none", "--insecure"]) == 2
     err = capsys.readouterr().err
     assert str(path) in err and key in err and words in err, err
     assert not (tmp_path / "run").exists()  # refused before anything started
