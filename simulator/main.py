@@ -36,6 +36,7 @@ from amlink.errors import LinkError
 from amlink.limits import SetpointLimits
 from amlink.lockstep import SimServer
 from amlink.types import ScenarioInfo
+from amlink.udp import STATUSTEXT_MAX
 from companion import procstats
 
 from telemetry.publisher import TelemetryPublisher
@@ -245,9 +246,7 @@ def main(argv: list[str] | None = None) -> int:
             status = f"run complete; {verdict['text']}"
         if verdict["status"] == "failed":
             code = MISSION_FAILED
-            first = verdict["failures"][0]
-            # a GCS command is said as it happened ("mission failed: aborted by the GCS at t = 7.02 s")
-            told = f"mission failed: {first['reason'] if first['class'] == 'commanded' else first['class']}"
+            told = _told(verdict["failures"][0])
     except _Stop as stop:
         status, code = f"interrupted by {stop}", 130
         told = status
@@ -288,6 +287,18 @@ def main(argv: list[str] | None = None) -> int:
     print(f"simulator: {said}; {sim_time:.3f} s simulated in {wall:.1f} s; outcome in {run_dir / 'outcome.json'}",
           file=sys.stderr)
     return code
+
+
+def _told(first: dict) -> str:
+    """The run's last STATUSTEXT for a failed mission (one STATUSTEXT: 50 bytes): its class, or
+    for a GCS command what it did ("mission failed: aborted by the GCS at t = 7.02 s")."""
+    if first["class"] != "commanded":
+        return f"mission failed: {first['class']}"
+    reason = first["reason"]
+    for text in (f"mission failed: {reason}", f"mission failed: {reason.replace(' by the GCS', ' (GCS)')}"):
+        if len(text.encode()) <= STATUSTEXT_MAX:
+            return text
+    return "mission failed: ended by a GCS command"
 
 
 class _Throttled:
