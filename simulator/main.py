@@ -283,7 +283,7 @@ def main(argv: list[str] | None = None) -> int:
     (run_dir / "outcome.json").write_text(json.dumps(result, indent=1))
     progress.event(event="done", status=status, exit_code=code, outcome=str(run_dir / "outcome.json"))
     verdict_text = result.get("verdict", {}).get("text", "")  # "mission success", as am-run says it
-    said = status if not verdict_text or verdict_text in status else f"{status}; {verdict_text}"
+    said = f"{status}; {verdict_text}" if completed and verdict_text and verdict_text not in status else status
     print(f"simulator: {said}; {sim_time:.3f} s simulated in {wall:.1f} s; outcome in {run_dir / 'outcome.json'}",
           file=sys.stderr)
     return code
