@@ -76,7 +76,7 @@ def squeeze_plan(spec: ScenarioSpec, model: AmModel) -> SqueezePlan:
     share = spec.object.mass_kg * g / n
     required = ms.friction_margin * share / ms.friction_assumed
     weight = model.mass_kg * g + share
-    thrust = ms.thrust_fraction_max * v.rotors.count * v.rotors.thrust_max_n
+    thrust = ms.thrust_fraction_max * v.rotors.thrust_max_z_n
     feasible = min(math.sqrt(max(thrust * thrust - weight * weight, 0.0)), ms.squeeze_max_n)
     if not ms.squeeze_sizing:
         return SqueezePlan(fixed, ms.squeeze_m, required, feasible)

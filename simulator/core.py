@@ -243,14 +243,16 @@ class SitlCore:
         if self.fcs:
             quat, w_B = self.world.attitude_and_rate(s)
             out = self.fcs[s].step(quat, w_B, sp.attitude)
-            joints = self.world.apply_rotors(s, out.rotor_thrusts_n, sp.tau_q_nm, out.allocation.saturated)
+            axes = out.allocation.saturated_axes
+            joints = self.world.apply_rotors(s, out.rotor_thrusts_n, sp.tau_q_nm, axes)
             rotors_saturated, joints_saturated = out.allocation.saturated, joints.saturated
         else:
             rep = self.world.apply(s, sp.thrust_n, sp.tau_B_nm, sp.tau_q_nm)
+            axes = rep.mix.allocation.saturated_axes
             rotors_saturated, joints_saturated = rep.mix.saturated, rep.joints.saturated
         if rotors_saturated or joints_saturated:
             t = self.world.time_s
-            if self.outcome.saturation(s, t, rotors_saturated, joints_saturated):
+            if self.outcome.saturation(s, t, rotors_saturated, joints_saturated, axes):
                 self.log(f"t={t:.3f} s sysid {s}: command saturated ({_describe(sp)}); counted in outcome.json, "
                          f"further ones not printed")
 

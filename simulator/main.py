@@ -179,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
 
     core = SitlCore(spec, log=log, on_truth=sim_tele.truth, failsafe_after_rejected=a.failsafe_after_rejected)
     v = spec.vehicle
-    limits = SetpointLimits.for_vehicle(v.rotors.count * v.rotors.thrust_max_n, max(v.joint_torque_max_nm), v.n_joints)
+    limits = SetpointLimits.for_vehicle(v.rotors.thrust_max_total_n, max(v.joint_torque_max_nm), v.n_joints)
     gcs_link = GcsLink(gcs_endpoint, sysids, key=gcs_key, accept_unsigned=keys is None, tlog=run_dir / "gcs.tlog")
     server = SimServer(binds, sysids=sysids, scenario=info, timeout_s=a.step_timeout, signing_keys=keys,
                        limits=limits, on_heartbeat=gcs_link.forward_heartbeat)

@@ -201,7 +201,14 @@ AM_TRUTH_SCHEMA = _object("amstack.AmTruth", "Ground-truth base and end-effector
                               "description": "commands so far whose rotor mix saturated (cumulative; optional)"},
     "joint_saturated_steps": {"type": "integer", "minimum": 0,
                               "description": "commands so far with a joint torque clipped (cumulative; optional)"},
-}, optional=("p_W_joints", "rotor_saturated_steps", "joint_saturated_steps"))
+    "axis_saturated_steps": {"type": "array", "items": {"type": "integer", "minimum": 0}, "minItems": 4,
+                             "maxItems": 4, "description": "commands so far whose roll, pitch, yaw torque, thrust "
+                                                           "fell short (cumulative; optional)"},
+    "rotor_fraction_max": {"type": "number", "description": "the busiest rotor's thrust as a fraction of its range "
+                                                            "(optional)"},
+    "rotor_fraction_min": {"type": "number", "description": "the idlest rotor's (optional)"},
+}, optional=("p_W_joints", "rotor_saturated_steps", "joint_saturated_steps", "axis_saturated_steps",
+             "rotor_fraction_max", "rotor_fraction_min"))
 
 CONTACT_SCHEMA = _object("amstack.PadContact", "Force the object applies on one AM's pad, ground truth", {
     "sysid": {"type": "integer"},
@@ -302,6 +309,9 @@ def am_truth_sample(t_s: float, sysid: int, am, seq: int = 0) -> dict:
         out["p_W_joints"] = [_l(p) for p in joints]
     for key in ("rotor_saturated_steps", "joint_saturated_steps"):  # 0 where the simulator does not count
         out[key] = int(getattr(am, key, 0))
+    out["axis_saturated_steps"] = [int(x) for x in getattr(am, "axis_saturated_steps", (0, 0, 0, 0))]
+    for key in ("rotor_fraction_max", "rotor_fraction_min"):
+        out[key] = float(getattr(am, key, 0.0))
     return out
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from amcore.config import ConfigError, load_scenario
+from trials.toml_write import dumps
 
 ROOT = Path(__file__).resolve().parents[2]
 SHORT = ROOT / "configs" / "scenarios" / "two_am_short.toml"
@@ -52,7 +53,7 @@ def _scenario(tmp_path, table: str, key: str, value, vehicle_table: str | None =
         data["am"][0][key] = value
     else:
         data.setdefault(table, {})[key] = value
-    (tmp_path / "v.toml").write_text(_dump(vdata))
+    (tmp_path / "v.toml").write_text(dumps(vdata))  # the rotor rows are an array of tables in a table
     data["scenario"]["vehicle"] = str(tmp_path / "v.toml") if not (table == "scenario" and key == "vehicle") \
         else value
     path = tmp_path / "s.toml"
@@ -107,8 +108,8 @@ BAD = [
     ("link", "loss", 1.5, None),
     ("am", "misalignment_deg", 90.0, None),
     ("am", "sysid", 256, None),
-    ("rotors", "count", 6, None),
-    ("rotors", "layout", "plus", None),
+    ("rotors", "arm_length_m", 0.3, None),
+    ("rotors", "rotor", [], None),
     ("rotors", "thrust_min_n", 12.0, None),
     ("rotors", "thrust_max_n", 0.0, None),
     ("rotors", "time_constant_s", -0.1, None),
