@@ -33,8 +33,9 @@ def write_secret(path: Path, text: str) -> Path:
 
 def write_run_keys(folder: Path, sysids, master: bytes | None = None) -> dict[str, Path]:
     """A random master key (or `master`) and the keys of the simulator and of the companions
-    `sysids`, in `folder`: {"recorder": master file, "simulator": ..., "am<sysid>": ...}."""
+    `sysids`, in `folder` (created if need be): {"recorder": master file, "simulator": ..., "am<sysid>": ...}."""
     master = os.urandom(KEY_BYTES) if master is None else master
+    Path(folder).mkdir(parents=True, exist_ok=True)
     files = {"recorder": write_secret(Path(folder) / MASTER_FILE, master.hex())}
     for name in ["simulator"] + [f"am{s}" for s in sysids]:
         files[name] = write_secret(Path(folder) / publisher_file(name), publisher_key(master, name).hex())
