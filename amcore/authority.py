@@ -10,9 +10,11 @@ vertical face with normal force N and carrying a load share m_s on its pad (fric
 
 with c_W = R c_B(q) the AM's centre of mass and p_W = R p_E(q) the pad's face centre relative to
 the base, both from the URDF (pinocchio). So the base pitches by theta = atan2(N, (m + m_s) g)
-about y_B, T = |(N, 0, (m + m_s) g)|, and tau_B is what the rotors must add. The face's normal
-is taken horizontal and the arm planar (x-z plane of B), as in the paper's grasp. The joint
-torques are internal to the AM and drop out.
+about y_B, T = |(N, 0, (m + m_s) g)|, and tau_B is what the rotors must add. The arm holds the
+pad where it was at the unloaded hover (relative to the base's position, in W: the task
+law's job), so q follows theta (inverse kinematics on the pad's pose); the face's normal is
+horizontal and the arm planar (x-z plane of B), as in the paper's grasp. The joint torques
+are internal to the AM and drop out.
 
 Authority around an operating point is what `amcore.allocation.Allocation.authority` gives:
 the torque the allocator can add on one axis before a rotor leaves its range.
@@ -45,6 +47,8 @@ class OperatingPoint:
     rotor_fractions: tuple[float, ...]
     feasible: bool
     authority_nm: dict[str, tuple[float, float]]
+    joint_torques_nm: tuple[float, ...] = ()  # what the arm's joints hold, g_q - (J_E^T W)_q [N m]
+    joint_fractions: tuple[float, ...] = ()  # each |torque| over its joint's limit
 
 
 @dataclass(frozen=True)
@@ -69,23 +73,51 @@ def operating_point(vehicle: VehicleParams, model: AmModel, q: np.ndarray, squee
     g = vehicle.gravity_mps2
     m = model.mass_kg
     data = create_data(model)
-    q_pin = np.concatenate([[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0], np.asarray(q, dtype=float)])
-    c_B = pin.centerOfMass(model.pin_model, data, q_pin).copy()
-    pin.updateFramePlacements(model.pin_model, data)
-    p_B = data.oMf[model.ee_frame_id].translation.copy()
     vertical = (m + load_kg) * g
     theta = math.atan2(squeeze_n, vertical)
     thrust = math.hypot(squeeze_n, vertical)
     c, s = math.cos(theta), math.sin(theta)
     R = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])  # pitch theta about y: z_B leans to +x_W
+    q = _hold_pad(model, data, np.asarray(q, dtype=float), R)
+    q_pin = np.concatenate([[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0], q])
+    c_B = pin.centerOfMass(model.pin_model, data, q_pin).copy()
+    pin.updateFramePlacements(model.pin_model, data)
+    p_B = data.oMf[model.ee_frame_id].translation.copy()
     z_W, x_W = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])
     M = np.cross(R @ c_B, -m * g * z_W) + np.cross(R @ p_B, -squeeze_n * x_W - load_kg * g * z_W)
     tau_B = -(R.T @ M)
+    # the joints: tau = g(q) - J_E^T W (static), W the pad's wrench from the object, at E, in W axes
+    q_pin = np.concatenate([[0.0, 0.0, 0.0], pin.Quaternion(R).coeffs(), q])
+    grav = pin.computeGeneralizedGravity(model.pin_model, data, q_pin)
+    J_E = pin.computeFrameJacobian(model.pin_model, data, q_pin, model.ee_frame_id, pin.LOCAL_WORLD_ALIGNED)
+    W = np.concatenate([-squeeze_n * x_W - load_kg * g * z_W, np.zeros(3)])
+    tau_q = (grav - J_E.T @ W)[6:]
     a = alloc.allocate_wrench(thrust, tau_B)
     f_min, f_max = np.array(vehicle.rotors.thrust_min()), np.array(vehicle.rotors.thrust_max())
     frac = (np.array(a.rotor_thrusts_n) - f_min) / (f_max - f_min)
     return OperatingPoint(squeeze_n, load_kg, thrust, tuple(tau_B.tolist()), theta, a.rotor_thrusts_n,
-                          tuple(frac.tolist()), not a.saturated, alloc.authority(thrust, tau_B))
+                          tuple(frac.tolist()), not a.saturated, alloc.authority(thrust, tau_B),
+                          tuple(tau_q.tolist()),
+                          tuple((np.abs(tau_q) / np.array(vehicle.joint_torque_max_nm)).tolist()))
+
+
+def _hold_pad(model: AmModel, data, q0: np.ndarray, R_WB: np.ndarray) -> np.ndarray:
+    """The arm configuration that keeps the pad's pose relative to the base origin in W as at q0
+    with a level base, once the base is turned by R_WB (damped Gauss-Newton on the frame's
+    pose error; the arm is planar, so the pose is reachable while the turn is about y_B)."""
+    base = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+    pin.framesForwardKinematics(model.pin_model, data, np.concatenate([base, q0]))
+    target = pin.SE3(R_WB.T, np.zeros(3)) * data.oMf[model.ee_frame_id]  # the same pose, seen from B
+    q = q0.copy()
+    for _ in range(50):
+        q_pin = np.concatenate([base, q])
+        pin.framesForwardKinematics(model.pin_model, data, q_pin)
+        err = pin.log6(data.oMf[model.ee_frame_id].actInv(target)).vector
+        if np.linalg.norm(err) < 1e-10:
+            break
+        J = pin.computeFrameJacobian(model.pin_model, data, q_pin, model.ee_frame_id, pin.LOCAL)[:, 6:]
+        q = q + np.linalg.solve(J.T @ J + 1e-9 * np.eye(len(q)), J.T @ err)
+    return q
 
 
 def vehicle_authority(vehicle: VehicleParams, squeeze_n: float = 0.0, load_kg: float = 0.0,
@@ -122,6 +154,8 @@ def report_lines(va: VehicleAuthority) -> list[str]:
         for ax in AXES[:3]:
             down, up = op.authority_nm[ax]
             lines.append(f"  {ax:5s} torque it can add: -{down:.3f} / +{up:.3f} N m")
+        lines.append(f"  arm joints hold [N m]: {', '.join(f'{t:+.2f}' for t in op.joint_torques_nm)}; the busiest at "
+                     f"{max(op.joint_fractions) * 100:.0f} % of its limit")
     lo, hi = va.hover.authority_nm["yaw"]
     lines.append(f"yaw authority at hover: {min(lo, hi):.3f} N m")
     return lines

@@ -301,7 +301,7 @@ class World:
             sat[0] += rotors
             sat[1] += joints
             for k, a in enumerate(axes):
-                sat[2 + k] += a
+                sat[2 + k] += bool(a)
 
     def rotor_thrusts(self, sysid: int) -> list[float] | None:
         """The lagging rotors' thrusts [N] after the last step (None: ideal rotors, or no step yet)."""

@@ -230,3 +230,17 @@ def test_am_vehicle_prints_authority_and_exits_2_on_bad_geometry(tmp_path, capsy
     with pytest.raises(SystemExit) as e:
         main([str(bad), "--squeeze", "-1"])
     assert e.value.code == 2
+
+
+def test_am_vehicle_prints_a_teams_payload_and_the_team_an_object_needs(capsys):
+    from companion.vehicle import main
+
+    hexa = str(ROOT / "configs" / "vehicles" / "hex3dof.toml")
+    assert main([hexa, "--team", "2", "--friction", "0.5", "--mass", "2.5"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[-2].startswith("team of 2 at friction 0.5 (margin 1.2) holds up to ")
+    assert out[-1].startswith("2.5 kg at friction 0.5 (margin 1.2) needs 29.4 N per pad from 2 AMs")
+    assert out[-1].endswith("use 3 AMs")
+    with pytest.raises(SystemExit) as e:
+        main([hexa, "--mass", "2.0"])
+    assert e.value.code == 2
