@@ -605,6 +605,21 @@ def _in_range(where: str, value, lo: float, hi: float, unit: str = "") -> None:
 RATE_HZ_RANGE = (100.0, 100_000.0)
 SEED_MAX = 2**32 - 1  # the seed is a uint32 (numpy's SeedSequence entropy; AM_SCENARIO.seed)
 SCENARIO_NAME_MAX_BYTES = 32  # AM_SCENARIO.name is char[32]
+# Plausible objects for this stack's AMs, tables and arena ([object], [mission], [[am]]):
+# - mass: below 10 g the weight (0.1 N) is within two steps of the wrist sensor's resolution
+#   (1/16 N) and Bullet's contact solver loses it against the AMs' 1.8 kg; above 100 kg no
+#   team of these vehicles lifts it (the lift check names the team's own limit, lower still);
+# - each edge, radius and height: below 5 cm the pad's 8 cm face and the 3-4 cm squeeze are
+#   as large as the object; above 3 m the AMs around it start outside the arena
+#   ([success].max_distance_m, 3 m by default);
+# - the object stands over the ground plane's drawn 10 m square, its bottom (the table's
+#   top) at most 5 m up;
+# - mission distances (standoff, start height, pre-grasp gap, lift) are at most 2 m.
+OBJECT_MASS_RANGE_KG = (0.01, 100.0)
+OBJECT_SIZE_RANGE_M = (0.05, 3.0)
+OBJECT_XY_MAX_M = 10.0
+OBJECT_BOTTOM_MAX_M = 5.0
+MISSION_DISTANCE_MAX_M = 2.0
 ROTOR_COUNT_RANGE = (4, 16)  # PX4's CA_ROTOR_COUNT allows up to 12; 16 leaves room for coaxial octos
 ROTOR_SPACING_MIN_M = 0.01  # two rotors closer than this are one rotor entered twice
 
@@ -922,15 +937,22 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     obj = ObjectSpec(**_build(ObjectSpec, data["object"], f"{where}: [object]"))
     if obj.shape not in ("box", "cylinder"):
         raise ConfigError(f"{where}: [object].shape: expected 'box' or 'cylinder', got '{obj.shape}'")
-    _positive(f"{where}: [object].mass_kg", obj.mass_kg)
+    _in_range(f"{where}: [object].mass_kg", obj.mass_kg, *OBJECT_MASS_RANGE_KG, " kg")
     _positive(f"{where}: [object].lateral_friction", obj.lateral_friction)
     if obj.pad_friction < 0.0:
         raise ConfigError(f"{where}: [object].pad_friction: must be >= 0 (0: unset), got {obj.pad_friction!r}")
     if obj.shape == "cylinder":
-        _positive(f"{where}: [object].radius_m", obj.radius_m)
-        _positive(f"{where}: [object].height_m", obj.height_m)
+        _in_range(f"{where}: [object].radius_m", obj.radius_m, *OBJECT_SIZE_RANGE_M, " m")
+        _in_range(f"{where}: [object].height_m", obj.height_m, *OBJECT_SIZE_RANGE_M, " m")
     else:
-        _positive(f"{where}: [object].size_m", obj.size_m)
+        for i, edge in enumerate(obj.size_m):
+            _in_range(f"{where}: [object].size_m (entry {i})", edge, *OBJECT_SIZE_RANGE_M, " m")
+    for i in (0, 1):
+        _in_range(f"{where}: [object].position_m (entry {i})", obj.position_m[i], -OBJECT_XY_MAX_M, OBJECT_XY_MAX_M,
+                  " m (over the ground's drawn square)")
+    if obj.position_m[2] - obj.half_height_m > OBJECT_BOTTOM_MAX_M:
+        raise ConfigError(f"{where}: [object].position_m: the object's bottom (the table's top) is "
+                          f"{obj.position_m[2] - obj.half_height_m:.3g} m up, must be in [0, {OBJECT_BOTTOM_MAX_M:g}] m")
     if obj.position_m[2] - obj.half_height_m < -1e-9:
         raise ConfigError(f"{where}: [object].position_m: the object's bottom is {obj.position_m[2] - obj.half_height_m:.3g} m, "
                           f"below the ground (z = 0)")
@@ -943,6 +965,8 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     for key in ("standoff_m", "start_height_m", "pre_gap_m", "squeeze_m", "touch_force_n", "touch_hold_s"):
         if not getattr(mission, key) >= 0.0:  # (values are finite: _check_type)
             raise ConfigError(f"{where}: [mission].{key}: must be >= 0, got {getattr(mission, key)!r}")
+    for key in ("standoff_m", "start_height_m", "pre_gap_m", "lift_m"):
+        _in_range(f"{where}: [mission].{key}", getattr(mission, key), 0.0, MISSION_DISTANCE_MAX_M, " m")
     if mission.thrust_fraction_max > 1.0:
         raise ConfigError(f"{where}: [mission].thrust_fraction_max: must be <= 1, got {mission.thrust_fraction_max}")
     if (mission.touch_force_n > 0.0) != (mission.touch_hold_s > 0.0):
@@ -1014,6 +1038,7 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     _check_divides(spec.rate_hz, vehicle.flight_controller.rate_hz, f"{where}: [flight_controller].rate_hz")
     check_duration(spec, spec.duration_s, f"{where}: [scenario].duration_s")
     _check_lift(spec, where)
+    _check_grasp_geometry(spec, where)
     return spec
 
 
@@ -1024,11 +1049,16 @@ def check_duration(spec: ScenarioSpec, duration_s: float, where: str) -> None:
                           f"got {duration_s!r}")
 
 
+_NAME_CHARS = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-.")
+
+
 def _check_name(name: str, where: str) -> None:
-    raw = name.encode("utf-8")
-    if not name or not name.isascii() or not name.isprintable() or len(raw) > SCENARIO_NAME_MAX_BYTES:
-        raise ConfigError(f"{where}: must be 1 to {SCENARIO_NAME_MAX_BYTES} printable ASCII characters "
-                          f"(AM_SCENARIO.name), got {name!r}")
+    """A scenario name fits AM_SCENARIO.name and is one plain folder name: runs are written
+    to runs/<name>-<time>, so a name with a path in it would write elsewhere."""
+    if (not name or len(name) > SCENARIO_NAME_MAX_BYTES or not set(name) <= _NAME_CHARS
+            or name[0] in ".-"):
+        raise ConfigError(f"{where}: must be 1 to {SCENARIO_NAME_MAX_BYTES} letters, digits, '_', '-' or '.', "
+                          f"not starting with '.' or '-' (AM_SCENARIO.name, and the run folder's name), got {name!r}")
 
 
 def _check_lift(spec: ScenarioSpec, where: str) -> None:
@@ -1045,6 +1075,69 @@ def _check_lift(spec: ScenarioSpec, where: str) -> None:
                           f"margin: they and the object weigh {need_n:.1f} N, {m.thrust_fraction_max:g} of their rotors' "
                           f"{n * v.rotors.thrust_max_z_n:g} N is {have_n:.1f} N (at most "
                           f"{max(0.0, most):.2f} kg)")
+
+
+def surface_distance(obj: ObjectSpec, azimuth_rad: float) -> float:
+    """Distance [m] from the object's vertical axis to its side along the horizontal direction azimuth."""
+    if obj.shape == "cylinder":
+        return obj.radius_m
+    hx, hy = 0.5 * obj.size_m[0], 0.5 * obj.size_m[1]
+    c, s = abs(math.cos(azimuth_rad)), abs(math.sin(azimuth_rad))
+    return min(hx / c if c > 1e-12 else math.inf, hy / s if s > 1e-12 else math.inf)
+
+
+def _pad_start_W(spec: ScenarioSpec, am: AmSpec) -> tuple[float, float, float]:
+    """Where AM `am`'s pad starts [m, W]: [mission].standoff_m outside the face on its azimuth,
+    start_height_m above the grasp height, moved by its start_offset_m (amcore.mission)."""
+    az = math.radians(am.azimuth_deg)
+    r = surface_distance(spec.object, az) + spec.mission.standoff_m
+    c = spec.object.position_m
+    return (c[0] + r * math.cos(az) + am.start_offset_m[0], c[1] + r * math.sin(az) + am.start_offset_m[1],
+            c[2] + spec.mission.start_height_m + am.start_offset_m[2])
+
+
+def _base_width_m(v: VehicleParams, where: str) -> float:
+    """The widest horizontal edge of the base link's collision boxes in the URDF [m]; if it has
+    none, the farthest rotor's distance from the base's z axis (its arm)."""
+    link = next((l for l in _urdf_tree(v.urdf, where).iter("link") if l.get("name") == v.base_link), None)
+    edges = []
+    for box in ([] if link is None else link.findall("collision/geometry/box")):
+        try:
+            edges += [float(e) for e in box.get("size", "").split()[:2]]
+        except ValueError:
+            pass
+    return max(edges) if edges else max(math.hypot(r.position_m[0], r.position_m[1]) for r in v.rotors.rotor)
+
+
+def _check_grasp_geometry(spec: ScenarioSpec, where: str) -> None:
+    """The AMs can start and grasp where the scenario puts them: the squeeze stays inside the
+    object, no two AMs start with their bases overlapping (closer than the base's width; their
+    pads' start points are a lower bound of their bases' distance, each base being behind its
+    pad, away from the object), and the lift reaches the success criterion's height."""
+    m, obj = spec.mission, spec.object
+    half_min = obj.radius_m if obj.shape == "cylinder" else 0.5 * min(obj.size_m[0], obj.size_m[1])
+    if m.squeeze_m >= half_min:
+        raise ConfigError(f"{where}: [mission].squeeze_m: {m.squeeze_m:g} m reaches the object's centre; it must be "
+                          f"less than its half width, {half_min:g} m")
+    if m.lift_m < spec.success.min_lift_m:
+        raise ConfigError(f"{where}: [mission].lift_m: {m.lift_m:g} m never reaches [success].min_lift_m "
+                          f"({spec.success.min_lift_m:g} m); must be in [{spec.success.min_lift_m:g}, "
+                          f"{MISSION_DISTANCE_MAX_M:g}] m")
+    starts = [_pad_start_W(spec, a) for a in spec.ams]
+    gap = _base_width_m(spec.vehicle, where)
+    for i in range(len(spec.ams)):
+        for j in range(i + 1, len(spec.ams)):
+            d = math.dist(starts[i], starts[j])
+            if d < gap:
+                a, b = spec.ams[i], spec.ams[j]
+                r = min(surface_distance(obj, math.radians(x.azimuth_deg)) for x in (a, b)) + m.standoff_m
+                least = math.degrees(2.0 * math.asin(min(1.0, gap / (2.0 * r))))
+                raise ConfigError(
+                    f"{where}: [[am]] #{j + 1}.azimuth_deg: sysid {b.sysid} (azimuth_deg {b.azimuth_deg:g}, "
+                    f"start_offset_m {list(b.start_offset_m)}) starts {d:.3g} m from [[am]] #{i + 1}, sysid {a.sysid} "
+                    f"(azimuth_deg {a.azimuth_deg:g}, start_offset_m {list(a.start_offset_m)}); AMs must start at least "
+                    f"a base's width ({gap:g} m) apart: azimuths about {least:.0f} deg or more apart at this object and "
+                    f"standoff")
 
 
 def _table(data: dict, name: str, where: str) -> dict:

@@ -22,7 +22,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import law
-from .config import AmSpec, ObjectSpec, ScenarioSpec
+from .config import AmSpec, ScenarioSpec, surface_distance  # noqa: F401 (surface_distance: re-exported)
 from .control import Reference
 from .model import AmModel, AmState, create_data, decoupled_terms
 from .so3 import Rz
@@ -50,15 +50,6 @@ def nominal_geometry(model: AmModel) -> NominalGeometry:
     return NominalGeometry(
         p_BE=data.oMf[model.ee_frame_id].translation.copy(), r_BC=com.copy(), pitch_rad=angle_of(R_BE, "pitch")
     )
-
-
-def surface_distance(obj: ObjectSpec, azimuth_rad: float) -> float:
-    """Distance [m] from the object's vertical axis to its side along the horizontal direction azimuth."""
-    if obj.shape == "cylinder":
-        return obj.radius_m
-    hx, hy = 0.5 * obj.size_m[0], 0.5 * obj.size_m[1]
-    c, s = abs(np.cos(azimuth_rad)), abs(np.sin(azimuth_rad))
-    return min(hx / c if c > 1e-12 else np.inf, hy / s if s > 1e-12 else np.inf)
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-import pybullet as pb
+from .bullet import pb
 
 from amcore.config import AmSpec, ObjectSpec, ScenarioSpec, load_scenario
 from amcore.model import AmState, build_model

@@ -66,8 +66,8 @@ class RunOutcome:
         it once)."""
         a = self.ams[sysid]
         a.saturated_steps += 1
-        a.rotor_saturated_steps += rotors
-        a.joint_saturated_steps += joints
+        a.rotor_saturated_steps += bool(rotors)  # bool(): numpy's bools would make the counts numpy
+        a.joint_saturated_steps += bool(joints)  # integers, which outcome.json cannot hold
         for k, x in enumerate(axes):
             a.axis_saturated_steps[k] += bool(x)
         if a.first_saturation_s is None:

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
-import pybullet as pb
+from .bullet import pb
 
 from amcore.config import ScenarioSpec
 from amcore.model import AmState
@@ -449,17 +449,27 @@ class World:
         return tuple(sorted({self._names.get(b, f"body{b}") for b in body_ids}))
 
 
+def _friction_sign_on_A(pt) -> float:
+    """+1 if a contact point's friction pair is the force on the query's body A, -1 if on B
+    (see `_sum_contact`): the sign of (dir1 x dir2) . contactNormalOnB."""
+    n_manifold = np.cross(pt[11], pt[13])
+    return 1.0 if float(n_manifold @ np.asarray(pt[7])) >= 0.0 else -1.0
+
+
 def _sum_contact(points) -> PadContact:
     """Sum PyBullet contact points between the object (body A) and a pad (body B) into the
     force the object applies on the pad.
 
-    Verified conventions (tests/simulator/test_world_sensors.py, the squeeze tests): contactNormalOnB points
-    from B into A and A receives +normalForce along it. The friction pair
-    (lateralFriction_k, lateralFrictionDir_k) is the force on the first body of Bullet's
-    internal contact manifold, which is NOT swapped when a query names the bodies the other
-    way round; the object is created before every AM (lower broadphase id), so it is that
-    first body and A receives +sum_k lateralFriction_k lateralFrictionDir_k. The pad gets
-    the opposite of both.
+    Verified conventions (tests/simulator/test_world_sensors.py, the squeeze tests with every
+    pad shape): contactNormalOnB points from B into A and A receives +normalForce along it;
+    PyBullet swaps the normal when the query names the bodies the other way round. The
+    friction pair (lateralFriction_k, lateralFrictionDir_k) is the force on the FIRST body of
+    Bullet's internal contact manifold, which PyBullet does not swap, and which body comes
+    first depends on the shapes' collision algorithm (the object for a flat pad's box, the pad
+    for a crowned pad's cylinder). The manifold's own normal tells: Bullet builds the friction
+    directions with btPlaneSpace1(n), so dir2 = n x dir1 and n = dir1 x dir2. Where that n
+    agrees with contactNormalOnB the manifold's first body is A (the object); where it is
+    opposed, it is B (the pad). The pad gets the opposite of A's force.
     """
     if not points:
         return _NO_CONTACT
@@ -469,7 +479,7 @@ def _sum_contact(points) -> PadContact:
     total_normal = 0.0
     for pt in points:
         F_n -= pt[9] * np.array(pt[7])
-        F_t -= pt[10] * np.array(pt[11]) + pt[12] * np.array(pt[13])
+        F_t -= _friction_sign_on_A(pt) * (pt[10] * np.array(pt[11]) + pt[12] * np.array(pt[13]))
         weighted_point += pt[9] * np.array(pt[5])
         total_normal += pt[9]
     magnitude = float(np.linalg.norm(F_n))

@@ -32,7 +32,7 @@ BASE = (ROOT / "configs" / "scenarios" / "two_am_comp.toml").read_text()
 @pytest.mark.parametrize("old,new,key", [
     ("mass_kg = 1.0", "mass_kg = 1.0\ncolour = 3", "[object]: unknown key 'colour'"),
     ("mass_kg = 1.0", 'mass_kg = "heavy"', "[object].mass_kg: expected a number"),
-    ("mass_kg = 1.0", "mass_kg = -1.0", "[object].mass_kg: must be > 0"),
+    ("mass_kg = 1.0", "mass_kg = -1.0", "[object].mass_kg: must be in [0.01, 100] kg"),
     ("sysid = 5", "sysid = 4", "sysid: duplicate sysid 4"),
     ("sysid = 5", "sysid = 1", "must be in 2..255"),
     ("squeeze_m = 0.03", "squeeze_m = [0.03]", "[mission].squeeze_m: expected a number"),
