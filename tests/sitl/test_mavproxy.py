@@ -2,9 +2,8 @@
 name, the run's GCS signing key kept in a file (`am-run --gcs-key-file`), MAVProxy started
 with `--non-interactive` and its commands repeated by its own `repeat` (it reads no prompt).
 
-MAVProxy comes with the mavproxy extra (pip install -e '.[test,mavproxy]'; not in the test
-extra: it brings opencv-python and vtk, ~245 MB). In this environment the dialect is amstack's
-own. With
+MAVProxy comes with the test extra (pip install -e '.[test]'; it brings opencv-python and vtk,
+~245 MB; the mavproxy extra has it alone). In this environment the dialect is amstack's own. With
 AMSTACK_MAVPROXY_PYTHON naming the interpreter of an environment of its own, MAVProxy runs
 from there, after the documented install step (`python -m amlink.dialect_export`). Without
 either the test skips, saying so."""
@@ -76,7 +75,7 @@ def _unsigned_heartbeats(port: int, n: int = 3) -> None:
             time.sleep(0.05)
 
 
-@pytest.mark.skipif(FOUND is None, reason="MAVProxy is not installed: pip install -e '.[test,mavproxy]' (or set "
+@pytest.mark.skipif(FOUND is None, reason="MAVProxy is not installed: pip install -e '.[test]' (or set "
                                           "AMSTACK_MAVPROXY_PYTHON to the python of MAVProxy's own environment)")
 def test_mavproxy_sees_both_vehicles_arms_signed_survives_unsigned_frames_and_aborts_by_name(tmp_path):
     python, mavproxy, own = FOUND
