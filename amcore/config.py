@@ -488,10 +488,16 @@ class DevicesSpec:
 
 def devices_from_table(table: dict, where: str) -> DevicesSpec:
     """A [devices] table as a DevicesSpec; errors name `where` and the key."""
-    kw = _build(DevicesSpec, table, f"{where}: [devices]")
     parts = {"imu": ImuSpec, "mocap": MocapSpec, "ft": ForceTorqueSpec, "encoders": EncoderSpec,
              "estimator": EstimatorSpec}
-    spec = DevicesSpec(**{k: parts[k](**v) if k in parts else v for k, v in kw.items()})
+    kw = _build(DevicesSpec, {k: v for k, v in table.items() if k not in parts}, f"{where}: [devices]",
+                skip=tuple(parts))
+    for name, cls in parts.items():
+        sub = table.get(name, {})
+        if not isinstance(sub, dict):
+            raise ConfigError(f"{where}: [devices.{name}] must be a table")
+        kw[name] = cls(**_build(cls, sub, f"{where}: [devices.{name}]"))
+    spec = DevicesSpec(**kw)
     for part in ("imu", "mocap", "ft", "encoders", "estimator"):
         sub = getattr(spec, part)
         for f in dataclasses.fields(sub):
