@@ -156,6 +156,11 @@ class SitlCore:
         self._unobserved = (k, values, out)
         self._values, self._values_t = values, t
 
+    @property
+    def exact_values(self) -> dict[int, list[float]]:
+        """The exact values (`World.sensor_values`) behind the last frames, per sysid."""
+        return self._values
+
     def _sense(self, s: int, values: list[float], t: float) -> list[float]:
         """One physics step of AM s's devices and estimator ([devices]): the frame's values."""
         dev = self.devices.get(s)
