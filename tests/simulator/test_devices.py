@@ -199,3 +199,48 @@ def test_a_latency_beyond_the_estimator_history_is_refused():
     spec = dataclasses.replace(FULL, mocap=dataclasses.replace(FULL.mocap, latency_s=0.1))
     with pytest.raises(ValueError, match="history_steps"):
         DeviceSuite(spec, 3, DT, G, 0, 4, VALUES)
+
+
+def test_closed_loop_estimate_tracks_the_truth_up_to_the_motion_capture_bias():
+    """Two AMs flying their approach on the estimator's odometry, default device levels: after
+    the first second, the estimate's error beyond the motion capture's fixed bias is small."""
+    from amcore.config import _read_toml, scenario_from_dict
+    from companion.pilot import Pilot
+    from simulator.core import SitlCore
+    from simulator.inprocess import as_on_the_wire, setpoint_as_on_the_wire
+    from trials.randomize import load_randomize
+
+    from ..conftest import SCENARIO
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    data = _read_toml(SCENARIO)
+    data["devices"] = load_randomize(root / "configs" / "randomize" / "default.toml").devices
+    data["scenario"]["seed"] = 11
+    spec = scenario_from_dict(data, SCENARIO)
+    core = SitlCore(spec)
+    pilots = {s: Pilot(spec, s, model=core.model) for s in core.sysids}
+    core.connect()
+    rows = []
+    try:
+        for k in range(2500):
+            frames = core.frames(k)
+            if k >= 1000:
+                for s, f in frames.items():
+                    x, dev = core.exact_values[s], core.devices[s]
+                    q_true = np.array(x[3:7])
+                    d = quat_log(quat_mul(quat_mul(np.array([q_true[0], *(-q_true[1:])]), f.quat_WB_wxyz),
+                                          quat_exp(-dev.mocap.bias_R)))
+                    v_err = rotation(np.asarray(f.quat_WB_wxyz)) @ f.v_B - rotation(q_true) @ np.array(x[7:10])
+                    rows.append([np.linalg.norm(f.p_WB - np.array(x[0:3]) - dev.mocap.bias_p), np.linalg.norm(d),
+                                 np.linalg.norm(v_err), np.linalg.norm(f.w_B - np.array(x[10:13]))])
+            core.actuate(k, {s: setpoint_as_on_the_wire(pilots[s].step(as_on_the_wire(f))[0])
+                             for s, f in frames.items()})
+            core.step()
+    finally:
+        core.close()
+    p99 = np.percentile(np.array(rows), 99, axis=0)
+    assert p99[0] < 5e-4  # m: the motion capture's noise, filtered
+    assert p99[1] < 1.5e-3  # rad: gyro bias and motion-capture noise, filtered
+    assert p99[2] < 5e-3  # m/s
+    assert p99[3] < 0.03  # rad/s: the gyro's noise through IMU_GYRO_CUTOFF, its bias removed
