@@ -94,6 +94,7 @@ class SitlCore:
         # [devices]: each AM's sensors and estimator, sampled every physics step (made at the first)
         self.devices: dict[int, DeviceSuite] = {}
         self._odometry: dict[int, list[float]] = {}  # the estimator's last frame values, per AM
+        self._reported: dict[int, list[float]] = {}  # the last frame's base state, per AM (telemetry)
         self.failsafes: dict[int, Failsafe] = {}  # companion lost
         self.landing: dict[int, Failsafe] = {}  # landing on a GCS command (companion ignored)
         self.disarmed: set[int] = set()  # disarmed by a GCS command: motors off, joints limp
@@ -152,6 +153,7 @@ class SitlCore:
                 sensor = self.sensors.get(s)  # none: exact frames
                 reported = v if sensor is None else sensor(v)
             out[s] = f = sensor_frame_from_wire(k, t, reported, n, 0)
+            self._reported[s] = reported
             yield s, f
         self._unobserved = (k, values, out)
         self._values, self._values_t = values, t
@@ -187,6 +189,9 @@ class SitlCore:
         gt = self.world.ground_truth()
         self.outcome.add(gt, wrench_E)
         if self.on_truth is not None:
+            if self._reported:  # the reported base state beside the truth (telemetry)
+                gt = dataclasses.replace(gt, ams={s: dataclasses.replace(a, estimate=tuple(self._reported[s][:13]))
+                                                  if s in self._reported else a for s, a in gt.ams.items()})
             self.on_truth(gt)
 
     def hold(self, k: int, lost: Collection[int] = ()) -> None:

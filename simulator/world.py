@@ -90,6 +90,9 @@ class AmTruth:
     p_W_joints: tuple[np.ndarray, ...] = ()  # arm joint origins, base to wrist [m] (to draw the arm)
     rotor_saturated_steps: int = 0  # commands so far whose rotor mix saturated (cumulative)
     joint_saturated_steps: int = 0  # commands so far with a joint torque clipped (cumulative)
+    # what the flight controller reports of the base (simulator.core): p_WB, quat_WB (w, x, y, z),
+    # v_B, w_B, its estimator's odometry with [devices]; empty before its first frame
+    estimate: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)

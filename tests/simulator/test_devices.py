@@ -203,7 +203,8 @@ def test_a_latency_beyond_the_estimator_history_is_refused():
 
 def test_closed_loop_estimate_tracks_the_truth_up_to_the_motion_capture_bias():
     """Two AMs flying their approach on the estimator's odometry, default device levels: after
-    the first second, the estimate's error beyond the motion capture's fixed bias is small."""
+    the first second, the estimate's error beyond the motion capture's fixed bias is small, and
+    the ground truth handed to telemetry carries the estimate beside it."""
     from amcore.config import _read_toml, scenario_from_dict
     from companion.pilot import Pilot
     from simulator.core import SitlCore
@@ -218,7 +219,8 @@ def test_closed_loop_estimate_tracks_the_truth_up_to_the_motion_capture_bias():
     data["devices"] = load_randomize(root / "configs" / "randomize" / "default.toml").devices
     data["scenario"]["seed"] = 11
     spec = scenario_from_dict(data, SCENARIO)
-    core = SitlCore(spec)
+    truths = []
+    core = SitlCore(spec, on_truth=truths.append)
     pilots = {s: Pilot(spec, s, model=core.model) for s in core.sysids}
     core.connect()
     rows = []
@@ -236,6 +238,10 @@ def test_closed_loop_estimate_tracks_the_truth_up_to_the_motion_capture_bias():
                                  np.linalg.norm(v_err), np.linalg.norm(f.w_B - np.array(x[10:13]))])
             core.actuate(k, {s: setpoint_as_on_the_wire(pilots[s].step(as_on_the_wire(f))[0])
                              for s, f in frames.items()})
+            if k % 10 == 0 and k >= 1000:  # telemetry: this step's estimate beside its truth
+                for s, f in frames.items():
+                    est = np.array(truths[-1].ams[s].estimate)
+                    assert est == pytest.approx(np.concatenate([f.p_WB, f.quat_WB_wxyz, f.v_B, f.w_B]), abs=1e-12)
             core.step()
     finally:
         core.close()
