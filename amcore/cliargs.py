@@ -19,8 +19,28 @@ from pathlib import Path
 BAD_ARGUMENTS = 2  # exit code of every main for a bad configuration or argument
 
 
+class DefaultsHelpFormatter(argparse.HelpFormatter):
+    """--help gives every option's default: "(default: ...)" is added to each help text that
+    does not already say its default, for every option and optional positional with a value
+    (not for flags, and not where the default is None or empty: "not given" is then what the
+    help text describes)."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        optional = bool(action.option_strings) or action.nargs in (argparse.OPTIONAL, argparse.ZERO_OR_MORE)
+        if ("default" in text.lower() or not optional or action.default in (None, False, [], ())
+                or action.default is argparse.SUPPRESS or action.nargs == 0):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
 class ArgumentParser(argparse.ArgumentParser):
-    """argparse, but an error is one line (`prog: error: ...`, exit 2) without the usage block."""
+    """argparse, but an error is one line (`prog: error: ...`, exit 2) without the usage block,
+    and --help gives every default (`DefaultsHelpFormatter`)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault("formatter_class", DefaultsHelpFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str):  # noqa: D401 - argparse's hook
         self.exit(BAD_ARGUMENTS, f"{self.prog}: error: {message}\n")

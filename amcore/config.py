@@ -25,19 +25,79 @@ DEFAULT_SCENARIO = Path(__file__).resolve().parents[1] / "configs" / "scenarios"
 
 
 # ----------------------------------------------------------------------------- vehicle
+ROTOR_SPINS = ("ccw", "cw")  # seen from above the rotor, looking down its thrust axis
+
+
+@dataclass(frozen=True)
+class Rotor:
+    """One rotor as PX4's control allocation describes it (CA_ROTORn_PX/PY/PZ, AX/AY/AZ, KM),
+    in the base frame B (x forward, y left, z up; origin at the base link's origin, which is
+    its centre of mass in the shipped URDFs).
+
+    position_m: where its thrust acts [m] (PX4 PX/PY/PZ, which are FRD); axis: the direction of
+    its thrust, normalized when loaded (PX4 AX/AY/AZ); spin: "ccw" or "cw" seen from the side
+    the thrust points to; moment_ratio_m: its drag torque per newton of thrust [N m / N] (|KM|;
+    PX4's KM is +moment_ratio_m for ccw, - for cw). The drag torque on the base is
+    -KM f axis: a ccw rotor yaws the base clockwise. thrust_min_n, thrust_max_n and
+    time_constant_s override the [rotors] table's values for this rotor (None: the table's).
+    """
+
+    position_m: tuple[float, float, float]
+    axis: tuple[float, float, float]
+    spin: str
+    moment_ratio_m: float
+    thrust_min_n: float | None = None
+    thrust_max_n: float | None = None
+    time_constant_s: float | None = None
+
+    @property
+    def km(self) -> float:
+        """PX4's CA_ROTORn_KM: signed moment ratio, > 0 for a ccw rotor [m]."""
+        return self.moment_ratio_m if self.spin == "ccw" else -self.moment_ratio_m
+
+
 @dataclass(frozen=True)
 class RotorParams:
-    """Rotor geometry of the multirotor; the flight-controller emulation mixes with it."""
+    """The multirotor's rotors: one `Rotor` row each ([[rotors.rotor]] in a vehicle file),
+    with the thrust range and lag every row takes unless it gives its own. The allocation
+    (amcore.allocation) and the simulator's rotor forces are built from these rows alone."""
 
-    arm_length_m: float
-    thrust_max_n: float  # per rotor
+    rotor: tuple[Rotor, ...]
+    thrust_max_n: float  # per rotor [N]
     thrust_min_n: float = 0.0
-    yaw_moment_coeff_m: float = 0.016  # rotor drag torque / rotor thrust [N m / N]
-    count: int = 4
-    layout: str = "x"
     # First-order lag of each rotor's thrust behind its command [s]; 0 is an ideal actuator.
     # The vehicle file gives the physical value and its source (configs/vehicles/am3dof.toml).
     time_constant_s: float = 0.0
+
+    @property
+    def count(self) -> int:
+        return len(self.rotor)
+
+    def thrust_min(self) -> tuple[float, ...]:
+        """Per rotor, its least thrust [N]."""
+        return tuple(self.thrust_min_n if r.thrust_min_n is None else r.thrust_min_n for r in self.rotor)
+
+    def thrust_max(self) -> tuple[float, ...]:
+        """Per rotor, its greatest thrust [N]."""
+        return tuple(self.thrust_max_n if r.thrust_max_n is None else r.thrust_max_n for r in self.rotor)
+
+    def time_constants(self) -> tuple[float, ...]:
+        """Per rotor, its thrust lag [s] (0: ideal)."""
+        return tuple(self.time_constant_s if r.time_constant_s is None else r.time_constant_s for r in self.rotor)
+
+    @property
+    def lagging(self) -> bool:
+        return any(t > 0.0 for t in self.time_constants())
+
+    @property
+    def thrust_max_total_n(self) -> float:
+        """Sum of the rotors' greatest thrusts [N] (along their own axes)."""
+        return float(sum(self.thrust_max()))
+
+    @property
+    def thrust_max_z_n(self) -> float:
+        """Greatest thrust along z_B [N]: every rotor at its maximum, the cant's share lost."""
+        return float(sum(f * r.axis[2] / math.hypot(*r.axis) for f, r in zip(self.thrust_max(), self.rotor)))
 
 
 @dataclass(frozen=True)
@@ -675,7 +735,23 @@ def _in_range(where: str, value, lo: float, hi: float, unit: str = "") -> None:
 RATE_HZ_RANGE = (100.0, 100_000.0)
 SEED_MAX = 2**32 - 1  # the seed is a uint32 (numpy's SeedSequence entropy; AM_SCENARIO.seed)
 SCENARIO_NAME_MAX_BYTES = 32  # AM_SCENARIO.name is char[32]
-ROTOR_LAYOUTS = ("x",)  # what simulator.mixer mixes (four rotors)
+# Plausible objects for this stack's AMs, tables and arena ([object], [mission], [[am]]):
+# - mass: below 10 g the weight (0.1 N) is within two steps of the wrist sensor's resolution
+#   (1/16 N) and Bullet's contact solver loses it against the AMs' 1.8 kg; above 100 kg no
+#   team of these vehicles lifts it (the lift check names the team's own limit, lower still);
+# - each edge, radius and height: below 5 cm the pad's 8 cm face and the 3-4 cm squeeze are
+#   as large as the object; above 3 m the AMs around it start outside the arena
+#   ([success].max_distance_m, 3 m by default);
+# - the object stands over the ground plane's drawn 10 m square, its bottom (the table's
+#   top) at most 5 m up;
+# - mission distances (standoff, start height, pre-grasp gap, lift) are at most 2 m.
+OBJECT_MASS_RANGE_KG = (0.01, 100.0)
+OBJECT_SIZE_RANGE_M = (0.05, 3.0)
+OBJECT_XY_MAX_M = 10.0
+OBJECT_BOTTOM_MAX_M = 5.0
+MISSION_DISTANCE_MAX_M = 2.0
+ROTOR_COUNT_RANGE = (4, 16)  # PX4's CA_ROTOR_COUNT allows up to 12; 16 leaves room for coaxial octos
+ROTOR_SPACING_MIN_M = 0.01  # two rotors closer than this are one rotor entered twice
 
 
 def _is_key_hex(text: str) -> bool:
@@ -694,7 +770,9 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     if extra:
         raise ConfigError(f"{where}: unknown table [{sorted(extra)[0]}]")
     sub = {}
-    for name, cls in (("rotors", RotorParams), ("task", TaskSpec), ("gains", Gains),
+    if "rotors" in data:
+        sub["rotors"] = _rotors(data["rotors"], f"{where}: [rotors]")
+    for name, cls in (("task", TaskSpec), ("gains", Gains),
                       ("safety", Safety), ("options", ControllerOptions), ("pad", PadSpec),
                       ("baseline", BaselineGains), ("flight_controller", FlightControllerParams)):
         if name in data:
@@ -709,16 +787,7 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     g = v.gains
     _check_urdf(v, where)
     _in_range(f"{where}: [vehicle].gravity_mps2", v.gravity_mps2, 0.1, 100.0, " m/s^2")
-    r = v.rotors
-    if r.count != 4:
-        raise ConfigError(f"{where}: [rotors].count: the flight controller mixes 4 rotors, got {r.count}")
-    if r.layout not in ROTOR_LAYOUTS:
-        raise ConfigError(f"{where}: [rotors].layout: expected one of {', '.join(ROTOR_LAYOUTS)}, got '{r.layout}'")
-    if not 0.0 <= r.thrust_min_n < r.thrust_max_n:
-        raise ConfigError(f"{where}: [rotors].thrust_min_n: need 0 <= thrust_min_n < thrust_max_n, got "
-                          f"{r.thrust_min_n!r} and {r.thrust_max_n!r}")
-    if not r.yaw_moment_coeff_m > 0.0:
-        raise ConfigError(f"{where}: [rotors].yaw_moment_coeff_m: must be > 0, got {r.yaw_moment_coeff_m!r}")
+    _check_rotors(v.rotors, f"{where}: [rotors]")
     for key, seq in (("q_nominal_rad", v.q_nominal_rad), ("joint_torque_max_nm", v.joint_torque_max_nm)):
         if len(seq) != n:
             raise ConfigError(f"{where}: [vehicle].{key}: expected {n} entries (one per arm joint), got {len(seq)}")
@@ -734,8 +803,6 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
         _positive(f"{where}: [gains].{key}", getattr(g, key))
     if v.safety.y_err_max and len(v.safety.y_err_max) != n:
         raise ConfigError(f"{where}: [safety].y_err_max: expected {n} entries, got {len(v.safety.y_err_max)}")
-    _positive(f"{where}: [rotors].thrust_max_n", v.rotors.thrust_max_n)
-    _positive(f"{where}: [rotors].arm_length_m", v.rotors.arm_length_m)
     _positive(f"{where}: [vehicle].joint_torque_max_nm", v.joint_torque_max_nm)
     _positive(f"{where}: [options].force_filter_hz", v.options.force_filter_hz)
     _positive(f"{where}: [options].force_filter_zeta", v.options.force_filter_zeta)
@@ -768,10 +835,78 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
         raise ConfigError(f"{where}: [options].controller = 'baseline' needs a [baseline] table")
     if v.baseline is not None:
         _check_baseline(v.baseline, n, f"{where}: [baseline]")
-    if not v.rotors.time_constant_s >= 0.0:
-        raise ConfigError(f"{where}: [rotors].time_constant_s: must be >= 0, got {v.rotors.time_constant_s!r}")
     _check_flight_controller(v.flight_controller, f"{where}: [flight_controller]")
     return v
+
+
+def _rotors(table, where: str) -> RotorParams:
+    """[rotors] with its [[rotors.rotor]] rows (see `Rotor`, `RotorParams`)."""
+    if not isinstance(table, dict):
+        raise ConfigError(f"{where}: expected a table, got {table!r}")
+    if "rotor" not in table:
+        hint = (" (the rotors are now one [[rotors.rotor]] row each, as PX4's CA_ROTORn_*: see "
+                "configs/vehicles/am3dof.toml)" if {"arm_length_m", "layout", "yaw_moment_coeff_m"} & set(table) else "")
+        raise ConfigError(f"{where}: missing key 'rotor'{hint}")
+    rows = table["rotor"]
+    if not isinstance(rows, list) or not all(isinstance(r, dict) for r in rows):
+        raise ConfigError(f"{where}.rotor: expected an array of tables ([[rotors.rotor]]), got {rows!r}")
+    kw = _build(RotorParams, {k: v for k, v in table.items() if k != "rotor"}, where, skip=("rotor",))
+    rotors = tuple(Rotor(**_build(Rotor, row, f"{where}.rotor[{i}]")) for i, row in enumerate(rows))
+    for i, r in enumerate(rotors):
+        for key in ("thrust_min_n", "thrust_max_n", "time_constant_s", "moment_ratio_m"):
+            val = getattr(r, key)
+            if val is not None and (isinstance(val, bool) or not isinstance(val, (int, float))):
+                raise ConfigError(f"{where}.rotor[{i}].{key}: expected a number, got {val!r}")
+    return RotorParams(rotor=rotors, **kw)
+
+
+def _check_rotors(r: RotorParams, where: str) -> None:
+    """A rotor table the allocation can use: finite rows, unit-able axes, known spins, sane
+    ranges, no rotor entered twice, and a layout that makes thrust along +z_B and torque about
+    every body axis (the effectiveness matrix's [F_z, tau] rows have full rank 4)."""
+    import numpy as np
+
+    from amcore.allocation import effectiveness  # imports this module
+
+    lo_n, hi_n = ROTOR_COUNT_RANGE
+    if not lo_n <= r.count <= hi_n:
+        raise ConfigError(f"{where}.rotor: expected {lo_n} to {hi_n} rotors, got {r.count}")
+    for i, row in enumerate(r.rotor):
+        w = f"{where}.rotor[{i}]"
+        if not all(math.isfinite(x) and abs(x) <= 5.0 for x in row.position_m):
+            raise ConfigError(f"{w}.position_m: must be finite and within 5 m of the base, got {list(row.position_m)}")
+        if not all(math.isfinite(x) for x in row.axis) or math.hypot(*row.axis) < 1e-6:
+            raise ConfigError(f"{w}.axis: must be a nonzero finite direction, got {list(row.axis)}")
+        if row.spin not in ROTOR_SPINS:
+            raise ConfigError(f"{w}.spin: expected one of {', '.join(ROTOR_SPINS)}, got '{row.spin}'")
+        if not 0.0 < row.moment_ratio_m <= 1.0:
+            raise ConfigError(f"{w}.moment_ratio_m: must be in (0, 1] m (PX4's default |KM| is 0.05), "
+                              f"got {row.moment_ratio_m!r}")
+    for i, (f_min, f_max, tau) in enumerate(zip(r.thrust_min(), r.thrust_max(), r.time_constants())):
+        w = f"{where}.rotor[{i}]" if any(getattr(r.rotor[i], k) is not None for k in
+                                          ("thrust_min_n", "thrust_max_n", "time_constant_s")) else where
+        if not (math.isfinite(f_max) and 0.0 <= f_min < f_max <= 1000.0):
+            raise ConfigError(f"{w}: need 0 <= thrust_min_n < thrust_max_n <= 1000 N, got {f_min!r} and {f_max!r}")
+        if not 0.0 <= tau <= 1.0:
+            raise ConfigError(f"{w}.time_constant_s: must be in [0, 1] s (0: ideal), got {tau!r}")
+    for i in range(r.count):
+        for j in range(i):
+            d = math.dist(r.rotor[i].position_m, r.rotor[j].position_m)
+            if d < ROTOR_SPACING_MIN_M:
+                raise ConfigError(f"{where}.rotor[{i}].position_m: {d * 1e3:.1f} mm from rotor[{j}]: the same rotor "
+                                  f"entered twice? (rotors at least {ROTOR_SPACING_MIN_M * 1e3:g} mm apart)")
+    B = effectiveness(r)
+    if not np.all(B[2] > 0.0):
+        k = int(np.argmin(B[2]))
+        raise ConfigError(f"{where}.rotor[{k}].axis: every rotor must thrust upward (axis z > 0), got "
+                          f"{list(r.rotor[k].axis)}")
+    s = np.linalg.svd(B[2:6], compute_uv=False)
+    if s[-1] < 1e-6 * s[0]:
+        _, _, vt = np.linalg.svd(B[2:6].T)
+        names = ("thrust along z", "roll torque", "pitch torque", "yaw torque")
+        weak = names[int(np.argmax(np.abs(vt[-1])))]
+        raise ConfigError(f"{where}.rotor: this layout cannot make {weak} independently of the other axes "
+                          f"(the effectiveness matrix's [F_z, tau] rows have rank < 4)")
 
 
 def _urdf_tree(urdf: Path, where: str) -> ET.Element:
@@ -932,15 +1067,22 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     obj = ObjectSpec(**_build(ObjectSpec, data["object"], f"{where}: [object]"))
     if obj.shape not in ("box", "cylinder"):
         raise ConfigError(f"{where}: [object].shape: expected 'box' or 'cylinder', got '{obj.shape}'")
-    _positive(f"{where}: [object].mass_kg", obj.mass_kg)
+    _in_range(f"{where}: [object].mass_kg", obj.mass_kg, *OBJECT_MASS_RANGE_KG, " kg")
     _positive(f"{where}: [object].lateral_friction", obj.lateral_friction)
     if obj.pad_friction < 0.0:
         raise ConfigError(f"{where}: [object].pad_friction: must be >= 0 (0: unset), got {obj.pad_friction!r}")
     if obj.shape == "cylinder":
-        _positive(f"{where}: [object].radius_m", obj.radius_m)
-        _positive(f"{where}: [object].height_m", obj.height_m)
+        _in_range(f"{where}: [object].radius_m", obj.radius_m, *OBJECT_SIZE_RANGE_M, " m")
+        _in_range(f"{where}: [object].height_m", obj.height_m, *OBJECT_SIZE_RANGE_M, " m")
     else:
-        _positive(f"{where}: [object].size_m", obj.size_m)
+        for i, edge in enumerate(obj.size_m):
+            _in_range(f"{where}: [object].size_m (entry {i})", edge, *OBJECT_SIZE_RANGE_M, " m")
+    for i in (0, 1):
+        _in_range(f"{where}: [object].position_m (entry {i})", obj.position_m[i], -OBJECT_XY_MAX_M, OBJECT_XY_MAX_M,
+                  " m (over the ground's drawn square)")
+    if obj.position_m[2] - obj.half_height_m > OBJECT_BOTTOM_MAX_M:
+        raise ConfigError(f"{where}: [object].position_m: the object's bottom (the table's top) is "
+                          f"{obj.position_m[2] - obj.half_height_m:.3g} m up, must be in [0, {OBJECT_BOTTOM_MAX_M:g}] m")
     if obj.position_m[2] - obj.half_height_m < -1e-9:
         raise ConfigError(f"{where}: [object].position_m: the object's bottom is {obj.position_m[2] - obj.half_height_m:.3g} m, "
                           f"below the ground (z = 0)")
@@ -953,6 +1095,8 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     for key in ("standoff_m", "start_height_m", "pre_gap_m", "squeeze_m", "touch_force_n", "touch_hold_s"):
         if not getattr(mission, key) >= 0.0:  # (values are finite: _check_type)
             raise ConfigError(f"{where}: [mission].{key}: must be >= 0, got {getattr(mission, key)!r}")
+    for key in ("standoff_m", "start_height_m", "pre_gap_m", "lift_m"):
+        _in_range(f"{where}: [mission].{key}", getattr(mission, key), 0.0, MISSION_DISTANCE_MAX_M, " m")
     if mission.thrust_fraction_max > 1.0:
         raise ConfigError(f"{where}: [mission].thrust_fraction_max: must be <= 1, got {mission.thrust_fraction_max}")
     if (mission.touch_force_n > 0.0) != (mission.touch_hold_s > 0.0):
@@ -1027,6 +1171,7 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     _check_divides(spec.rate_hz, vehicle.flight_controller.rate_hz, f"{where}: [flight_controller].rate_hz")
     check_duration(spec, spec.duration_s, f"{where}: [scenario].duration_s")
     _check_lift(spec, where)
+    _check_grasp_geometry(spec, where)
     return spec
 
 
@@ -1037,11 +1182,16 @@ def check_duration(spec: ScenarioSpec, duration_s: float, where: str) -> None:
                           f"got {duration_s!r}")
 
 
+_NAME_CHARS = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-.")
+
+
 def _check_name(name: str, where: str) -> None:
-    raw = name.encode("utf-8")
-    if not name or not name.isascii() or not name.isprintable() or len(raw) > SCENARIO_NAME_MAX_BYTES:
-        raise ConfigError(f"{where}: must be 1 to {SCENARIO_NAME_MAX_BYTES} printable ASCII characters "
-                          f"(AM_SCENARIO.name), got {name!r}")
+    """A scenario name fits AM_SCENARIO.name and is one plain folder name: runs are written
+    to runs/<name>-<time>, so a name with a path in it would write elsewhere."""
+    if (not name or len(name) > SCENARIO_NAME_MAX_BYTES or not set(name) <= _NAME_CHARS
+            or name[0] in ".-"):
+        raise ConfigError(f"{where}: must be 1 to {SCENARIO_NAME_MAX_BYTES} letters, digits, '_', '-' or '.', "
+                          f"not starting with '.' or '-' (AM_SCENARIO.name, and the run folder's name), got {name!r}")
 
 
 def _check_lift(spec: ScenarioSpec, where: str) -> None:
@@ -1051,13 +1201,76 @@ def _check_lift(spec: ScenarioSpec, where: str) -> None:
     n = len(spec.ams)
     m_am = urdf_mass_kg(v.urdf, where)
     need_n = (n * m_am + spec.object.mass_kg) * v.gravity_mps2
-    have_n = m.thrust_fraction_max * n * v.rotors.count * v.rotors.thrust_max_n
+    have_n = m.thrust_fraction_max * n * v.rotors.thrust_max_z_n
     if need_n > have_n:
         most = have_n / v.gravity_mps2 - n * m_am
         raise ConfigError(f"{where}: [object].mass_kg: {spec.object.mass_kg:g} kg is more than {n} AMs can lift with "
                           f"margin: they and the object weigh {need_n:.1f} N, {m.thrust_fraction_max:g} of their rotors' "
-                          f"{n * v.rotors.count * v.rotors.thrust_max_n:g} N is {have_n:.1f} N (at most "
+                          f"{n * v.rotors.thrust_max_z_n:g} N is {have_n:.1f} N (at most "
                           f"{max(0.0, most):.2f} kg)")
+
+
+def surface_distance(obj: ObjectSpec, azimuth_rad: float) -> float:
+    """Distance [m] from the object's vertical axis to its side along the horizontal direction azimuth."""
+    if obj.shape == "cylinder":
+        return obj.radius_m
+    hx, hy = 0.5 * obj.size_m[0], 0.5 * obj.size_m[1]
+    c, s = abs(math.cos(azimuth_rad)), abs(math.sin(azimuth_rad))
+    return min(hx / c if c > 1e-12 else math.inf, hy / s if s > 1e-12 else math.inf)
+
+
+def _pad_start_W(spec: ScenarioSpec, am: AmSpec) -> tuple[float, float, float]:
+    """Where AM `am`'s pad starts [m, W]: [mission].standoff_m outside the face on its azimuth,
+    start_height_m above the grasp height, moved by its start_offset_m (amcore.mission)."""
+    az = math.radians(am.azimuth_deg)
+    r = surface_distance(spec.object, az) + spec.mission.standoff_m
+    c = spec.object.position_m
+    return (c[0] + r * math.cos(az) + am.start_offset_m[0], c[1] + r * math.sin(az) + am.start_offset_m[1],
+            c[2] + spec.mission.start_height_m + am.start_offset_m[2])
+
+
+def _base_width_m(v: VehicleParams, where: str) -> float:
+    """The widest horizontal edge of the base link's collision boxes in the URDF [m]; if it has
+    none, the farthest rotor's distance from the base's z axis (its arm)."""
+    link = next((l for l in _urdf_tree(v.urdf, where).iter("link") if l.get("name") == v.base_link), None)
+    edges = []
+    for box in ([] if link is None else link.findall("collision/geometry/box")):
+        try:
+            edges += [float(e) for e in box.get("size", "").split()[:2]]
+        except ValueError:
+            pass
+    return max(edges) if edges else max(math.hypot(r.position_m[0], r.position_m[1]) for r in v.rotors.rotor)
+
+
+def _check_grasp_geometry(spec: ScenarioSpec, where: str) -> None:
+    """The AMs can start and grasp where the scenario puts them: the squeeze stays inside the
+    object, no two AMs start with their bases overlapping (closer than the base's width; their
+    pads' start points are a lower bound of their bases' distance, each base being behind its
+    pad, away from the object), and the lift reaches the success criterion's height."""
+    m, obj = spec.mission, spec.object
+    half_min = obj.radius_m if obj.shape == "cylinder" else 0.5 * min(obj.size_m[0], obj.size_m[1])
+    if m.squeeze_m >= half_min:
+        raise ConfigError(f"{where}: [mission].squeeze_m: {m.squeeze_m:g} m reaches the object's centre; it must be "
+                          f"less than its half width, {half_min:g} m")
+    if m.lift_m < spec.success.min_lift_m:
+        raise ConfigError(f"{where}: [mission].lift_m: {m.lift_m:g} m never reaches [success].min_lift_m "
+                          f"({spec.success.min_lift_m:g} m); must be in [{spec.success.min_lift_m:g}, "
+                          f"{MISSION_DISTANCE_MAX_M:g}] m")
+    starts = [_pad_start_W(spec, a) for a in spec.ams]
+    gap = _base_width_m(spec.vehicle, where)
+    for i in range(len(spec.ams)):
+        for j in range(i + 1, len(spec.ams)):
+            d = math.dist(starts[i], starts[j])
+            if d < gap:
+                a, b = spec.ams[i], spec.ams[j]
+                r = min(surface_distance(obj, math.radians(x.azimuth_deg)) for x in (a, b)) + m.standoff_m
+                least = math.degrees(2.0 * math.asin(min(1.0, gap / (2.0 * r))))
+                raise ConfigError(
+                    f"{where}: [[am]] #{j + 1}.azimuth_deg: sysid {b.sysid} (azimuth_deg {b.azimuth_deg:g}, "
+                    f"start_offset_m {list(b.start_offset_m)}) starts {d:.3g} m from [[am]] #{i + 1}, sysid {a.sysid} "
+                    f"(azimuth_deg {a.azimuth_deg:g}, start_offset_m {list(a.start_offset_m)}); AMs must start at least "
+                    f"a base's width ({gap:g} m) apart: azimuths about {least:.0f} deg or more apart at this object and "
+                    f"standoff")
 
 
 def _table(data: dict, name: str, where: str) -> dict:

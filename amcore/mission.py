@@ -22,7 +22,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import law
-from .config import AmSpec, ObjectSpec, ScenarioSpec
+from .config import AmSpec, ScenarioSpec, surface_distance  # noqa: F401 (surface_distance: re-exported)
 from .control import Reference
 from .model import AmModel, AmState, create_data, decoupled_terms
 from .so3 import Rz
@@ -52,15 +52,6 @@ def nominal_geometry(model: AmModel) -> NominalGeometry:
     )
 
 
-def surface_distance(obj: ObjectSpec, azimuth_rad: float) -> float:
-    """Distance [m] from the object's vertical axis to its side along the horizontal direction azimuth."""
-    if obj.shape == "cylinder":
-        return obj.radius_m
-    hx, hy = 0.5 * obj.size_m[0], 0.5 * obj.size_m[1]
-    c, s = abs(np.cos(azimuth_rad)), abs(np.sin(azimuth_rad))
-    return min(hx / c if c > 1e-12 else np.inf, hy / s if s > 1e-12 else np.inf)
-
-
 @dataclass(frozen=True)
 class SqueezePlan:
     """The grasp's normal force per pad [N] and the task depth that makes it through the
@@ -85,7 +76,7 @@ def squeeze_plan(spec: ScenarioSpec, model: AmModel) -> SqueezePlan:
     share = spec.object.mass_kg * g / n
     required = ms.friction_margin * share / ms.friction_assumed
     weight = model.mass_kg * g + share
-    thrust = ms.thrust_fraction_max * v.rotors.count * v.rotors.thrust_max_n
+    thrust = ms.thrust_fraction_max * v.rotors.thrust_max_z_n
     feasible = min(math.sqrt(max(thrust * thrust - weight * weight, 0.0)), ms.squeeze_max_n)
     if not ms.squeeze_sizing:
         return SqueezePlan(fixed, ms.squeeze_m, required, feasible)

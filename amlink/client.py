@@ -19,6 +19,7 @@ from amlink.udp import (
     RUN_HEARTBEAT_PERIOD_S,
     SIM_COMPID,
     SIM_SYSID,
+    WAITING_NOTICE_PREFIX,
     LinkStats,
     Shim,
 )
@@ -91,6 +92,8 @@ class CompanionClient:
         self.stats = LinkStats()
         self.scenario: ScenarioInfo | None = None
         self.status_texts: deque[tuple[int, str]] = deque(maxlen=_MAX_TEXTS)  # (MAV_SEVERITY, text), latest
+        # the simulator's last "still gathering companions" notice: (time.monotonic(), text), or None
+        self.waiting_notice: tuple[float, str] | None = None
         self._shim = shim
         self._link = None  # the transport (amlink.transport), once connected
         self._sim_addr = None  # where we send: the simulator's address, or its stream connection
@@ -176,8 +179,13 @@ class CompanionClient:
                 next_try, confirmation = now + COMMAND_RETRY_S, min(confirmation + 1, 255)
             self._pump(min(deadline, next_try) - now)
 
-    def recv_frame(self, timeout_s: float = 1.0) -> SensorFrame | None:
+    def recv_frame(self, timeout_s: float = 1.0, on_waiting=None) -> SensorFrame | None:
         """Newest sensor frame not yet returned, or None once the simulator announced shutdown.
+
+        Before the first frame, a simulator still gathering its other companions says so every
+        few seconds (:data:`amlink.udp.WAITING_NOTICE_PREFIX`); ``timeout_s`` then counts from
+        its last notice, so a companion waits as long as its simulator does, and
+        ``on_waiting(text)``, if given, gets each notice.
 
         In lockstep at most one frame is pending.  A backlog (the simulator ran on
         while this companion did not answer, e.g. before it rejoined) is passed
@@ -188,9 +196,16 @@ class CompanionClient:
         ``timeout_s``.
         """
         self._require_connected()
-        deadline = time.monotonic() + timeout_s
+        start = time.monotonic()
+        deadline = start + timeout_s
         polled = False  # poll the socket at least once, even with timeout_s = 0
+        seen = self.waiting_notice
         while not self._shutdown:
+            if self.waiting_notice is not seen and self._newest_step < 0:
+                seen = self.waiting_notice
+                deadline = max(deadline, seen[0] + timeout_s)
+                if on_waiting is not None:
+                    on_waiting(seen[1])
             if self._inbox:
                 item = self._inbox.popleft()
                 if isinstance(item, codec.Shutdown):
@@ -203,6 +218,8 @@ class CompanionClient:
                 return item
             remaining = deadline - time.monotonic()
             if remaining <= 0 and polled:
+                if seen is not None and self._newest_step < 0:
+                    raise SimulatorTimeoutError(f"sensor frame and no word (its last: '{seen[1]}')", timeout_s)
                 raise SimulatorTimeoutError("sensor frame", timeout_s)
             self._pump(remaining)
             polled = True
@@ -308,6 +325,8 @@ class CompanionClient:
             self._acks.append(body)
         elif mid == _STATUSTEXT:
             self.status_texts.append((body.severity, body.text))
+            if body.text.startswith(WAITING_NOTICE_PREFIX):
+                self.waiting_notice = (time.monotonic(), body.text)
         elif mid == _SIM_STEP and self.scenario is not None and body[2] != self.scenario.scenario_id:
             self.stats.rejected_frames += 1  # body[2]: AM_SIM_STEP.scenario_id
             self._frames.reset()

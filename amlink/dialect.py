@@ -1,7 +1,7 @@
 """The amstack MAVLink 2 dialect, generated from XML by pymavlink's mavgen on first use.
 
 The generated Python module is never committed.  :func:`load` builds it from
-``amlink/dialect/amstack.xml`` (plus pymavlink's own common/standard/minimal.xml)
+``amlink/dialect/amstack.xml`` (plus pymavlink's own ardupilotmega.xml and all it includes)
 into a cache directory and imports it:
 
 * cache directory: ``$AMSTACK_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/amstack``,
@@ -43,7 +43,30 @@ DIALECT_NAME = "amstack"
 XML_PATH = Path(__file__).resolve().parent / "dialect" / f"{DIALECT_NAME}.xml"
 # pymavlink ships the included standard definitions next to its generated dialects.
 PYMAVLINK_V20_DIR = Path(pymavlink.__file__).resolve().parent / "dialects" / "v20"
-INCLUDED_XML = ("common.xml", "standard.xml", "minimal.xml")
+
+
+def _includes(xml: Path) -> list[str]:
+    """The file names a dialect XML <include>s, in order."""
+    import xml.etree.ElementTree as ET
+
+    return [(e.text or "").strip() for e in ET.parse(xml).getroot().findall("include")]
+
+
+def _included_closure(xml: Path, folder: Path) -> tuple[str, ...]:
+    """Every XML that `xml` includes, directly or not, from pymavlink's `folder`."""
+    seen: list[str] = []
+    todo = _includes(xml)
+    while todo:
+        name = todo.pop(0)
+        if name not in seen:
+            seen.append(name)
+            todo += _includes(folder / name)
+    return tuple(seen)
+
+
+# ardupilotmega.xml and what it includes (common, standard, minimal, ...), as pymavlink ships them:
+# the dialect carries everything stock tools (MAVProxy, MAVExplorer) expect of a vehicle
+INCLUDED_XML = _included_closure(XML_PATH, PYMAVLINK_V20_DIR)
 CACHE_ENV = "AMSTACK_CACHE_DIR"
 
 _lock = threading.Lock()

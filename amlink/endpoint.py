@@ -42,6 +42,15 @@ ACCEPTED_FORMS = """accepted forms (mavutil's):
   DEVICE[:BAUD] or DEVICE,BAUD   serial port, e.g. /dev/ttyUSB0:921600 (default 115200 baud)
   HOST: a name, an IPv4 address or a bracketed IPv6 address such as [::1]"""
 
+# a companion's --sim: udp:HOST:PORT has always meant "send to the simulator" there
+COMPANION_SIM_FORMS = ACCEPTED_FORMS.replace(
+    "  udpin:HOST:PORT    listen for UDP (udp:HOST:PORT is the same)\n",
+    "  udpin:HOST:PORT    listen for UDP (for a flight controller that sends first)\n")
+COMPANION_SIM_FORMS = COMPANION_SIM_FORMS.replace(
+    "  udpout:HOST:PORT   send UDP to HOST:PORT\n",
+    "  udpout:HOST:PORT   send UDP to HOST:PORT (udp:HOST:PORT is read as this here, with a warning;\n"
+    "                     in mavutil udp: listens)\n")
+
 
 class EndpointError(ValueError):
     """A malformed endpoint string; the message names it and lists the accepted forms."""

@@ -8,7 +8,7 @@ the flight-controller emulation still saturates to the vehicle's real limits.
 Defaults are generous enough for any vehicle of this project (a 10 kN thrust
 would lift a tonne); the process mains should pass vehicle-specific ones, e.g.::
 
-    SetpointLimits.for_vehicle(thrust_max_n=rotors.count * rotors.thrust_max_n,
+    SetpointLimits.for_vehicle(thrust_max_n=rotors.thrust_max_total_n,
                                joint_torque_max_nm=max(v.joint_torque_max_nm),
                                n_joints=v.n_joints)
 """

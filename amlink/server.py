@@ -23,6 +23,8 @@ from amlink.udp import (
     SIM_COMPID,
     SIM_SYSID,
     STATUSTEXT_MAX,
+    WAITING_NOTICE_PERIOD_S,
+    WAITING_NOTICE_PREFIX,
     LinkStats,
     Shim,
 )
@@ -224,20 +226,24 @@ class SimServer:
         return frozenset(s for s, p in self._peers.items() if p.lost)
 
     # -- handshake ---------------------------------------------------------------
-    def wait_for_peers(self, timeout_s: float) -> None:
+    def wait_for_peers(self, timeout_s: float, on_waiting: Callable[[str], None] | None = None) -> None:
         """Wait for a HEARTBEAT from every configured sysid (each answered with AM_SCENARIO).
 
-        Raises PeerMissingError naming the silent sysids after ``timeout_s``.
+        Raises PeerMissingError naming the silent sysids after ``timeout_s``. Meanwhile, every
+        WAITING_NOTICE_PERIOD_S, the companions already there hear whom it waits for (a
+        STATUSTEXT, :func:`waiting_notice`) and ``on_waiting`` gets the same text.
         """
-        self._wait_until(lambda p: p.addr is not None, timeout_s, "HEARTBEAT")
+        self._wait_until(lambda p: p.addr is not None, timeout_s, "HEARTBEAT", on_waiting)
 
-    def wait_for_armed(self, timeout_s: float) -> None:
-        """Wait until every companion has armed (COMMAND_LONG ARM); PeerMissingError if not."""
-        self._wait_until(lambda p: p.armed, timeout_s, "ARM command")
+    def wait_for_armed(self, timeout_s: float, on_waiting: Callable[[str], None] | None = None) -> None:
+        """Wait until every companion has armed (COMMAND_LONG ARM); PeerMissingError if not.
+        Notices as :meth:`wait_for_peers`."""
+        self._wait_until(lambda p: p.armed, timeout_s, "ARM", on_waiting)
 
-    def _wait_until(self, ok, timeout_s: float, what: str) -> None:
+    def _wait_until(self, ok, timeout_s: float, what: str, on_waiting=None) -> None:
         link = self._require_open()
         deadline = time.monotonic() + timeout_s
+        next_notice = time.monotonic() + WAITING_NOTICE_PERIOD_S
         while True:
             missing = [s for s, p in self._peers.items() if not ok(p)]
             if not missing:
@@ -246,6 +252,13 @@ class SimServer:
             remaining = deadline - now
             if remaining <= 0:
                 raise PeerMissingError(missing, timeout_s, what)
+            if now >= next_notice:
+                text = waiting_notice(what, missing, remaining)
+                self._notify(text)
+                if on_waiting is not None:
+                    on_waiting(text)
+                next_notice = now + WAITING_NOTICE_PERIOD_S
+            remaining = min(remaining, next_notice - now)
             if self._hello:
                 if now >= self._next_hello:
                     self._say_hello()
@@ -254,6 +267,14 @@ class SimServer:
             for data, addr in link.recv(remaining):
                 for _setpoint in self._handle(data, addr):
                     self.stats.stale_setpoints += 1  # nothing awaited yet
+
+    def _notify(self, text: str) -> None:
+        """STATUSTEXT (INFO) to every companion heard so far."""
+        msg = mav.MAVLink_statustext_message(mav.MAV_SEVERITY_INFO,
+                                             text.encode("utf-8")[:STATUSTEXT_MAX].decode("utf-8", "ignore").encode())
+        for peer in self._peers.values():
+            if peer.addr is not None:
+                self._link.send(peer.addr, peer.encoder.pack([msg]))
 
     def _say_hello(self) -> None:
         """HEARTBEAT to every udpout destination no companion answers from yet, once per
@@ -518,3 +539,10 @@ class SimServer:
         if self._link is None:
             raise RuntimeError("SimServer is not open; call open() first")
         return self._link
+
+
+def waiting_notice(what: str, sysids: Sequence[int], remaining_s: float) -> str:
+    """What the simulator says while it gathers its companions: ``waiting 58 s more for ARM
+    from sysid 5`` (it fits a STATUSTEXT for up to about six sysids; the rest is cut)."""
+    who = "sysid" + ("s " if len(sysids) > 1 else " ") + ", ".join(map(str, sysids))
+    return f"{WAITING_NOTICE_PREFIX}{remaining_s:.0f} s more for {what} from {who}"

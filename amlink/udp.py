@@ -26,6 +26,11 @@ SENSOR_RETRY_S = 0.025  # first re-send of an unanswered sensor batch [s wall]; 
 REJOIN_QUIET_S = 1.0  # signing off: a HEARTBEAT moves a peer only after this long silent [s]
 SHUTDOWN_COPIES = 3  # the last datagram of a run is sent this many times (loss)
 STATUSTEXT_MAX = 50  # bytes in STATUSTEXT.text
+# While the simulator gathers its companions (HEARTBEAT, then ARM from every sysid), it tells
+# those already there whom it waits for, every WAITING_NOTICE_PERIOD_S, in a STATUSTEXT that
+# begins with WAITING_NOTICE_PREFIX; a companion waits for its first frame as long as these come.
+WAITING_NOTICE_PERIOD_S = 2.0
+WAITING_NOTICE_PREFIX = "waiting "
 _MAX_DATAGRAM = 65535
 _MAX_DRAIN = 256  # datagrams read per wake-up before checking the clock again
 _DONTWAIT = getattr(socket, "MSG_DONTWAIT", None)

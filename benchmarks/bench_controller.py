@@ -29,6 +29,7 @@ import numpy as np
 import pinocchio as pin
 
 from amcore import law
+from amcore.allocation import Allocation
 from amcore.config import load_scenario
 from amcore.control import ControllerMemory, ControllerParams, step
 from amcore.mission import am_mission
@@ -61,7 +62,7 @@ def main() -> None:
     # the same states as sensor frames (the wire carries the quaternion as float32)
     frames = [SensorFrame(step=k, time_s=0.0, p_WB=s.p_WB, quat_WB_wxyz=R_to_quat_wxyz(s.R_WB).astype(np.float32),
                           v_B=s.v_B, w_B=s.w_B, q=s.q, qdot=s.qdot, wrench_E=F) for k, s in enumerate(sts)]
-    thrust_max = spec.vehicle.rotors.thrust_max_n * spec.vehicle.rotors.count
+    thrust_max = Allocation(spec.vehicle.rotors).thrust_scale_n
     mem = [ControllerMemory(), ControllerMemory()]
     pm, fid = model.pin_model, model.ee_frame_id
     clock = time.perf_counter_ns

@@ -8,7 +8,7 @@ Rows, each timed in interleaved rounds so that a change in machine load hits all
   the loop running every call), and its allocation alone (Px4Allocation.allocate);
 - the simulator's attitude-mode path for one AM and step: read attitude and rate, the
   autopilot, command the rotors (World.attitude_and_rate + step + World.apply_rotors), next
-  to torque mode's (World.apply: the mixer), on a connected world;
+  to torque mode's (World.apply: the allocation), on a connected world;
 - the rotors' lag for one AM and step (simulator.rotors.RotorLag.step);
 - the companion's attitude-mode law on top of torque mode's step (amcore.offboard: the body
   torque estimate and the joint torques for it), next to torque mode's step alone.
@@ -98,7 +98,7 @@ def main() -> None:
     rows = {"flight controller loop (FlightController.step)": fc_step,
             "  of which the allocation (Px4Allocation.allocate)": allocation,
             "simulator, attitude mode: read + autopilot + apply_rotors": attitude_path,
-            "simulator, torque mode: World.apply (mixer)": torque_path,
+            "simulator, torque mode: World.apply (allocation)": torque_path,
             "rotor lag (RotorLag.step)": rotor_lag,
             "companion, torque mode: control.step": torque_law,
             "companion, attitude mode: offboard.offboard_step": offboard_law}

@@ -109,7 +109,7 @@ class _KeyedRecorder:
         self.endpoint = free_endpoint()
         keyfile = tmp / f"{name}.key"
         keyfile.write_text(MASTER.hex())
-        self.proc = subprocess.Popen([sys.executable, "-m", "ground_station", "record",
+        self.proc = subprocess.Popen([sys.executable, "-m", "ground_station", "record", "--insecure",
                                       "--out", str(tmp / f"{name}.mcap"), "--zenoh-listen", self.endpoint,
                                       "--telemetry-key-file", str(keyfile), "--summary-json"],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -314,7 +314,7 @@ def caller_costs(templates: dict, n: int) -> None:
         rec = None
         with tempfile.TemporaryDirectory() as tmp:
             if rec_kind:
-                rec = subprocess.Popen([sys.executable, "-m", "ground_station", "record", "--out", f"{tmp}/b.mcap",
+                rec = subprocess.Popen([sys.executable, "-m", "ground_station", "record", "--insecure", "--out", f"{tmp}/b.mcap",
                                         "--zenoh-listen", ep], stderr=subprocess.PIPE, text=True)
                 rec.stderr.readline()
             try:
@@ -419,7 +419,7 @@ def throughput(templates: dict, n_ams: int, rate: float, seconds: float, truth_e
         data.write_text(json.dumps({k: ({str(s): v for s, v in t.items()} if isinstance(t, dict) and k != "run_start"
                                         else t) for k, t in templates.items() if k in _TEMPLATES}))
         ep, out = free_endpoint(), Path(tmp) / "run.mcap"
-        rec = subprocess.Popen([sys.executable, "-m", "ground_station", "record", "--out", str(out), "--zenoh-listen",
+        rec = subprocess.Popen([sys.executable, "-m", "ground_station", "record", "--insecure", "--out", str(out), "--zenoh-listen",
                                 ep, "--summary-json", "--linger", "2"], stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True)
         rec.stderr.readline()
@@ -478,7 +478,7 @@ def recorder_capacity(templates: dict, n_ams: int, seconds: float, encoding: str
           f"one sample per message, for {seconds:.0f} s")
     with tempfile.TemporaryDirectory() as tmp:
         ep = free_endpoint()
-        rec = subprocess.Popen([sys.executable, "-m", "ground_station", "record", "--out", f"{tmp}/c.mcap",
+        rec = subprocess.Popen([sys.executable, "-m", "ground_station", "record", "--insecure", "--out", f"{tmp}/c.mcap",
                                 "--zenoh-listen", ep, "--summary-json"], stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True)
         rec.stderr.readline()

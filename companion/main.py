@@ -25,7 +25,7 @@ from pathlib import Path
 from amcore import cliargs
 from amcore.config import DEFAULT_SCENARIO, ConfigError, load_scenario, scenario_id
 from amlink import signing
-from amlink.endpoint import COMPANION_SIM, EndpointError, as_destination, parse_endpoint
+from amlink.endpoint import COMPANION_SIM, COMPANION_SIM_FORMS, EndpointError, as_destination, parse_endpoint
 from amlink.errors import LinkError, SimulatorUnreachableError
 from amlink.lockstep import CompanionClient
 from amlink.tlog import TlogWriter
@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
         if sim.alias == "udp":  # read as udpout: a destination
             sim = as_destination(sim, a.sim)
     except EndpointError as exc:
-        print(f"{tag}: error: --sim: {exc}", file=sys.stderr)
+        print(f"{tag}: error: --sim: endpoint {exc.text!r}: {exc.why}\n{COMPANION_SIM_FORMS}", file=sys.stderr)
         return 2
     if sim.alias == "udp":
         print(f"{tag}: warning: --sim {a.sim} is read as udpout:{a.sim.split(':', 1)[1]} (send to the simulator), "
@@ -133,8 +133,15 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{tag}: connected to {a.sim}, scenario '{info.name}', armed", file=sys.stderr, flush=True)
         t0 = time.perf_counter()
         cpu.start()
+        waited = []
+
+        def simulator_waits(text: str) -> None:  # the simulator is still gathering the other companions
+            if not waited or waited[-1].split(" more ", 1)[-1] != text.split(" more ", 1)[-1]:
+                print(f"{tag}: the simulator is {text}", file=sys.stderr, flush=True)
+            waited.append(text)
+
         while True:
-            frame = client.recv_frame(timeout_s=a.frame_timeout)
+            frame = client.recv_frame(timeout_s=a.frame_timeout, on_waiting=simulator_waits)
             if frame is None:
                 break
             sp, att, res = pilot.command(frame)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 
 from amcore import baseline, control
+from amcore.allocation import Allocation
 from amcore.adapt import HeadingAdmittance, HeadingState, heading_update, turn_frame, turn_reference
 from amcore.config import ScenarioSpec
 from amcore.control import StepResult
@@ -49,7 +50,7 @@ class Pilot:
             self.law = control.step
             self.params = control.ControllerParams.from_vehicle(spec.vehicle, self.mission.frame)
             self.memory = OffboardMemory() if self.attitude_mode else control.ControllerMemory()
-        self.thrust_max_n = spec.vehicle.rotors.thrust_max_n * spec.vehicle.rotors.count
+        self.thrust_max_n = Allocation(spec.vehicle.rotors).thrust_scale_n  # thrust 1 of SET_ATTITUDE_TARGET [N]
         ms = spec.mission
         self.outcome = Outcome(sysid, ("approach", "grasp", "hover"), (ms.grasp_end_s + ms.lift_move_s + 1.0,
                                                                       ms.hover_end_s))

@@ -1,11 +1,14 @@
 """ground-station: record telemetry to MCAP, review a recorded run.
 
-    ground-station record --out RUN.mcap [--duration S] [zenoh options]
+    ground-station record --out RUN.mcap --telemetry-key-file DIR/telemetry.key [--duration S] [zenoh options]
     ground-station review RUN.mcap [--json] [--plots DIR]
+    ground-station keys DIR [--config SCENARIO]
 
 record stops on SIGINT/SIGTERM, after --duration seconds of wall time, or shortly after
 the simulator's run_end event, and always finishes the file. review reads finished and
-truncated logs (a killed recorder) alike. Exit status: 0 ok, 1 runtime failure,
+truncated logs (a killed recorder) alike. keys writes a run's telemetry keys for processes
+started by hand: the recorder's master key and the simulator's and each companion's own
+(telemetry.keyfiles). Exit status: 0 ok, 1 runtime failure,
 2 bad input (missing file, not an MCAP, empty log, bad options).
 """
 from __future__ import annotations
@@ -18,6 +21,7 @@ import threading
 from pathlib import Path
 
 from amcore import cliargs
+from amcore.config import DEFAULT_SCENARIO
 from telemetry.session import TelemetryConfigError, add_zenoh_arguments, options_from_args
 
 
@@ -65,6 +69,26 @@ def _record(a: argparse.Namespace) -> int:
     return 0
 
 
+def _keys(a: argparse.Namespace) -> int:
+    from amcore.config import ConfigError, load_scenario
+    from telemetry.keyfiles import MASTER_FILE, write_run_keys
+
+    try:
+        sysids = [am.sysid for am in load_scenario(a.config).ams]
+    except ConfigError as exc:
+        _err(str(exc))
+        return 2
+    if (a.folder / MASTER_FILE).exists():
+        _err(f"{a.folder} already holds {MASTER_FILE}: a new set would lock out the processes using it; "
+             f"choose another folder or remove the old keys")
+        return 2
+    a.folder.mkdir(parents=True, exist_ok=True)
+    files = write_run_keys(a.folder, sysids)
+    for name, path in files.items():
+        print(f"{name}: --telemetry-key-file {path}")
+    return 0
+
+
 def _review(a: argparse.Namespace) -> int:
     from .mcap_io import NotAnMcapError, read_log
     from .review import NoDataError, format_summary, load_run, summarize
@@ -106,6 +130,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--compression", choices=("zstd", "lz4", "none"), default="zstd")
     r.add_argument("--summary-json", action="store_true", help="print the final summary as JSON on stdout")
     add_zenoh_arguments(r, role="recorder")
+    k = sub.add_parser("keys", help="write a run's telemetry keys (recorder, simulator, each companion) into a folder")
+    k.add_argument("folder", type=cliargs.output_dir, help="folder for the key files (created; mode 0600 files)")
+    k.add_argument("--config", type=Path, default=DEFAULT_SCENARIO, help="scenario TOML: whose keys (its sysids)")
     v = sub.add_parser("review", help="summarize a recorded run per phase, optionally plot it")
     v.add_argument("log", type=Path, help="MCAP file (a truncated one is salvaged)")
     v.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -117,6 +144,8 @@ def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
     if a.command == "record":
         return _record(a)
+    if a.command == "keys":
+        return _keys(a)
     return _review(a)
 
 

@@ -9,7 +9,7 @@ what a lockstep server does per step: `apply`, `state` and `wrench_ee` for every
 "per AM" times, back to back (hot caches), the lockstep simulator's own work for one AM and
 step as `simulator.core` and `amlink.server` do it: read the sensors (`sensor_values`, the
 frame's value type), frame and sign the sensor batch (4 MAVLink 2 frames), verify and decode
-the answer (TorqueSetpoint + SET_ATTITUDE_TARGET, 2 signed frames), apply it (mixer, joint
+the answer (TorqueSetpoint + SET_ATTITUDE_TARGET, 2 signed frames), apply it (allocation, joint
 limits) and re-apply it in the step (3 PyBullet setters). "floor" is what the same work
 costs in calls that no Python code around them can avoid: the PyBullet getters and setters
 it makes and one SHA-256 per signed frame (hashlib), back to back. In a running SITL every
@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-import pybullet as pb
+from .bullet import pb
 
 from amcore.config import AmSpec, ObjectSpec, ScenarioSpec, load_scenario
 from amcore.model import AmState, build_model

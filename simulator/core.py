@@ -24,7 +24,10 @@ hold), and after K refusals in a row ([flight_controller].failsafe_after_rejecte
 vehicle goes to its failsafe for the rest of the run (its companion is no longer trusted).
 
 Beyond the companions, a GCS can command each flight controller between steps (`arm`,
-`disarm`, `land`; `simulator.commands`), and `snapshot` says what each one reports.
+`disarm`, `land`; `simulator.commands`), and `snapshot` says what each one reports. Once a
+GCS command rules a vehicle (landing, disarmed), its companion's setpoints are ignored and
+counted (`ignored_setpoints`), never judged: one that would be implausible is not a refusal.
+The verdict names the command as the run's cause (`commanded`).
 """
 from __future__ import annotations
 
@@ -99,6 +102,8 @@ class SitlCore:
         self.landing: dict[int, Failsafe] = {}  # landing on a GCS command (companion ignored)
         self.disarmed: set[int] = set()  # disarmed by a GCS command: motors off, joints limp
         self._overridden: set[int] = set()  # landing or disarmed: setpoints are not applied
+        self.ignored_setpoints: dict[int, int] = {s: 0 for s in self.sysids}  # arrived while a GCS command ruled
+        self.commanded: list[tuple[float, int, str]] = []  # (t, sysid, what) of GCS commands that took the vehicle
         v = spec.vehicle
         self.mode = v.flight_controller.mode
         self._kind = AttitudeSetpoint if self.mode == "attitude" else TorqueSetpoint  # what the autopilot takes
@@ -226,6 +231,8 @@ class SitlCore:
             if s in done:  # applied on arrival (on_setpoint)
                 continue
             if s in self._overridden:  # a GCS command rules this flight controller
+                if s in setpoints:
+                    self.ignored_setpoints[s] += 1
                 if s in self.disarmed:
                     w.apply(s, 0.0, np.zeros(3), np.zeros(self.model.n))
                 else:
@@ -269,14 +276,16 @@ class SitlCore:
             odo = self._odometry.get(s)  # [devices]: the autopilot flies on its estimator
             quat, w_B = self.world.attitude_and_rate(s) if odo is None else (odo[3:7], odo[10:13])
             out = self.fcs[s].step(quat, w_B, sp.attitude)
-            joints = self.world.apply_rotors(s, out.rotor_thrusts_n, sp.tau_q_nm, out.allocation.saturated)
+            axes = out.allocation.saturated_axes
+            joints = self.world.apply_rotors(s, out.rotor_thrusts_n, sp.tau_q_nm, axes)
             rotors_saturated, joints_saturated = out.allocation.saturated, joints.saturated
         else:
             rep = self.world.apply(s, sp.thrust_n, sp.tau_B_nm, sp.tau_q_nm)
+            axes = rep.mix.allocation.saturated_axes
             rotors_saturated, joints_saturated = rep.mix.saturated, rep.joints.saturated
         if rotors_saturated or joints_saturated:
             t = self.world.time_s
-            if self.outcome.saturation(s, t, rotors_saturated, joints_saturated):
+            if self.outcome.saturation(s, t, rotors_saturated, joints_saturated, axes):
                 self.log(f"t={t:.3f} s sysid {s}: command saturated ({_describe(sp)}); counted in outcome.json, "
                          f"further ones not printed")
 
@@ -284,6 +293,9 @@ class SitlCore:
         """A setpoint of `sysid` answering the current step was refused as implausible: counted;
         its flight controller holds the last valid command (the caller leaves the setpoint out
         of `actuate`), or, the K-th refusal in a row, goes to failsafe for the rest of the run."""
+        if sysid in self._overridden:  # a GCS command rules: ignored, as every setpoint now
+            self.ignored_setpoints[sysid] += 1
+            return
         t = self.time_s
         if len(self.rejected) < 1000:
             self.rejected.append((t, sysid, why))
@@ -316,6 +328,7 @@ class SitlCore:
         self.landing[s] = Failsafe(self.model, self.world.state(s), t, LAND_NOW)
         self.failsafes.pop(s, None)
         self._overridden.add(s)
+        self.commanded.append((t, s, "abort" if by == "mission abort" else "land"))
         self.events.append({"t": t, "sysid": s, "event": "land", "by": by})
         self.log(f"t={t:.3f} s sysid {s}: landing ({by} command)")
 
@@ -326,6 +339,8 @@ class SitlCore:
         if not force and self.fc_mode(s) != FcMode.LANDED:
             return False
         t = self.world.time_s
+        if force and self.fc_mode(s) != FcMode.LANDED:
+            self.commanded.append((t, s, "disarm"))
         self.disarmed.add(s)
         self._overridden.add(s)
         self.events.append({"t": t, "sysid": s, "event": "disarmed", "by": by, "forced": force})
@@ -368,9 +383,11 @@ class SitlCore:
         self.observe()
         w = self.world
         self.outcome.add(w.ground_truth(), {s: w.wrench_ee(s) for s in self.sysids})
-        v = judge(self.outcome, self.spec.success, w.step_index, self.failsafes, self.rejected, self.controller_errors)
+        v = judge(self.outcome, self.spec.success, w.step_index, self.failsafes, self.rejected, self.controller_errors,
+                  self.commanded)
         return {"state_digest": self.digest.hexdigest(), "verdict": v.to_dict(), "events": self.events,
                 "rejected_setpoints": len(self.rejected), "failsafe_after_rejected": self.failsafe_after_rejected,
+                "ignored_setpoints": {str(s): n for s, n in self.ignored_setpoints.items()},
                 "distrusted": sorted(self.distrusted),
                 "flight_controller": self.mode, "control_every": self.control_every,
                 "failsafe_at_end": sorted(self.failsafes),

@@ -15,8 +15,9 @@ What runs, at [flight_controller].rate_hz, each named after the PX4 code it foll
    IMU_DGYRO_CUTOFF (PX4's LowPassFilter2p). Anti-windup as PX4: the integral stops growing
    on an axis the allocation saturated in that direction, is attenuated for large errors
    (factor 1 - (e / 400 deg/s)^2) and is clamped at MC_*_INT_LIM.
-3. Control allocation (control_allocator, ControlAllocationPseudoInverse with
-   ControlAllocationSequentialDesaturation, MC_AIRMODE = 0): the pseudo-inverse of the
+3. Control allocation (`amcore.allocation`, which torque mode uses too; control_allocator,
+   ControlAllocationPseudoInverse with ControlAllocationSequentialDesaturation, MC_AIRMODE = 0):
+   the pseudo-inverse of the
    rotors' effectiveness, normalized as PX4 normalizes it (roll and pitch together so that
    a unit command moves the rotors by +-0.707 on an X quad, yaw by its largest entry,
    thrust by the mean), then desaturated in PX4's order: thrust (only downwards), roll,
@@ -26,8 +27,8 @@ What runs, at [flight_controller].rate_hz, each named after the PX4 code it foll
 
 Units and the gain mapping to this vehicle: a normalized torque u on an axis is the physical
 torque u * S_axis [N m], S = `Px4Allocation.torque_scale_nm` (for the X quad with arm L and
-rotor thrust f_max: S_roll = S_pitch = 2 L f_max, S_yaw = 4 k f_max, k the yaw moment
-coefficient); thrust 1 is count * f_max. So MC_ROLLRATE_P is S_roll * MC_ROLLRATE_P N m s/rad
+rotor thrust f_max: S_roll = S_pitch = 2 L f_max, S_yaw = 4 k f_max, k the rotors' moment
+ratio); thrust 1 is count * f_max (for canted rotors, their thrust along z_B). So MC_ROLLRATE_P is S_roll * MC_ROLLRATE_P N m s/rad
 of physical rate damping (docs/flight_controller.md).
 
 Frames: PX4 works in NED/FRD, this module in the simulator's ENU/FLU. The laws are the same
@@ -41,14 +42,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from amcore.allocation import Allocation, AllocationResult
 from amcore.config import FlightControllerParams, RotorParams
 
-from .mixer import QuadMixer  # the rotor geometry, defined once
-
 _I_ATTENUATION_RAD_S = math.radians(400.0)  # RateControl::updateIntegral's i_factor scale
-_YAW_MARGIN = 0.15  # ControlAllocationSequentialDesaturation: yaw's room above full output
-_WEAK_EFFECTIVENESS = 0.2  # computeDesaturationGain ignores actuators weaker than this
-_ACHIEVED_TOL = 1e-6  # |unallocated|^2 below which the allocation counts as achieved (normalized)
 
 
 # ----------------------------------------------------------------------------- quaternions
@@ -147,86 +144,8 @@ class LowPass2p:
 
 
 # ----------------------------------------------------------------------------- allocation
-@dataclass(frozen=True)
-class AllocationResult:
-    """One allocation: outputs (count,) in [min, max]; allocated and unallocated control in
-    normalized units (roll, pitch, yaw torque, thrust); saturated if the request was not met."""
-
-    outputs: tuple[float, ...]
-    allocated: tuple[float, float, float, float]
-    unallocated: tuple[float, float, float, float]
-    saturated: bool
-
-
-class Px4Allocation:
-    """PX4's pseudo-inverse allocation with sequential desaturation, airmode off (see module doc)."""
-
-    def __init__(self, rotors: RotorParams) -> None:
-        if rotors.count != 4 or rotors.layout != "x":
-            raise ValueError(f"the PX4 allocation here supports the X quad (count 4); got {rotors.count}, {rotors.layout}")
-        m = QuadMixer.from_rotors(rotors)
-        # effectiveness of one unit of output per rotor, rows (tau_x, tau_y, tau_z, T): A reordered, times f_max
-        B = np.vstack([m.A[1:4], m.A[0:1]]) * rotors.thrust_max_n
-        mix = np.linalg.pinv(B)  # (4 rotors, 4 axes)
-        n_rp = [int(np.sum(np.abs(mix[:, k]) > 1e-3)) for k in (0, 1)]
-        rp = max(math.sqrt(float(mix[:, k] @ mix[:, k]) / (n / 2.0)) for k, n in zip((0, 1), n_rp))
-        nz = np.abs(mix[:, 3]) > np.finfo(np.float32).eps
-        scale = np.array([rp, rp, float(mix[:, 2].max()), float(np.abs(mix[nz, 3]).sum() / nz.sum())])
-        self.mix = mix / scale  # normalized: outputs per unit normalized command
-        self.effectiveness_normalized = B * scale[:, None]  # normalized control per unit output
-        self.torque_scale_nm = tuple((1.0 / scale[:3]).tolist())  # physical torque per unit normalized torque
-        self.thrust_scale_n = float(1.0 / scale[3])  # physical thrust per unit normalized thrust
-        self.thrust_max_n = rotors.thrust_max_n
-        self.out_min = rotors.thrust_min_n / rotors.thrust_max_n
-        self.out_max = 1.0
-        cols = self.mix.T.tolist()
-        self._roll, self._pitch, self._yaw, self._thrust = (tuple(c) for c in cols)
-        self._eff = tuple(map(tuple, self.effectiveness_normalized.tolist()))
-
-    def _gain(self, v, out, hi: float) -> float:
-        """computeDesaturationGain: k_min + k_max over the outputs outside [out_min, hi]."""
-        lo = self.out_min
-        k_min = k_max = 0.0
-        for vi, x in zip(v, out):
-            if abs(vi) < _WEAK_EFFECTIVENESS:
-                continue
-            if x < lo:
-                k = (lo - x) / vi
-                k_min, k_max = min(k_min, k), max(k_max, k)
-            if x > hi:
-                k = (hi - x) / vi
-                k_min, k_max = min(k_min, k), max(k_max, k)
-        return k_min + k_max
-
-    def _desaturate(self, out: list, v, hi: float, thrust_down_only: bool = False) -> list:
-        """desaturateActuators along v; with thrust_down_only, a move that would raise the
-        thrust (v is the thrust column, positive here in FLU) is not made."""
-        g = self._gain(v, out, hi)
-        if thrust_down_only and g > 0.0:
-            return out
-        out = [x + g * vi for x, vi in zip(out, v)]
-        g = 0.5 * self._gain(v, out, hi)
-        return [x + g * vi for x, vi in zip(out, v)]
-
-    def allocate(self, roll: float, pitch: float, yaw: float, thrust: float) -> AllocationResult:
-        """Outputs for normalized (roll, pitch, yaw) torque and thrust in [0, 1] (mixAirmodeDisabled)."""
-        r, p, y, t = self._roll, self._pitch, self._yaw, self._thrust
-        lo, hi = self.out_min, self.out_max
-        out = [roll * a + pitch * b + thrust * c for a, b, c in zip(r, p, t)]
-        full = [x + yaw * a for x, a in zip(out, y)]
-        if min(out) >= lo and max(out) <= hi and min(full) >= lo and max(full) <= hi:
-            # inside the limits with and without yaw: every desaturation gain below is zero
-            return AllocationResult(tuple(full), (roll, pitch, yaw, thrust), (0.0, 0.0, 0.0, 0.0), False)
-        out = self._desaturate(out, t, hi, thrust_down_only=True)
-        out = self._desaturate(out, r, hi)
-        out = self._desaturate(out, p, hi)
-        out = [x + yaw * a for x, a in zip(out, y)]  # mixYaw
-        out = self._desaturate(out, y, hi + (hi - self.out_min) * _YAW_MARGIN)
-        out = self._desaturate(out, t, hi, thrust_down_only=True)
-        out = tuple(min(max(x, self.out_min), hi) for x in out)
-        allocated = tuple(sum(e * x for e, x in zip(row, out)) for row in self._eff)
-        unallocated = (roll - allocated[0], pitch - allocated[1], yaw - allocated[2], thrust - allocated[3])
-        return AllocationResult(out, allocated, unallocated, sum(u * u for u in unallocated) > _ACHIEVED_TOL)
+# PX4's allocation is amcore.allocation's, the one torque mode uses too (kept under its old name).
+Px4Allocation = Allocation
 
 
 # ----------------------------------------------------------------------------- the loops
@@ -252,7 +171,7 @@ class FlightController:
         self.every = max(1, round(1.0 / (fc.rate_hz * physics_dt_s)))
         self.dt_s = self.every * physics_dt_s
         rate_hz = 1.0 / self.dt_s
-        self.allocation = Px4Allocation(rotors)
+        self.allocation = Allocation(rotors)
         self.yaw_weight = fc.MC_YAW_WEIGHT
         w = fc.MC_YAW_WEIGHT
         # AttitudeControl::setProportionalGain: the yaw gain compensates the yaw weight's scaling
@@ -317,5 +236,4 @@ class FlightController:
         achieved = not a.saturated
         self._sat_pos = tuple(not achieved and u > 1.2e-7 for u in a.unallocated[:3])
         self._sat_neg = tuple(not achieved and u < -1.2e-7 for u in a.unallocated[:3])
-        f_max = self.allocation.thrust_max_n
-        return FcOutput(tuple(f_max * x for x in a.outputs), a, rates_sp, torque, thrust)
+        return FcOutput(tuple(f * x for f, x in zip(self.allocation.rotor_thrust_max_n, a.outputs)), a, rates_sp, torque, thrust)

@@ -70,7 +70,7 @@ def run(spec: ScenarioSpec, duration_s: float | None = None,
     pilots = {s: Pilot(spec, s, model=core.model) for s in core.sysids}
     jitcache.warm(pilots[core.sysids[0]].warm_up)  # compiles the law once per machine, else loads it
     v = spec.vehicle
-    limits = SetpointLimits.for_vehicle(v.rotors.count * v.rotors.thrust_max_n, max(v.joint_torque_max_nm), v.n_joints)
+    limits = SetpointLimits.for_vehicle(v.rotors.thrust_max_total_n, max(v.joint_torque_max_nm), v.n_joints)
     n = int(round((spec.duration_s if duration_s is None else duration_s) * spec.rate_hz))
     every = max(1, int(round(spec.rate_hz)))
     crashed: set[int] = set()

@@ -2,11 +2,12 @@
 MAVLink/UDP on loopback, with a progress bar and a run folder holding the outcome.
 
     am-run [configs/scenarios/two_am_comp.toml] [--run-dir runs/NAME] [--duration S]
-           [--gcs udpout:127.0.0.1:14551] [--tlog-companions]
+           [--gcs udpout:127.0.0.1:14551] [--gcs-key-file FILE] [--tlog-companions]
 
 The run folder gets outcome.json (simulator ground truth), am<sysid>.json (each
 companion's controller errors per phase), gcs.tlog (the flight controllers' GCS link, for
-stock MAVLink tools), gcs.key (its signing passphrase), telemetry*.key (the run's telemetry
+stock MAVLink tools), gcs.key (its signing passphrase, new every run unless --gcs-key-file
+gives one to keep), telemetry*.key (the run's telemetry
 keys: the recorder keeps only what the run's simulator and companions sealed, telemetry.auth)
 and every process's log. Exit code:
 0 when every process ended cleanly and the mission succeeded (simulator.verdict), 4 when
@@ -28,7 +29,8 @@ from pathlib import Path
 from amcore import cliargs
 from amcore.config import DEFAULT_SCENARIO, ConfigError, check_duration, load_scenario
 from amlink.endpoint import DEFAULT_GCS, EndpointError, parse_endpoint
-from telemetry.auth import publisher_key
+from amlink.signing import SigningKeyError, read_gcs_key_file
+from telemetry.keyfiles import write_run_keys, write_secret
 
 from .progress import SimBar
 from .verdict import MISSION_FAILED
@@ -59,11 +61,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("scenario", nargs="?", type=Path, default=DEFAULT_SCENARIO, help="scenario TOML")
     ap.add_argument("--run-dir", type=cliargs.output_dir, default=None, help="run folder (default runs/<name>-<time>)")
     ap.add_argument("--duration", type=cliargs.seconds, default=None, help="override the scenario's duration [s]")
-    ap.add_argument("--no-progress", action="store_true", help="no progress display")
+    ap.add_argument("--no-progress", action="store_true", help="no progress display (there is one on a terminal only)")
     ap.add_argument("--no-telemetry", action="store_true", help="no Zenoh telemetry, no MCAP log, no review")
     ap.add_argument("--startup-timeout", type=cliargs.seconds, default=120.0, help="seconds for all processes to connect")
     ap.add_argument("--gcs", default=DEFAULT_GCS, metavar="ENDPOINT",
                     help=f"the simulator's GCS link (default {DEFAULT_GCS}; mavutil's forms; 'none' for none)")
+    ap.add_argument("--gcs-key-file", type=Path, default=None, metavar="FILE",
+                    help="the GCS signing passphrase (one line; keep it mode 0600), the same for every run, so a "
+                         "GCS set up once keeps working; default: a new random one per run, gcs.key in the run folder")
     ap.add_argument("--tlog-companions", action="store_true",
                     help="each companion also writes its link to companion-<sysid>.tlog (1 kHz: large)")
     a = ap.parse_args(argv)
@@ -78,7 +83,15 @@ def main(argv: list[str] | None = None) -> int:
         if a.duration is not None:
             check_duration(spec, a.duration, "--duration")
         check_memory(spec)
-    except ConfigError as exc:
+        if a.gcs_key_file is not None:
+            if not spec.link.signing:
+                raise ConfigError(f"--gcs-key-file {a.gcs_key_file}: the scenario turns signing off ([link] signing "
+                                  f"= false), so the GCS link is unsigned and takes no key")
+            read_gcs_key_file(a.gcs_key_file)  # readable, and a passphrase MAVProxy takes
+            if a.gcs_key_file.stat().st_mode & 0o077:
+                print(f"am-run: warning: --gcs-key-file {a.gcs_key_file}: others may read it (chmod 600 it)",
+                      file=sys.stderr)
+    except (ConfigError, SigningKeyError) as exc:
         return cliargs.fail("am-run", str(exc))
     run_dir = (a.run_dir or Path("runs") / f"{spec.name}-{time.strftime('%Y%m%d-%H%M%S')}").resolve()
     try:
@@ -88,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
     _warm_control_law(spec)  # every argument checked: compile the law once, before any companion
     cfg = str(Path(a.scenario).resolve())
     key_args = _fresh_key(spec, run_dir)
-    sim_cmd = _command("simulator") + key_args + _gcs_key(spec, run_dir) + [
+    sim_cmd = _command("simulator") + key_args + _gcs_key(spec, run_dir, a.gcs_key_file) + [
         "--config", cfg, "--bind", "udpin:127.0.0.1:0", "--gcs", a.gcs, "--run-dir", str(run_dir),
         "--progress", "jsonl", "--peer-timeout", str(a.startup_timeout)]
     if a.duration is not None:
@@ -99,7 +112,8 @@ def main(argv: list[str] | None = None) -> int:
     mcap = run_dir / "run.mcap"
     procs: dict[str, subprocess.Popen] = {}
     logs = []
-    bar = SimBar(spec.duration_s if a.duration is None else a.duration, disabled=a.no_progress)
+    # a bar on a terminal only, as the simulator's own default: redirected output gets the summary lines
+    bar = SimBar(spec.duration_s if a.duration is None else a.duration, disabled=a.no_progress or not sys.stderr.isatty())
     print(f"am-run: scenario '{spec.name}' with {len(spec.ams)} AMs; run folder {run_dir}; GCS link {a.gcs}",
           file=sys.stderr)
     try:
@@ -215,27 +229,21 @@ def _telemetry_keys(spec, run_dir: Path) -> dict[str, str]:
     """A random telemetry master key for this run for the recorder, and each publisher's own
     key derived from it (telemetry.auth), each in a 0600 file of the run folder: the recorder
     keeps only what the run's simulator and companions sealed."""
-    master = os.urandom(32)
-    files = {"recorder": str(_secret_file(run_dir / "telemetry.key", master.hex()))}
-    for name in ["simulator"] + [f"am{am.sysid}" for am in spec.ams]:
-        files[name] = str(_secret_file(run_dir / f"telemetry-{name}.key", publisher_key(master, name).hex()))
-    return files
+    return {name: str(path) for name, path in write_run_keys(run_dir, [am.sysid for am in spec.ams]).items()}
 
 
-def _gcs_key(spec, run_dir: Path) -> list[str]:
-    """A random GCS signing passphrase for this run (mode 0600 in the run folder, MAVProxy's
-    'signing key' takes it as is), unless the scenario turns signing off."""
+def _gcs_key(spec, run_dir: Path, given: Path | None = None) -> list[str]:
+    """The GCS signing passphrase: `given` (am-run --gcs-key-file), else a random one for this
+    run (mode 0600 in the run folder, MAVProxy's 'signing key' takes it as is); none when the
+    scenario turns signing off."""
     if not spec.link.signing:
         return []
+    if given is not None:
+        return ["--gcs-key-file", str(Path(given).resolve())]
     return ["--gcs-key-file", str(_secret_file(run_dir / "gcs.key", os.urandom(16).hex()))]
 
 
-def _secret_file(path: Path, text: str) -> Path:
-    """`text` and a newline in a file only its owner can read or write (mode 0600)."""
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "w") as fh:
-        fh.write(text + "\n")
-    return path
+_secret_file = write_secret
 
 
 def _free_tcp_port() -> int:

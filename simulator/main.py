@@ -36,6 +36,7 @@ from amlink.errors import LinkError
 from amlink.limits import SetpointLimits
 from amlink.lockstep import SimServer
 from amlink.types import ScenarioInfo
+from amlink.udp import STATUSTEXT_MAX
 from companion import procstats
 
 from telemetry.publisher import TelemetryPublisher
@@ -145,6 +146,11 @@ def main(argv: list[str] | None = None) -> int:
         check_duration(spec, duration, "--duration")
     except ConfigError as exc:
         return cliargs.fail("simulator", str(exc))
+    try:  # a missing telemetry key, like a bad configuration, stops it before anything is written
+        tele_opts = options_from_args(a)
+    except (TelemetryConfigError, ValueError) as exc:
+        print(f"simulator: error: telemetry: {exc}", file=sys.stderr)
+        return 2
     mode = a.progress or ("bar" if sys.stderr.isatty() else "none")
     run_dir = a.run_dir or Path("runs") / f"{spec.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     try:  # before the run: a run folder that cannot be written must not lose the outcome afterwards
@@ -161,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGINT, _on_signal)
 
     try:
-        tele = TelemetryPublisher(options_from_args(a), name="simulator")
+        tele = TelemetryPublisher(tele_opts, name="simulator")
     except (TelemetryConfigError, ValueError) as exc:
         print(f"simulator: error: telemetry: {exc}", file=sys.stderr)
         return 2
@@ -173,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
 
     core = SitlCore(spec, log=log, on_truth=sim_tele.truth, failsafe_after_rejected=a.failsafe_after_rejected)
     v = spec.vehicle
-    limits = SetpointLimits.for_vehicle(v.rotors.count * v.rotors.thrust_max_n, max(v.joint_torque_max_nm), v.n_joints)
+    limits = SetpointLimits.for_vehicle(v.rotors.thrust_max_total_n, max(v.joint_torque_max_nm), v.n_joints)
     gcs_link = GcsLink(gcs_endpoint, sysids, key=gcs_key, accept_unsigned=keys is None, tlog=run_dir / "gcs.tlog")
     server = SimServer(binds, sysids=sysids, scenario=info, timeout_s=a.step_timeout, signing_keys=keys,
                        limits=limits, on_heartbeat=gcs_link.forward_heartbeat)
@@ -204,8 +210,9 @@ def main(argv: list[str] | None = None) -> int:
                        sysids=sysids)
         print(f"simulator: '{spec.name}' on {', '.join(bound)}, waiting for sysids {sysids}; GCS link "
               f"{gcs_endpoint or 'none'}", file=sys.stderr, flush=True)
-        server.wait_for_peers(a.peer_timeout)
-        server.wait_for_armed(a.peer_timeout)
+        said = _Throttled(lambda text: print(f"simulator: {text}", file=sys.stderr, flush=True))
+        server.wait_for_peers(a.peer_timeout, on_waiting=said)
+        server.wait_for_armed(a.peer_timeout, on_waiting=said)
         if not tele.await_recorder(tele.keys.sim_event, a.telemetry_wait):
             print(f"simulator: warning: telemetry: no subscriber (recorder) after {a.telemetry_wait:g} s; "
                   f"publishing anyway", file=sys.stderr, flush=True)
@@ -239,7 +246,7 @@ def main(argv: list[str] | None = None) -> int:
             status = f"run complete; {verdict['text']}"
         if verdict["status"] == "failed":
             code = MISSION_FAILED
-            told = f"mission failed: {verdict['failure_class']}"
+            told = _told(verdict["failures"][0])
     except _Stop as stop:
         status, code = f"interrupted by {stop}", 130
         told = status
@@ -275,9 +282,38 @@ def main(argv: list[str] | None = None) -> int:
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "outcome.json").write_text(json.dumps(result, indent=1))
     progress.event(event="done", status=status, exit_code=code, outcome=str(run_dir / "outcome.json"))
-    print(f"simulator: {status}; {sim_time:.3f} s simulated in {wall:.1f} s; outcome in {run_dir / 'outcome.json'}",
+    verdict_text = result.get("verdict", {}).get("text", "")  # "mission success", as am-run says it
+    said = f"{status}; {verdict_text}" if completed and verdict_text and verdict_text not in status else status
+    print(f"simulator: {said}; {sim_time:.3f} s simulated in {wall:.1f} s; outcome in {run_dir / 'outcome.json'}",
           file=sys.stderr)
     return code
+
+
+def _told(first: dict) -> str:
+    """The run's last STATUSTEXT for a failed mission (one STATUSTEXT: 50 bytes): its class, or
+    for a GCS command what it did ("mission failed: aborted by the GCS at t = 7.02 s")."""
+    if first["class"] != "commanded":
+        return f"mission failed: {first['class']}"
+    reason = first["reason"]
+    for text in (f"mission failed: {reason}", f"mission failed: {reason.replace(' by the GCS', ' (GCS)')}"):
+        if len(text.encode()) <= STATUSTEXT_MAX:
+            return text
+    return "mission failed: ended by a GCS command"
+
+
+class _Throttled:
+    """Prints a waiting notice when whom or what it waits for changes, else every `every_s`."""
+
+    def __init__(self, say, every_s: float = 10.0) -> None:
+        self.say, self.every_s = say, every_s
+        self._last, self._t = "", -float("inf")
+
+    def __call__(self, text: str) -> None:
+        who = text.split(" more ", 1)[-1]  # "waiting 58 s more for ARM from sysid 5" -> what and whom
+        now = time.monotonic()
+        if who != self._last or now - self._t >= self.every_s:
+            self.say(text)
+            self._last, self._t = who, now
 
 
 if __name__ == "__main__":

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from amcore.allocation import AXES
 from amcore.so3 import quat_wxyz_to_R
 
 
@@ -28,6 +29,9 @@ class _AmAcc:
         self.saturated_steps = 0
         self.rotor_saturated_steps = 0
         self.joint_saturated_steps = 0
+        self.axis_saturated_steps = [0, 0, 0, 0]  # roll, pitch, yaw, thrust (amcore.allocation.AXES)
+        self.hover_rotor_fraction_max = 0.0  # the busiest rotor's share of its range in the hover
+        self.hover_rotor_fraction_min = 1.0  # the idlest rotor's
         self.first_saturation_s: float | None = None
         self.lowest_base_z = np.inf
         self.first_base_contact: tuple[float, tuple[str, ...]] | None = None  # (t, what it touched)
@@ -55,13 +59,17 @@ class RunOutcome:
         self.slip_t_series: list[float] = []
         self.p_rest: np.ndarray | None = None
 
-    def saturation(self, sysid: int, t: float, rotors: bool = True, joints: bool = False) -> bool:
-        """Count one saturated step (the rotors', the joints' or both); True the first time
-        (so the caller logs it once)."""
+    def saturation(self, sysid: int, t: float, rotors: bool = True, joints: bool = False,
+                   axes: tuple[bool, bool, bool, bool] = (False, False, False, False)) -> bool:
+        """Count one saturated step (the rotors', the joints' or both; for the rotors, which
+        of roll, pitch, yaw and thrust fell short); True the first time (so the caller logs
+        it once)."""
         a = self.ams[sysid]
         a.saturated_steps += 1
-        a.rotor_saturated_steps += rotors
-        a.joint_saturated_steps += joints
+        a.rotor_saturated_steps += bool(rotors)  # bool(): numpy's bools would make the counts numpy
+        a.joint_saturated_steps += bool(joints)  # integers, which outcome.json cannot hold
+        for k, x in enumerate(axes):
+            a.axis_saturated_steps[k] += bool(x)
         if a.first_saturation_s is None:
             a.first_saturation_s = t
             return True
@@ -98,6 +106,9 @@ class RunOutcome:
             if am.base_contacts and a.first_base_contact is None:
                 a.first_base_contact = (t, tuple(am.base_contacts))
             a.lowest_base_z = min(a.lowest_base_z, float(am.p_WB[2]))
+            if in_hover:
+                a.hover_rotor_fraction_max = max(a.hover_rotor_fraction_max, getattr(am, "rotor_fraction_max", 0.0))
+                a.hover_rotor_fraction_min = min(a.hover_rotor_fraction_min, getattr(am, "rotor_fraction_min", 1.0))
             if t >= self.slip_from_s:
                 p_O = R_WO.T @ (am.p_WE - obj.p_WO)
                 if a.anchor_O is None:
@@ -128,6 +139,9 @@ class RunOutcome:
                 "saturated_steps": a.saturated_steps,
                 "rotor_saturated_steps": a.rotor_saturated_steps,
                 "joint_saturated_steps": a.joint_saturated_steps,
+                "axis_saturated_steps": dict(zip(AXES, a.axis_saturated_steps)),
+                "hover_rotor_fraction_max": a.hover_rotor_fraction_max,
+                "hover_rotor_fraction_min": a.hover_rotor_fraction_min if a.n else None,
                 "first_saturation_s": a.first_saturation_s,
                 "first_base_contact_s": a.first_base_contact[0] if a.first_base_contact else None,
             }

@@ -21,20 +21,22 @@ import math
 
 
 class RotorLag:
-    """First-order lag of `count` rotor thrusts [N] with time constant `tau_s`, stepped every `dt_s`."""
+    """First-order lag of `count` rotor thrusts [N] with time constant `tau_s` (one for all, or
+    one per rotor; 0 for a rotor without lag), stepped every `dt_s`."""
 
-    def __init__(self, tau_s: float, dt_s: float, count: int = 4) -> None:
-        if not (tau_s > 0.0 and dt_s > 0.0):
-            raise ValueError(f"RotorLag needs tau_s > 0 and dt_s > 0, got {tau_s}, {dt_s}")
+    def __init__(self, tau_s, dt_s: float, count: int = 4) -> None:
+        taus = [float(tau_s)] * count if isinstance(tau_s, (int, float)) else [float(t) for t in tau_s]
+        if len(taus) != count or not (all(t >= 0.0 for t in taus) and any(t > 0.0 for t in taus) and dt_s > 0.0):
+            raise ValueError(f"RotorLag needs {count} time constants >= 0 (one > 0) and dt_s > 0, got {tau_s}, {dt_s}")
         self.tau_s, self.dt_s, self.count = tau_s, dt_s, count
-        self.alpha = 1.0 - math.exp(-dt_s / tau_s)
+        self.alphas = [1.0 - math.exp(-dt_s / t) if t > 0.0 else 1.0 for t in taus]
+        self.alpha = self.alphas[0]
         self.thrusts_n: list[float] | None = None  # None until the first command
 
     def step(self, command_n) -> list[float]:
         """Advance one physics step under `command_n` (count floats [N]); the thrusts it ends with."""
-        a = self.alpha
         if self.thrusts_n is None:
             self.thrusts_n = [float(c) for c in command_n]
         else:
-            self.thrusts_n = [f + a * (c - f) for f, c in zip(self.thrusts_n, command_n)]
+            self.thrusts_n = [f + a * (c - f) for f, c, a in zip(self.thrusts_n, command_n, self.alphas)]
         return self.thrusts_n

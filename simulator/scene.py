@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pybullet as pb
+from .bullet import pb
 
 from amcore.config import ObjectSpec, VehicleParams
 from amcore.model import AmState

@@ -20,9 +20,11 @@ from .outcome import RunOutcome
 
 MISSION_FAILED = 4  # exit code of every runner (simulator, am-run, in-process) whose mission failed
 
-# "rejected setpoints" before "failsafe": K refused setpoints in a row send a vehicle to its
-# failsafe (amcore.config.FlightControllerParams), and the refusals are then the cause
-FAILURE_CLASSES = ("diverged", "base contact", "never lifted", "dropped", "slipped", "rejected setpoints",
+# "commanded" first: a GCS that aborted the mission, landed a vehicle or disarmed it in flight
+# decided the run's end, and what followed (the object dropped, a base on the ground) follows
+# from it. "rejected setpoints" before "failsafe": K refused setpoints in a row send a vehicle
+# to its failsafe (amcore.config.FlightControllerParams), and the refusals are then the cause
+FAILURE_CLASSES = ("commanded", "diverged", "base contact", "never lifted", "dropped", "slipped", "rejected setpoints",
                    "failsafe", "saturated")
 
 
@@ -72,17 +74,25 @@ class Verdict:
 
 def judge(outcome: RunOutcome, criteria: SuccessCriteria, n_steps: int, failsafe_at_end: Iterable[int] = (),
           rejected: Iterable[tuple[float, int, str]] = (),
-          controller_errors: Iterable[tuple[float, int, str]] = ()) -> Verdict:
+          controller_errors: Iterable[tuple[float, int, str]] = (),
+          commanded: Iterable[tuple[float, int, str]] = ()) -> Verdict:
     """The verdict of a finished run.
 
     n_steps: physics steps run (the saturation fraction's denominator); failsafe_at_end: sysids
     whose flight controller is in failsafe at the end; rejected: (t, sysid, why) of every
     setpoint the simulator refused as implausible; controller_errors: (t, sysid, what) of
-    controllers that raised instead of answering (in-process runs)."""
+    controllers that raised instead of answering (in-process runs); commanded: (t, sysid, what)
+    of GCS commands that took a vehicle from its companion, what = "abort" (the mission abort,
+    one entry per vehicle), "land" (NAV_LAND) or "disarm" (forced, in flight). A base that
+    touches something after its own vehicle was commanded down is that landing, not a crash."""
+    commanded = sorted(commanded)
+    down_at: dict[int, float] = {}
+    for t, s, _ in commanded:
+        down_at.setdefault(s, t)
     found: dict[str, Failure] = {}
     w0, w1 = outcome.hover_window
     complete = bool(outcome.t_series) and outcome.t_series[-1] >= w1 - 1e-9
-    for f in (*_diverged(outcome, criteria, controller_errors), *_base_contact(outcome),
+    for f in (*_commanded(commanded), *_diverged(outcome, criteria, controller_errors), *_base_contact(outcome, down_at),
               *_lift(outcome, criteria, complete), *_slip(outcome, criteria), *_failsafe(failsafe_at_end),
               *_rejected(rejected), *_saturation(outcome, criteria, n_steps)):
         found.setdefault(f.kind, f)
@@ -104,8 +114,21 @@ def _diverged(o: RunOutcome, c: SuccessCriteria, errors) -> list[Failure]:
     return sorted(out, key=lambda f: f.t_s)[:1]
 
 
-def _base_contact(o: RunOutcome) -> list[Failure]:
-    hits = [(a.first_base_contact, s) for s, a in o.ams.items() if a.first_base_contact is not None]
+def _commanded(commanded: list[tuple[float, int, str]]) -> list[Failure]:
+    if not commanded:
+        return []
+    t, s, what = commanded[0]
+    if what == "abort":
+        return [Failure("commanded", t, f"aborted by the GCS at t = {t:.2f} s")]
+    others = {x for _, x, _ in commanded} - {s}
+    more = f" (then am{', am'.join(map(str, sorted(others)))})" if others else ""
+    done = "landed by the GCS" if what == "land" else "disarmed in flight by the GCS"
+    return [Failure("commanded", t, f"am{s} {done} at t = {t:.2f} s{more}")]
+
+
+def _base_contact(o: RunOutcome, down_at: Mapping[int, float]) -> list[Failure]:
+    hits = [(a.first_base_contact, s) for s, a in o.ams.items()
+            if a.first_base_contact is not None and a.first_base_contact[0] < down_at.get(s, float("inf"))]
     if not hits:
         return []
     (t, names), s = min(hits, key=lambda h: h[0][0])

@@ -12,8 +12,12 @@ Frames: W world (z up); B base link = quadrotor CoM; E end-effector (`ee` link: 
 the pad's contact face, x = outward normal). Conventions verified by tests/simulator:
 
 * PyBullet reports the base's inertial frame; `load_am` asserts it coincides with B.
-* Thrust is a force (0, 0, T) in B at B's origin and the body torque a torque in B, both
-  applied with LINK_FRAME on the base (for the base, LINK_FRAME torque is body-frame).
+* Rotors (amcore.allocation): the command is allocated to rotor thrusts, and what acts is
+  the wrench those thrusts make, sum_i f_i (a_i; p_i x a_i - KM_i a_i): each rotor's force
+  along its own axis at its own position, its drag torque included, summed about B's origin
+  (for a rigid base the same as applying them one by one, in two PyBullet calls instead of
+  2n). Force and torque are applied in B with LINK_FRAME on the base (for the base,
+  LINK_FRAME torque is body-frame). No body wrench the rotors could not make reaches the base.
   PyBullet clears external forces and joint torques after every step, so `step()`
   re-applies the latest command: commands persist until replaced.
 * Rotors: with [rotors].time_constant_s > 0 each rotor's thrust lags its command
@@ -28,13 +32,15 @@ from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
-import pybullet as pb
+from .bullet import pb
 
 from amcore.config import ScenarioSpec
 from amcore.model import AmState
 
 from . import scene
-from .mixer import JointTorqueResult, MixResult, QuadMixer, limit_joint_torques
+from amcore.allocation import Allocation, WrenchAllocation
+
+from .mixer import JointTorqueResult, limit_joint_torques
 from .rotors import RotorLag
 
 
@@ -46,7 +52,7 @@ class WorldNotConnected(RuntimeError):
 class ApplyReport:
     """What the flight controller and the joint drivers really applied for one command."""
 
-    mix: MixResult
+    mix: WrenchAllocation
     joints: JointTorqueResult
 
     @property
@@ -90,6 +96,11 @@ class AmTruth:
     p_W_joints: tuple[np.ndarray, ...] = ()  # arm joint origins, base to wrist [m] (to draw the arm)
     rotor_saturated_steps: int = 0  # commands so far whose rotor mix saturated (cumulative)
     joint_saturated_steps: int = 0  # commands so far with a joint torque clipped (cumulative)
+    # commands so far whose roll, pitch, yaw torque or thrust was not met (cumulative, per axis)
+    axis_saturated_steps: tuple[int, int, int, int] = (0, 0, 0, 0)
+    # the busiest rotor's thrust as a fraction of its range (0: at its least, 1: at its most), now
+    rotor_fraction_max: float = 0.0
+    rotor_fraction_min: float = 0.0  # the idlest rotor's, likewise
     # what the flight controller reports of the base (simulator.core): p_WB, quat_WB (w, x, y, z),
     # v_B, w_B, its estimator's odometry with [devices]; empty before its first frame
     estimate: tuple[float, ...] = ()
@@ -146,16 +157,18 @@ class World:
             raise ValueError(f"initial states given for sysids {sorted(initial)}, scenario has {expected}")
         self.spec = spec
         self._initial = dict(initial)
-        self._mixer = QuadMixer.from_rotors(spec.vehicle.rotors)
+        self._alloc = Allocation(spec.vehicle.rotors)
         self._tau_q_max = np.array(spec.vehicle.joint_torque_max_nm, dtype=float)
         self._client: int | None = None
         self._ams: dict[int, scene.AmBody] = {}
-        self._commands: dict[int, tuple[float, list[float], list[float]]] = {}  # applied T, tau_B, tau_q
-        self._saturated = {a.sysid: [0, 0] for a in spec.ams}  # saturated commands so far: rotors, joints
+        self._commands: dict[int, tuple[tuple, tuple, list[float]]] = {}  # applied F_B, tau_B, tau_q
+        # saturated commands so far: rotors, joints, then per axis roll, pitch, yaw, thrust
+        self._saturated = {a.sysid: [0, 0, 0, 0, 0, 0] for a in spec.ams}
         # lagging rotors (time_constant_s > 0): per AM the lag, the rotor thrust command
         # (None before the first) and the joint torques
         self._lags: dict[int, RotorLag] = {}
         self._rotor_commands: dict[int, list[float] | None] = {}
+        self._rotors_now: dict[int, list[float]] = {}  # each AM's rotor thrusts acting now [N]
         self._joint_commands: dict[int, list[float]] = {}
         self._names: dict[int, str] = {}
         self._object_id = -1
@@ -187,10 +200,10 @@ class World:
             scene.reset_am(c, am, self._initial[a.sysid])
             self._ams[a.sysid] = am
             self._names[am.body_id] = f"am{a.sysid}"
-            self._commands[a.sysid] = (0.0, [0.0] * 3, [0.0] * n)
-            if self.spec.vehicle.rotors.time_constant_s > 0.0:
-                r = self.spec.vehicle.rotors
-                self._lags[a.sysid] = RotorLag(r.time_constant_s, self.spec.dt_s, r.count)
+            self._commands[a.sysid] = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), [0.0] * n)
+            r = self.spec.vehicle.rotors
+            if r.lagging:
+                self._lags[a.sysid] = RotorLag(r.time_constants(), self.spec.dt_s, r.count)
                 self._rotor_commands[a.sysid] = None
                 self._joint_commands[a.sysid] = [0.0] * n
             self._arm_ids[a.sysid] = list(am.arm_joint_ids)
@@ -250,41 +263,48 @@ class World:
     # ------------------------------------------------------------------ actuation
     def apply(self, sysid: int, thrust_n: float, tau_B_nm, tau_q_nm) -> ApplyReport:
         """Command total thrust T [N] along +z_B, body torque tau_B [N m] (in B, about the
-        base CoM) and joint torques tau_q [N m]. Mixed and limited like the real vehicle;
-        the applied values (see the report) act from the next `step()` until replaced."""
+        base CoM) and joint torques tau_q [N m]. Allocated to the rotors and limited like the
+        real vehicle (`amcore.allocation`); what the rotors make (see the report) acts from
+        the next `step()` until replaced."""
         self._am(sysid)
-        mix = self._mixer.mix(float(thrust_n), tau_B_nm)
+        mix = self._alloc.allocate_wrench(float(thrust_n), tau_B_nm)
         joints = limit_joint_torques(tau_q_nm, self._tau_q_max)
-        self._count_saturation(sysid, mix.saturated, joints.saturated)
-        if self._lags:  # the rotors go toward the mixer's thrusts in step()
-            self._rotor_commands[sysid] = mix.rotor_thrusts_n.tolist()
+        self._count_saturation(sysid, mix.allocation.saturated_axes, joints.saturated)
+        if self._lags:  # the rotors go toward the allocated thrusts in step()
+            self._rotor_commands[sysid] = list(mix.rotor_thrusts_n)
             self._joint_commands[sysid] = joints.applied_nm.tolist()
         else:
-            self._commands[sysid] = (mix.applied_thrust_n, mix.applied_tau_B_nm.tolist(), joints.applied_nm.tolist())
+            self._commands[sysid] = (mix.force_B_n, mix.tau_B_nm, joints.applied_nm.tolist())
+            self._rotors_now[sysid] = list(mix.rotor_thrusts_n)
         return ApplyReport(mix=mix, joints=joints)
 
-    def apply_rotors(self, sysid: int, rotor_thrusts_n, tau_q_nm, rotors_saturated: bool = False) -> JointTorqueResult:
-        """Command each rotor's thrust [N] (rotor order of `simulator.mixer`, within the
-        rotor limits: a flight controller that allocates itself, and says whether its
-        allocation saturated) and the joint torques [N m] (limited here); they act from the
-        next `step()` until replaced."""
+    def apply_rotors(self, sysid: int, rotor_thrusts_n, tau_q_nm,
+                     saturated_axes: tuple[bool, bool, bool, bool] = (False, False, False, False)) -> JointTorqueResult:
+        """Command each rotor's thrust [N] (the rotor table's order, within the rotor limits:
+        a flight controller that allocates itself, and says per axis (roll, pitch, yaw,
+        thrust) whether its allocation fell short) and the joint torques [N m] (limited
+        here); they act from the next `step()` until replaced."""
         self._am(sysid)
         joints = limit_joint_torques(tau_q_nm, self._tau_q_max)
-        self._count_saturation(sysid, rotors_saturated, joints.saturated)
+        self._count_saturation(sysid, saturated_axes, joints.saturated)
         f = [float(x) for x in rotor_thrusts_n]
         if self._lags:
             self._rotor_commands[sysid] = f
             self._joint_commands[sysid] = joints.applied_nm.tolist()
         else:
-            thrust, tau_B = self._mixer.wrench_floats(f)
-            self._commands[sysid] = (thrust, tau_B, joints.applied_nm.tolist())
+            force, tau_B = self._alloc.wrench(f)
+            self._commands[sysid] = (force, tau_B, joints.applied_nm.tolist())
+            self._rotors_now[sysid] = f
         return joints
 
-    def _count_saturation(self, sysid: int, rotors: bool, joints: bool) -> None:
+    def _count_saturation(self, sysid: int, axes: tuple[bool, bool, bool, bool], joints: bool) -> None:
+        rotors = any(axes)
         if rotors or joints:
             sat = self._saturated[sysid]
             sat[0] += rotors
             sat[1] += joints
+            for k, a in enumerate(axes):
+                sat[2 + k] += bool(a)
 
     def rotor_thrusts(self, sysid: int) -> list[float] | None:
         """The lagging rotors' thrusts [N] after the last step (None: ideal rotors, or no step yet)."""
@@ -296,12 +316,13 @@ class World:
         c = self._c()
         for sysid, am in self._ams.items():
             if self._lags and self._rotor_commands[sysid] is not None:
-                thrust, tau_B = self._mixer.wrench_floats(self._lags[sysid].step(self._rotor_commands[sysid]))
+                f = self._lags[sysid].step(self._rotor_commands[sysid])
+                self._rotors_now[sysid] = f
+                force, tau_B = self._alloc.wrench(f)
                 tau_q = self._joint_commands[sysid]
             else:
-                thrust, tau_B, tau_q = self._commands[sysid]
-            pb.applyExternalForce(am.body_id, -1, [0.0, 0.0, thrust], [0.0, 0.0, 0.0], pb.LINK_FRAME,
-                                  physicsClientId=c)
+                force, tau_B, tau_q = self._commands[sysid]
+            pb.applyExternalForce(am.body_id, -1, force, (0.0, 0.0, 0.0), pb.LINK_FRAME, physicsClientId=c)
             pb.applyExternalTorque(am.body_id, -1, tau_B, pb.LINK_FRAME, physicsClientId=c)
             pb.setJointMotorControlArray(am.body_id, self._arm_ids[sysid], pb.TORQUE_CONTROL, forces=tau_q,
                                          physicsClientId=c)
@@ -391,7 +412,8 @@ class World:
 
     def ground_truth(self) -> GroundTruth:
         c = self._c()
-        ams = {sysid: self._am_truth(am, self._saturated[sysid]) for sysid, am in self._ams.items()}
+        ams = {sysid: self._am_truth(am, self._saturated[sysid], self._rotors_now.get(sysid))
+               for sysid, am in self._ams.items()}
         p, quat = pb.getBasePositionAndOrientation(self._object_id, physicsClientId=c)
         v, w = pb.getBaseVelocity(self._object_id, physicsClientId=c)
         x, y, z, qw = quat
@@ -400,7 +422,7 @@ class World:
                           touching=self._names_of(pt[2] for pt in touching))
         return GroundTruth(time_s=self.time_s, step_index=self.step_index, ams=ams, object=obj)
 
-    def _am_truth(self, am: scene.AmBody, saturated=(0, 0)) -> AmTruth:
+    def _am_truth(self, am: scene.AmBody, saturated=(0, 0, 0, 0, 0, 0), rotors_n=None) -> AmTruth:
         c = self._c()
         p, quat = pb.getBasePositionAndOrientation(am.body_id, physicsClientId=c)
         ee = pb.getLinkState(am.body_id, am.ee_link_id, computeForwardKinematics=1, physicsClientId=c)
@@ -414,23 +436,43 @@ class World:
                        pad_other_contacts=self._names_of(pt[2] for pt in pad_points if pt[2] != self._object_id),
                        base_contacts=self._names_of(pt[2] for pt in base_points),
                        p_W_joints=tuple(np.array(j[4]) for j in joints),
-                       rotor_saturated_steps=saturated[0], joint_saturated_steps=saturated[1])
+                       rotor_saturated_steps=saturated[0], joint_saturated_steps=saturated[1],
+                       axis_saturated_steps=tuple(saturated[2:6]),
+                       **self._rotor_fractions(rotors_n))
+
+    def _rotor_fractions(self, rotors_n) -> dict[str, float]:
+        """The busiest and the idlest rotor's thrust as a fraction of its range (0.0 before any command)."""
+        if rotors_n is None:
+            return {}
+        a = self._alloc
+        x = [(f - lo) / (hi - lo) for f, lo, hi in zip(rotors_n, a.f_min.tolist(), a.rotor_thrust_max_n)]
+        return {"rotor_fraction_max": max(x), "rotor_fraction_min": min(x)}
 
     def _names_of(self, body_ids) -> tuple[str, ...]:
         return tuple(sorted({self._names.get(b, f"body{b}") for b in body_ids}))
+
+
+def _friction_sign_on_A(pt) -> float:
+    """+1 if a contact point's friction pair is the force on the query's body A, -1 if on B
+    (see `_sum_contact`): the sign of (dir1 x dir2) . contactNormalOnB."""
+    n_manifold = np.cross(pt[11], pt[13])
+    return 1.0 if float(n_manifold @ np.asarray(pt[7])) >= 0.0 else -1.0
 
 
 def _sum_contact(points) -> PadContact:
     """Sum PyBullet contact points between the object (body A) and a pad (body B) into the
     force the object applies on the pad.
 
-    Verified conventions (tests/simulator/test_world_sensors.py, the squeeze tests): contactNormalOnB points
-    from B into A and A receives +normalForce along it. The friction pair
-    (lateralFriction_k, lateralFrictionDir_k) is the force on the first body of Bullet's
-    internal contact manifold, which is NOT swapped when a query names the bodies the other
-    way round; the object is created before every AM (lower broadphase id), so it is that
-    first body and A receives +sum_k lateralFriction_k lateralFrictionDir_k. The pad gets
-    the opposite of both.
+    Verified conventions (tests/simulator/test_world_sensors.py, the squeeze tests with every
+    pad shape): contactNormalOnB points from B into A and A receives +normalForce along it;
+    PyBullet swaps the normal when the query names the bodies the other way round. The
+    friction pair (lateralFriction_k, lateralFrictionDir_k) is the force on the FIRST body of
+    Bullet's internal contact manifold, which PyBullet does not swap, and which body comes
+    first depends on the shapes' collision algorithm (the object for a flat pad's box, the pad
+    for a crowned pad's cylinder). The manifold's own normal tells: Bullet builds the friction
+    directions with btPlaneSpace1(n), so dir2 = n x dir1 and n = dir1 x dir2. Where that n
+    agrees with contactNormalOnB the manifold's first body is A (the object); where it is
+    opposed, it is B (the pad). The pad gets the opposite of A's force.
     """
     if not points:
         return _NO_CONTACT
@@ -440,7 +482,7 @@ def _sum_contact(points) -> PadContact:
     total_normal = 0.0
     for pt in points:
         F_n -= pt[9] * np.array(pt[7])
-        F_t -= pt[10] * np.array(pt[11]) + pt[12] * np.array(pt[13])
+        F_t -= _friction_sign_on_A(pt) * (pt[10] * np.array(pt[11]) + pt[12] * np.array(pt[13]))
         weighted_point += pt[9] * np.array(pt[5])
         total_normal += pt[9]
     magnitude = float(np.linalg.norm(F_n))

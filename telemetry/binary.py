@@ -73,6 +73,9 @@ float64[4] q_WE          # end-effector attitude (w, x, y, z); x = pad outward n
 float64[] p_W_joints     # arm joint origins, base to wrist, 3 numbers each (x0, y0, z0, x1, ...) [m]
 uint64 rotor_saturated_steps  # commands so far whose rotor mix saturated (cumulative)
 uint64 joint_saturated_steps  # commands so far with a joint torque clipped (cumulative)
+uint64[4] axis_saturated_steps  # commands so far whose roll, pitch, yaw torque, thrust fell short (cumulative)
+float64 rotor_fraction_max  # the busiest rotor's thrust as a fraction of its range, now
+float64 rotor_fraction_min  # the idlest rotor's
 float64[3] p_WB_est      # the base position the flight controller reports (its estimate) [m]; all 4 zero: none yet
 float64[4] q_WB_est      # its base attitude (w, x, y, z)
 float64[3] v_B_est       # its base velocity in B [m/s]
@@ -162,5 +165,8 @@ def from_dict(channel: Channel, payload: Mapping[str, Any]) -> bytes:
         payload = {**payload, "p_W_joints": [v for p in payload.get("p_W_joints", ()) for v in p],
                    "rotor_saturated_steps": payload.get("rotor_saturated_steps", 0),
                    "joint_saturated_steps": payload.get("joint_saturated_steps", 0),
+                   "axis_saturated_steps": payload.get("axis_saturated_steps", [0, 0, 0, 0]),
+                   "rotor_fraction_max": payload.get("rotor_fraction_max", 0.0),
+                   "rotor_fraction_min": payload.get("rotor_fraction_min", 0.0),
                    **{k: payload.get(k, [0.0] * n) for k, n in schema.ESTIMATE_FIELDS.items()}}
     return MESSAGES[channel].encode(payload)

@@ -281,7 +281,7 @@ def controller(t_s: float, phase: str, diag, cmd, sysid: int = 0) -> Pending:
 
 # ----------------------------------------------------------------------------- ground truth
 _TRUTH_HEAD = _padded_head("<dQI")
-_COUNTERS = struct.Struct("<QQ")
+_COUNTERS = struct.Struct("<QQ4Qdd")  # rotor, joint, per-axis saturation counts; rotor fractions
 _ESTIMATE = struct.Struct("<13d")  # p_WB_est, q_WB_est, v_B_est, w_B_est
 _NO_ESTIMATE = (0.0,) * 13
 _truth_finishers: dict[int, Finisher] = {}
@@ -314,7 +314,10 @@ def am_truth(t_s: float, sysid: int, am) -> Pending:
         est = getattr(am, "estimate", ()) or _NO_ESTIMATE
         pre = b"".join((_TRUTH_HEAD.pack(t_s, 0, sysid), am.p_WB, am.p_WE, am.R_WB, am.R_WE, *joints,
                         _COUNTERS.pack(getattr(am, "rotor_saturated_steps", 0),
-                                       getattr(am, "joint_saturated_steps", 0)), _ESTIMATE.pack(*est)))
+                                       getattr(am, "joint_saturated_steps", 0),
+                                       *getattr(am, "axis_saturated_steps", (0, 0, 0, 0)),
+                                       getattr(am, "rotor_fraction_max", 0.0),
+                                       getattr(am, "rotor_fraction_min", 0.0))), _ESTIMATE.pack(*est)))
         if len(pre) == finisher.pre_size and _LITTLE:
             return finisher, pre
     except (TypeError, ValueError, BufferError, struct.error):

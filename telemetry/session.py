@@ -181,12 +181,27 @@ def add_zenoh_arguments(parser: argparse.ArgumentParser, role: str = "publisher"
                          if role == "recorder" else
                          "this publisher's telemetry key (64 hex digits): seal every message with it")
                         + " (telemetry.auth; am-run writes them to the run folder)")
+    g.add_argument("--insecure", action="store_true",
+                   help=("record without a telemetry key: keep whatever anyone on the zenoh network publishes"
+                         if role == "recorder" else
+                         "publish without a telemetry key: the recorder cannot tell these messages from forged ones"))
     if role == "publisher":
         g.add_argument("--no-telemetry", action="store_true", help="publish nothing")
         g.add_argument("--telemetry-wait", type=seconds_or_zero, default=0.0, metavar="S",
                        help="at start, wait up to S seconds for a subscriber (the recorder) so that the log "
                             "holds the first samples, then go on without (default 0: do not wait; am-run, "
                             "which starts the recorder first, passes 5)")
+
+
+def missing_key_message(role: str) -> str:
+    """Why a process without a telemetry key does not start, and how to give it one."""
+    if role == "recorder":
+        return ("no telemetry key: give the run's master key with --telemetry-key-file FILE (am-run writes "
+                "telemetry.key into each run folder; 'ground-station keys DIR' writes a set for processes started "
+                "by hand), or --insecure to record whatever anyone on the zenoh network publishes")
+    return ("no telemetry key: give this publisher's key with --telemetry-key-file FILE (am-run writes "
+            "telemetry-<simulator|am<sysid>>.key into each run folder; 'ground-station keys DIR' writes a set for "
+            "processes started by hand), --no-telemetry to publish nothing, or --insecure to publish unsealed")
 
 
 def _endpoints(values: list[str] | None) -> tuple[str, ...] | None:
@@ -198,7 +213,9 @@ def _endpoints(values: list[str] | None) -> tuple[str, ...] | None:
 def options_from_args(args: argparse.Namespace, role: str = "publisher") -> ZenohOptions:
     """ZenohOptions from a namespace parsed with add_zenoh_arguments(parser, role); a config
     that zenoh cannot take (a bad --zenoh-config file) is a TelemetryConfigError now, before
-    the run, rather than a session that retries in the background forever."""
+    the run, rather than a session that retries in the background forever. So is a missing
+    telemetry key (secure by default): a publisher or recorder without --telemetry-key-file
+    is refused unless --insecure says to go without (a publisher may also --no-telemetry)."""
     key = None
     if args.telemetry_key_file is not None and not getattr(args, "no_telemetry", False):
         try:
@@ -208,13 +225,16 @@ def options_from_args(args: argparse.Namespace, role: str = "publisher") -> Zeno
                                        f"{getattr(exc, 'strerror', None) or exc}") from None
         except ValueError as exc:
             raise TelemetryConfigError(str(exc)) from None
+    enabled = not getattr(args, "no_telemetry", False)
     opts = ZenohOptions(
         role=role, mode=args.zenoh_mode, connect=_endpoints(args.zenoh_connect),
         listen=_endpoints(args.zenoh_listen), config_file=args.zenoh_config, prefix=args.telemetry_prefix,
-        enabled=not getattr(args, "no_telemetry", False), auth_key=key,
+        enabled=enabled, auth_key=key,
     )
     if opts.enabled and opts.config_file is not None:
         if not Path(opts.config_file).is_file():
             raise TelemetryConfigError(f"--zenoh-config {opts.config_file}: not a file")
         build_config(opts)
+    if enabled and key is None and not getattr(args, "insecure", False):  # last: other mistakes are named first
+        raise TelemetryConfigError(missing_key_message(role))
     return opts

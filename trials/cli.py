@@ -76,7 +76,7 @@ def parse_args(argv):
                     help="control law for every trial ([options].controller); repeat to compare laws")
     ap.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE", dest="overrides",
                     help="change the base scenario before the draws (VALUE in TOML syntax; am.KEY: every [[am]])")
-    ap.add_argument("--no-progress", action="store_true", help="no progress bar")
+    ap.add_argument("--no-progress", action="store_true", help="no progress bar (there is one on a terminal only)")
     ap.add_argument("--no-plots", action="store_true", help="no plots")
     return ap.parse_args(argv)
 
@@ -217,7 +217,8 @@ def _campaign(a, tasks: list[TrialTask], out: Path, controller: str | None, work
     name = controller or "the scenario's controller"
     print(f"am-trials: {len(tasks)} trials of {a.scenario.name} ({name}), seed {a.seed}, on {where}; "
           f"variation from {rand_source}", file=sys.stderr)
-    bar = tqdm(total=len(tasks), unit="trial", disable=a.no_progress, file=sys.stderr, dynamic_ncols=True)
+    bar = tqdm(total=len(tasks), unit="trial", disable=a.no_progress or not sys.stderr.isatty(), file=sys.stderr,
+               dynamic_ncols=True)  # a bar on a terminal only: redirected output gets the summary lines
     counts = {"ok": 0}
 
     def on_result(row):

@@ -141,3 +141,34 @@ def test_am_run_refuses_a_run_that_does_not_fit_in_memory(monkeypatch, capsys, t
     monkeypatch.setattr(launch, "available_mib", lambda: 100.0)
     assert launch.main([SHORT, "--run-dir", str(tmp_path / "r"), "--no-telemetry"]) == 2
     assert "AMs need about" in capsys.readouterr().err and not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize("module,defaults", [
+    ("companion.main", ["--connect-timeout CONNECT_TIMEOUT seconds to wait for the simulator (default: 30.0)",
+                        "(default: 10.0)", "two_am_comp.toml)"]),
+    ("simulator.main", ["(default: 60.0)", "(default: 5.0)", "two_am_comp.toml)"]),
+    ("simulator.launch", ["(default: 120.0)", "two_am_comp.toml)"]),
+])
+def test_help_gives_every_default(module, defaults, capsys):
+    """The timeouts and the scenario, as --help shows them: every option with a value says its
+    default."""
+    main = importlib.import_module(module).main
+    with pytest.raises(SystemExit) as ex:
+        main(["--help"])
+    assert ex.value.code == 0
+    text = " ".join(capsys.readouterr().out.split()).replace("- ", "-")  # argparse wraps paths at '-'
+    for d in defaults:
+        assert d in text, (d, text)
+
+
+def test_the_help_formatter_leaves_flags_and_unset_options_alone(capsys):
+    ap = cliargs.ArgumentParser(prog="p")
+    ap.add_argument("--flag", action="store_true", help="a flag")
+    ap.add_argument("--unset", default=None, help="not given: none")
+    ap.add_argument("--said", default=3, help="n (default 3, as the text says)")
+    ap.add_argument("--n", type=int, default=7, help="a count")
+    ap.add_argument("where", nargs="?", default="here", help="a place")
+    ap.print_help()
+    text = " ".join(capsys.readouterr().out.split())
+    assert "a flag (default" not in text and "not given: none (default" not in text
+    assert text.count("default 3") == 1 and "a count (default: 7)" in text and "a place (default: here)" in text

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from amcore.config import ConfigError, load_scenario, scenario_id
+from amcore.config import ConfigError, load_scenario, load_vehicle, scenario_id
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = sorted((ROOT / "configs" / "scenarios").glob("*.toml"))
@@ -32,7 +32,7 @@ BASE = (ROOT / "configs" / "scenarios" / "two_am_comp.toml").read_text()
 @pytest.mark.parametrize("old,new,key", [
     ("mass_kg = 1.0", "mass_kg = 1.0\ncolour = 3", "[object]: unknown key 'colour'"),
     ("mass_kg = 1.0", 'mass_kg = "heavy"', "[object].mass_kg: expected a number"),
-    ("mass_kg = 1.0", "mass_kg = -1.0", "[object].mass_kg: must be > 0"),
+    ("mass_kg = 1.0", "mass_kg = -1.0", "[object].mass_kg: must be in [0.01, 100] kg"),
     ("sysid = 5", "sysid = 4", "sysid: duplicate sysid 4"),
     ("sysid = 5", "sysid = 1", "must be in 2..255"),
     ("squeeze_m = 0.03", "squeeze_m = [0.03]", "[mission].squeeze_m: expected a number"),
@@ -56,7 +56,7 @@ BASE = (ROOT / "configs" / "scenarios" / "two_am_comp.toml").read_text()
     ("[object]", "[flight_controller]\nMC_ROLLRATE_D = -0.1\n[object]", "MC_ROLLRATE_D: must be >= 0"),
     ("[object]", "[flight_controller]\nMC_YAW_WEIGHT = 1.5\n[object]", "MC_YAW_WEIGHT: must be in [0, 1]"),
     ("[object]", "[flight_controller]\nMC_ROLL_RATE_P = 0.1\n[object]", "unknown key 'MC_ROLL_RATE_P'"),
-    ("time_constant_s = 0.0", "time_constant_s = -0.01", "[rotors].time_constant_s: must be >= 0"),
+    ("time_constant_s = 0.0", "time_constant_s = -0.01", "[rotors].time_constant_s: must be in [0, 1] s"),
     ("rate_hz = 1000.0", "rate_hz = 1000.0\ncontrol_rate_hz = 400.0", "control_rate_hz: 400 Hz must divide"),
     ("rate_hz = 1000.0", "rate_hz = 1000.0\ncontrol_rate_hz = 2000.0", "control_rate_hz: 2000 Hz must divide"),
 ])
@@ -161,3 +161,91 @@ def test_scenario_overrides_the_vehicles_flight_controller_and_rotors_key_by_key
     assert (fc.mode, fc.MC_ROLL_P, fc0.mode) == ("attitude", 9.0, "torque")
     assert fc.MC_PITCH_P == fc0.MC_PITCH_P and spec.vehicle.rotors == base.vehicle.rotors
     assert (spec.control_every, base.control_every) == (4, 1) and spec.control_dt_s == pytest.approx(0.004)
+
+
+# ----------------------------------------------------------------------------- rotor tables
+QUAD_ROWS = VEHICLE.read_text()
+
+
+def _vehicle_with(tmp_path, text: str) -> Path:
+    v = tmp_path / "v.toml"
+    v.write_text(text.replace('urdf = "am3dof.urdf"', f'urdf = "{VEHICLE.parent / "am3dof.urdf"}"'))
+    return v
+
+
+FL = 'position_m = [0.21213203435596426, 0.21213203435596426, 0.0]\naxis = [0.0, 0.0, 1.0]\nspin = "cw"'
+
+
+@pytest.mark.parametrize("old,new,words", [
+    (FL, FL.replace("axis = [0.0, 0.0, 1.0]", "axis = [0.0, 0.0, 0.0]"), "rotor[0].axis: must be a nonzero"),
+    (FL, FL.replace("axis = [0.0, 0.0, 1.0]", "axis = [0.0, 0.0, -1.0]"), "rotor[0].axis: every rotor must thrust upward"),
+    (FL, FL.replace('spin = "cw"', 'spin = "left"'), "rotor[0].spin: expected one of ccw, cw"),
+    (FL, FL.replace('spin = "cw"', 'spin = "ccw"').replace("0.21213203435596426, 0.21213203435596426",
+                                                         "-0.21213203435596426, 0.21213203435596426"),
+     "entered twice"),
+    ('spin = "cw"', 'spin = "ccw"', "cannot make yaw torque"),  # every rotor ccw: yaw only with thrust
+    ("0.21213203435596426, 0.21213203435596426", "0.3, 0.0", None),  # still a valid layout: control
+    ("0.21213203435596426, -0.21213203435596426", "0.3, 0.0", None),
+    ("moment_ratio_m = 0.016", "moment_ratio_m = -0.016", "moment_ratio_m: must be in (0, 1]"),
+    ("thrust_min_n = 0.0", "thrust_min_n = 13.0", "thrust_min_n < thrust_max_n"),
+    ("thrust_max_n = 12.0 ", "arm_length_m = 0.3\nthrust_max_n = 12.0 ", "unknown key 'arm_length_m'"),
+])
+def test_bad_rotor_geometry_names_file_and_key(tmp_path, old, new, words):
+    assert old in QUAD_ROWS
+    count = QUAD_ROWS.count(old) if words == "cannot make yaw torque" else 1
+    v = _vehicle_with(tmp_path, QUAD_ROWS.replace(old, new, count))
+    if words is None:
+        load_vehicle(v)
+        return
+    with pytest.raises(ConfigError) as e:
+        load_vehicle(v)
+    assert str(v) in str(e.value) and "[rotors]" in str(e.value) and words in str(e.value), str(e.value)
+
+
+def test_rotors_on_one_line_cannot_roll(tmp_path):
+    d = "0.21213203435596426"
+    text = QUAD_ROWS
+    for (sx, sy), x in zip([("", ""), ("-", ""), ("-", "-"), ("", "-")], ["0.3", "0.1", "-0.1", "-0.3"]):
+        old = f"position_m = [{sx}{d}, {sy}{d}, 0.0]"
+        assert old in text
+        text = text.replace(old, f"position_m = [{x}, 0.0, 0.0]")  # all on the x axis: no roll
+    with pytest.raises(ConfigError, match=r"\[rotors\].rotor: this layout cannot make roll torque"):
+        load_vehicle(_vehicle_with(tmp_path, text))
+
+
+def test_old_rotor_keys_say_what_replaced_them(tmp_path):
+    start, end = QUAD_ROWS.index("[rotors]"), QUAD_ROWS.index("[task]")
+    old = "[rotors]\narm_length_m = 0.30\nthrust_max_n = 12.0\nyaw_moment_coeff_m = 0.016\ncount = 4\nlayout = \"x\"\n\n"
+    with pytest.raises(ConfigError, match=r"missing key 'rotor' \(the rotors are now one \[\[rotors.rotor\]\] row"):
+        load_vehicle(_vehicle_with(tmp_path, QUAD_ROWS[:start] + old + QUAD_ROWS[end:]))
+
+
+def test_am_vehicle_prints_authority_and_exits_2_on_bad_geometry(tmp_path, capsys):
+    from companion.vehicle import main
+
+    assert main([str(ROOT / "configs" / "vehicles" / "hex3dof.toml"), "--squeeze", "9", "--load", "0.5"]) == 0
+    out = capsys.readouterr().out
+    line = [x for x in out.splitlines() if x.startswith("yaw authority at hover:")]
+    assert len(line) == 1 and float(line[0].split()[-3]) >= 1.0
+    assert "thrust margin" in out and "thrust lost to cant: 6.0 %" in out and "loaded hover (squeeze 9 N" in out
+    bad = _vehicle_with(tmp_path, QUAD_ROWS.replace("axis = [0.0, 0.0, 1.0]", "axis = [0.0, 0.0, 0.0]", 1))
+    assert main([str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert str(bad) in err and "rotor[0].axis" in err
+    with pytest.raises(SystemExit) as e:
+        main([str(bad), "--squeeze", "-1"])
+    assert e.value.code == 2
+
+
+def test_am_vehicle_prints_a_teams_payload_and_the_team_an_object_needs(capsys):
+    from companion.vehicle import main
+
+    hexa = str(ROOT / "configs" / "vehicles" / "hex3dof.toml")
+    assert main([hexa, "--team", "2", "--friction", "0.5", "--mass", "2.5"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[-2].startswith("team of 2 at friction 0.5 (margin 1.2) holds up to ")
+    assert out[-1].startswith("2.5 kg at friction 0.5 (margin 1.2) needs 29.4 N per pad from 2 AMs")
+    assert out[-1].endswith("use 3 AMs")
+    with pytest.raises(SystemExit) as e:
+        main([hexa, "--mass", "2.0"])
+    assert e.value.code == 2

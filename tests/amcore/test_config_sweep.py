@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from amcore.config import ConfigError, load_scenario
+from trials.toml_write import dumps
 
 ROOT = Path(__file__).resolve().parents[2]
 SHORT = ROOT / "configs" / "scenarios" / "two_am_short.toml"
@@ -52,7 +53,7 @@ def _scenario(tmp_path, table: str, key: str, value, vehicle_table: str | None =
         data["am"][0][key] = value
     else:
         data.setdefault(table, {})[key] = value
-    (tmp_path / "v.toml").write_text(_dump(vdata))
+    (tmp_path / "v.toml").write_text(dumps(vdata))  # the rotor rows are an array of tables in a table
     data["scenario"]["vehicle"] = str(tmp_path / "v.toml") if not (table == "scenario" and key == "vehicle") \
         else value
     path = tmp_path / "s.toml"
@@ -86,13 +87,29 @@ BAD = [
     ("object", "mass_kg", 50.0, None),
     ("object", "mass_kg", 0.0, None),
     ("object", "lateral_friction", -1.0, None),
+    ("object", "mass_kg", 1e-300, None),
+    ("object", "mass_kg", 150.0, None),
+    ("object", "size_m", [1e-9, 1e-9, 1e-9], None),
+    ("object", "size_m", [0.2, 0.2, 5.0], None),
+    ("object", "position_m", [50.0, 0.0, 0.6], None),
+    ("object", "position_m", [0.0, 0.0, 20.0], None),
+    ("scenario", "name", "../../escape", None),
+    ("scenario", "name", "a/b", None),
+    ("scenario", "name", ".hidden", None),
+    ("am", "azimuth_deg", 0.0, None),
+    ("am", "azimuth_deg", 30.0, None),
+    ("am", "start_offset_m", [0.5, 0.0, 0.0], None),
+    ("mission", "lift_m", 5.0, None),
+    ("mission", "lift_m", 0.1, None),
+    ("mission", "standoff_m", 3.0, None),
+    ("mission", "squeeze_m", 0.1, None),
     ("sensors", "latency_s", -0.001, None),
     ("success", "max_slip_m", -1.0, None),
     ("link", "loss", 1.5, None),
     ("am", "misalignment_deg", 90.0, None),
     ("am", "sysid", 256, None),
-    ("rotors", "count", 6, None),
-    ("rotors", "layout", "plus", None),
+    ("rotors", "arm_length_m", 0.3, None),
+    ("rotors", "rotor", [], None),
     ("rotors", "thrust_min_n", 12.0, None),
     ("rotors", "thrust_max_n", 0.0, None),
     ("rotors", "time_constant_s", -0.1, None),
@@ -157,3 +174,38 @@ def test_the_lift_check_names_what_the_team_can_carry(tmp_path):
         load_scenario(_scenario(tmp_path, "object", "mass_kg", 5.0))
     assert load_scenario(_scenario(tmp_path, "object", "mass_kg", 4.0)).object.mass_kg == 4.0
 
+
+
+# the implausible values that used to load, each with the plausible range its message must give
+IMPLAUSIBLE = [
+    ("object", "mass_kg", 1e-300, "[0.01, 100] kg"),
+    ("object", "size_m", [1e-9, 1e-9, 1e-9], "[0.05, 3] m"),
+    ("scenario", "name", "../../escape", "letters, digits, '_', '-' or '.'"),
+    ("am", "azimuth_deg", 0.0, "at least a base's width (0.24 m) apart"),
+]
+
+
+@pytest.mark.parametrize("table,key,value,words", IMPLAUSIBLE, ids=[f"{i[0]}.{i[1]}" for i in IMPLAUSIBLE])
+def test_implausible_values_exit_2_naming_file_key_and_range(tmp_path, capsys, table, key, value, words):
+    """Through a process main, as a user meets them: exit 2, one line naming the file, the key
+    and what would be plausible."""
+    from simulator.main import main
+
+    path = _scenario(tmp_path, table, key, value)
+    assert main(["--config", str(path), "--run-dir", str(tmp_path / "run"), "--gcs", "none", "--insecure"]) == 2
+    err = capsys.readouterr().err
+    assert str(path) in err and key in err and words in err, err
+    assert not (tmp_path / "run").exists()  # refused before anything started
+
+
+def test_azimuths_closer_than_a_base_at_the_start_are_refused_and_the_rest_load(tmp_path):
+    """Two AMs on the 0.2 m box, 0.25 m standoff: pads start 0.35 m from the centre, so a base's
+    width (0.24 m, the URDF's collision box) between them needs about 40 deg of azimuth (more
+    off the box's axes, where its faces are farther)."""
+    for az, ok in ((45.0, True), (30.0, False)):
+        path = _scenario(tmp_path, "am", "azimuth_deg", az)
+        if ok:
+            assert load_scenario(path).ams[0].azimuth_deg == az
+        else:
+            with pytest.raises(ConfigError, match=r"#2\.azimuth_deg: sysid 5 .* about 40 deg"):
+                load_scenario(path)

@@ -371,3 +371,63 @@ def test_signing_off_only_heartbeat_from_a_silent_peer_moves_it_and_a_rejoin_dis
             assert server.peer_address(2) == moved.getsockname()
             assert (server.stats.rejoins, server.stats.address_changes) == (1, 1)
             assert not server.armed(2)  # a restarted companion arms again
+
+
+def test_a_companion_waits_while_its_simulator_gathers_the_others_and_hears_whom_it_waits_for(monkeypatch):
+    """Companion 3 is armed, sysid 2 never shows up: the simulator tells 3 whom it waits for
+    every notice period, and 3's first-frame wait (0.5 s here, shorter than the simulator's
+    1.6 s) lasts as long as the notices come; the simulator then gives up and ends the run,
+    and 3 hears that instead of timing out."""
+    import amlink.server
+
+    monkeypatch.setattr(amlink.server, "WAITING_NOTICE_PERIOD_S", 0.2)
+    server = server_for([2, 3])
+    server.open()
+    client = CompanionClient(3, sim=url(server))
+    heard: list[str] = []
+    outcome: list = []
+
+    def companion():
+        try:
+            client.connect(5.0)
+            client.arm(2.0)
+            outcome.append(client.recv_frame(0.5, on_waiting=heard.append))
+        except BaseException as exc:  # noqa: BLE001 - reported by the assertion below
+            outcome.append(exc)
+
+    t = threading.Thread(target=companion)
+    t.start()
+    said: list[str] = []
+    try:
+        with pytest.raises(PeerMissingError):
+            server.wait_for_peers(1.6, on_waiting=said.append)
+        server.close(f"no HEARTBEAT from sysid 2", error=True)
+    finally:
+        t.join(5.0)
+        client.close()
+    assert outcome == [None], outcome  # the run's end, not a SimulatorTimeoutError
+    assert len(heard) >= 4 and heard == said[:len(heard)]
+    assert heard[0].startswith("waiting ") and heard[0].endswith("s more for HEARTBEAT from sysid 2")
+    assert client.status_texts[-1] == (mav.MAV_SEVERITY_ERROR, "no HEARTBEAT from sysid 2")
+
+
+def test_a_simulator_that_goes_silent_after_its_notices_times_the_companion_out(monkeypatch):
+    import amlink.server
+
+    monkeypatch.setattr(amlink.server, "WAITING_NOTICE_PERIOD_S", 0.1)
+    server = server_for([2, 3])
+    server.open()
+    client = CompanionClient(3, sim=url(server))
+    t = threading.Thread(target=lambda: (client.connect(5.0), client.arm(2.0)))
+    t.start()
+    try:
+        with pytest.raises(PeerMissingError):
+            server.wait_for_peers(0.5)
+        t.join(5.0)
+        t0 = time.monotonic()
+        with pytest.raises(SimulatorTimeoutError, match="its last: 'waiting .* for HEARTBEAT from sysid 2'"):
+            client.recv_frame(0.4)
+        assert 0.3 < time.monotonic() - t0 < 1.5
+    finally:
+        server.close()
+        client.close()

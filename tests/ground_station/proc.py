@@ -13,8 +13,10 @@ class RecorderProcess:
     its 'recording' line. Used as a context manager: killed on exit if still alive."""
 
     def __init__(self, out_path, endpoint: str, *extra: str, ready_timeout_s: float = 20.0):
+        # a test that is not about authentication records without a key (--insecure)
+        key = [] if "--telemetry-key-file" in extra else ["--insecure"]
         self.cmd = [sys.executable, "-m", "ground_station", "record", "--out", str(out_path), "--zenoh-listen",
-                    endpoint, "--summary-json", *extra]
+                    endpoint, "--summary-json", *key, *extra]
         self.ready_timeout_s = ready_timeout_s
         self.proc: subprocess.Popen | None = None
         self.stderr_lines: list[str] = []

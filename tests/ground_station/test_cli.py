@@ -4,6 +4,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -50,7 +51,7 @@ def test_review_text_json_and_plots(good_log, tmp_path, capsys):
 
 
 def test_console_script_entry_and_record_bad_output_dir(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "ground_station", "record", "--out", str(tmp_path / "no" / "dir.mcap"),
+    r = subprocess.run([sys.executable, "-m", "ground_station", "record", "--insecure", "--out", str(tmp_path / "no" / "dir.mcap"),
                         "--zenoh-listen", "none", "--duration", "0.1"], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "no such directory" in r.stderr
     r = subprocess.run([sys.executable, "-m", "ground_station", "review"], capture_output=True, text=True, timeout=60)
@@ -60,7 +61,7 @@ def test_console_script_entry_and_record_bad_output_dir(tmp_path):
 def test_record_for_a_duration_writes_a_finished_empty_log(tmp_path):
     from tests.telemetry.zenoh_testing import free_endpoint
     out = tmp_path / "quiet.mcap"
-    r = subprocess.run([sys.executable, "-m", "ground_station", "record", "--out", str(out), "--zenoh-listen",
+    r = subprocess.run([sys.executable, "-m", "ground_station", "record", "--insecure", "--out", str(out), "--zenoh-listen",
                         free_endpoint(), "--duration", "0.3", "--summary-json"], capture_output=True, text=True,
                        timeout=60)
     assert r.returncode == 0, r.stderr
@@ -85,3 +86,33 @@ def test_record_finishes_the_file_on_sigterm_and_sigint(tmp_path, sig):
         code, stdout = rec.wait(timeout_s=20.0)
     assert code == 0 and json.loads(stdout)["stop_reason"] == "signal"
     assert not read_log(out).truncated
+
+
+def test_record_without_a_telemetry_key_exits_2_saying_how_to_pass_one(tmp_path, capsys):
+    assert main(["record", "--out", str(tmp_path / "x.mcap"), "--zenoh-listen", "none"]) == 2
+    err = capsys.readouterr().err
+    assert "no telemetry key" in err and "--telemetry-key-file FILE" in err and "--insecure" in err
+    assert not (tmp_path / "x.mcap").exists()
+
+
+def test_keys_writes_a_runs_telemetry_keys_for_processes_by_hand(tmp_path, capsys):
+    """The master key for the recorder and each publisher's own key derived from it, owner-only
+    files; a second set into the same folder is refused (it would lock the first one's users out)."""
+    import stat
+
+    from telemetry.auth import publisher_key
+
+    folder = tmp_path / "keys"
+    short = Path(__file__).resolve().parents[2] / "configs" / "scenarios" / "two_am_short.toml"
+    assert main(["keys", str(folder), "--config", str(short)]) == 0
+    out = capsys.readouterr().out
+    files = {p.name: p for p in folder.iterdir()}
+    assert sorted(files) == ["telemetry-am4.key", "telemetry-am5.key", "telemetry-simulator.key", "telemetry.key"]
+    assert all(stat.S_IMODE(p.stat().st_mode) == 0o600 for p in files.values())
+    master = bytes.fromhex(files["telemetry.key"].read_text().strip())
+    for name in ("simulator", "am4", "am5"):
+        assert bytes.fromhex(files[f"telemetry-{name}.key"].read_text().strip()) == publisher_key(master, name)
+        assert f"{name}: --telemetry-key-file {folder / f'telemetry-{name}.key'}" in out
+    assert main(["keys", str(folder), "--config", str(short)]) == 2
+    assert "already holds telemetry.key" in capsys.readouterr().err
+    assert bytes.fromhex(files["telemetry.key"].read_text().strip()) == master  # untouched

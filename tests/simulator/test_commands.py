@@ -96,3 +96,47 @@ def test_broadcast_commands_are_answered_by_every_vehicle_and_others_are_unsuppo
     assert _results(answers) == {4: mav.MAV_RESULT_ACCEPTED, 5: mav.MAV_RESULT_ACCEPTED}
     assert fleet.do(mav.MAV_CMD_NAV_LAND, 9)[0] == []  # not one of ours: no answer
     assert fleet.core.events == []
+
+
+def test_setpoints_after_a_commanded_landing_are_ignored_not_rejected(fleet):
+    """A companion that keeps flying its mission after NAV_LAND sends setpoints its landing
+    vehicle does not take; even one the simulator would refuse as implausible is ignored and
+    counted, never a rejection (no failsafe, no "rejected setpoints" verdict)."""
+    fleet.core.note_rejected(4, "before: |tau_q_nm| > 12")  # a refusal before any command counts
+    fleet.do(mav.MAV_CMD_NAV_LAND, 5)
+    for _ in range(2 * fleet.core.failsafe_after_rejected):
+        fleet.core.note_rejected(5, "|tau_q_nm| > 12")
+    fleet.run(0.5)
+    core = fleet.core
+    assert [(s, why) for _, s, why in core.rejected] == [(4, "before: |tau_q_nm| > 12")]
+    assert 5 not in core.distrusted and core.fc_mode(5) == FcMode.LAND
+    assert core.ignored_setpoints[5] == 2 * core.failsafe_after_rejected + 500  # and every step's setpoint
+    assert core.ignored_setpoints[4] == 0
+
+
+def test_the_verdict_names_a_commanded_landing_and_not_the_touchdown(fleet):
+    """NAV_LAND on one vehicle: the run's cause is the command, with its time; its base then
+    reaching the ground is the landing, not a base-contact failure."""
+    fleet.do(mav.MAV_CMD_NAV_LAND, 5)
+    fleet.run(4.0)
+    assert fleet.core.fc_mode(5) == FcMode.LANDED  # down on the ground (or the table), motors off
+    v = fleet.core.finish()["verdict"]
+    assert v["status"] == "failed" and v["failure_class"] == "commanded", v["text"]
+    assert v["failures"][0]["reason"] == "am5 landed by the GCS at t = 0.20 s"
+    assert "base contact" not in [f["class"] for f in v["failures"]], v["text"]
+
+
+def test_the_verdict_names_the_mission_abort(fleet):
+    fleet.do(mav.MAV_CMD_AM_ABORT_MISSION, 5)
+    fleet.run(0.3)
+    v = fleet.core.finish()["verdict"]
+    assert v["failure_class"] == "commanded" and v["text"].startswith("mission FAILED: aborted by the GCS at t = 0.20 s")
+    assert [f["class"] for f in v["failures"]].count("commanded") == 1
+
+
+def test_a_forced_disarm_in_flight_is_named_but_a_disarm_after_landing_is_not(fleet):
+    fleet.do(mav.MAV_CMD_COMPONENT_ARM_DISARM, 4, 0.0, commands.FORCE_DISARM_MAGIC)
+    fleet.run(0.1)
+    assert fleet.core.commanded == [(pytest.approx(0.2), 4, "disarm")]
+    v = fleet.core.finish()["verdict"]
+    assert v["failures"][0]["reason"] == "am4 disarmed in flight by the GCS at t = 0.20 s"

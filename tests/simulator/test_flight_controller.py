@@ -11,7 +11,6 @@ import pytest
 from amcore.so3 import R_to_quat_wxyz, exp_so3, quat_wxyz_to_R
 from amlink.types import AttitudeTarget
 from simulator.flight_controller import FlightController, LowPass2p, Px4Allocation, attitude_error
-from simulator.mixer import QuadMixer
 from simulator.rotors import RotorLag
 
 
@@ -50,17 +49,18 @@ def test_attitude_error_is_the_rotation_to_the_target_and_yaw_is_weighted():
 # ----------------------------------------------------------------------------- allocation
 def test_allocation_is_normalized_as_px4_and_scales_to_this_vehicle(alloc, spec):
     r = spec.vehicle.rotors
-    assert alloc.torque_scale_nm[0] == pytest.approx(2.0 * r.arm_length_m * r.thrust_max_n)
-    assert alloc.torque_scale_nm[1] == pytest.approx(2.0 * r.arm_length_m * r.thrust_max_n)
-    assert alloc.torque_scale_nm[2] == pytest.approx(4.0 * r.yaw_moment_coeff_m * r.thrust_max_n)
+    arm_length_m = math.hypot(*r.rotor[0].position_m)  # the quad X: every rotor at the same radius
+    k = r.rotor[0].moment_ratio_m
+    assert alloc.torque_scale_nm[0] == pytest.approx(2.0 * arm_length_m * r.thrust_max_n)
+    assert alloc.torque_scale_nm[1] == pytest.approx(2.0 * arm_length_m * r.thrust_max_n)
+    assert alloc.torque_scale_nm[2] == pytest.approx(4.0 * k * r.thrust_max_n)
     assert alloc.thrust_scale_n == pytest.approx(4.0 * r.thrust_max_n)
     np.testing.assert_allclose(np.abs(alloc.mix[:, 0:2]), math.sqrt(0.5), atol=1e-12)  # quad X: +-0.707
     np.testing.assert_allclose(np.abs(alloc.mix[:, 2:4]), 1.0, atol=1e-12)
     # physically: the rotors' wrench is the normalized command times the scales
-    mixer = QuadMixer.from_rotors(r)
     a = alloc.allocate(0.05, -0.03, 0.2, 0.45)
     assert not a.saturated
-    T, tau = mixer.wrench([r.thrust_max_n * x for x in a.outputs])
+    (_, _, T), tau = alloc.wrench([r.thrust_max_n * x for x in a.outputs])
     np.testing.assert_allclose(tau, np.array([0.05, -0.03, 0.2]) * alloc.torque_scale_nm, atol=1e-12)
     assert T == pytest.approx(0.45 * alloc.thrust_scale_n)
 
@@ -120,13 +120,13 @@ def test_loop_runs_at_its_own_rate_and_holds_between(fc_params, spec):
 def _fly(fc, rotors, q_d, steps, disturbance_nm=(0.0, 0.0, 0.0), tau_s=0.025, dt=1e-3):
     """A rigid quadrotor (the vehicle's base and arm at its nominal inertia) with lagging rotors."""
     J = np.diag([0.04, 0.04, 0.065])
-    mixer, lag = QuadMixer.from_rotors(rotors), RotorLag(tau_s, dt)
+    alloc, lag = Px4Allocation(rotors), RotorLag(tau_s, dt)
     R, w = np.eye(3), np.zeros(3)
     target = AttitudeTarget(0, q_d, [0.0, 0.0, 0.0], 0.4)
     errors = []
     for _ in range(steps):
         o = fc.step(tuple(R_to_quat_wxyz(R).tolist()), tuple(w.tolist()), target)
-        _, tau = mixer.wrench_floats(lag.step(o.rotor_thrusts_n))
+        _, tau = alloc.wrench(lag.step(o.rotor_thrusts_n))
         w = w + dt * np.linalg.solve(J, np.array(tau) + disturbance_nm - np.cross(w, J @ w))
         R = R @ exp_so3(w * dt)
         E = quat_wxyz_to_R(np.array(q_d)).T @ R

@@ -39,3 +39,16 @@ def test_pad_sliding_down_the_object_is_slip():
         slide = 0.004 * max(0.0, t - 2.0)  # 4 mm over the last second
         o.add(*_gt(t, p_WO, 0.0, p_WO + np.array([-0.1, 0.0, -slide])))
     assert o.to_dict()["ams"]["4"]["slip_max_m"] == pytest.approx(0.004)
+
+
+def test_saturation_counts_stay_python_integers_whatever_bools_they_get():
+    """The allocation reports numpy bools; the counts must still go into outcome.json."""
+    import json
+
+    o = RunOutcome([4], (1.0, 2.0), slip_from_s=0.5)
+    o.saturation(4, 0.1, np.bool_(True), np.bool_(False), tuple(np.array([True, False, True, False])))
+    o.saturation(4, 0.2, True, True, (False, True, False, False))
+    a = o.to_dict()["ams"]["4"]
+    json.dumps(a)
+    assert (a["saturated_steps"], a["rotor_saturated_steps"], a["joint_saturated_steps"]) == (2, 2, 1)
+    assert list(a["axis_saturated_steps"].values()) == [1, 1, 1, 0]

@@ -120,7 +120,7 @@ def test_a_run_cut_short_is_incomplete_unless_something_already_failed():
 
 
 def test_failure_classes_come_in_the_documented_order():
-    assert FAILURE_CLASSES == ("diverged", "base contact", "never lifted", "dropped", "slipped",
+    assert FAILURE_CLASSES == ("commanded", "diverged", "base contact", "never lifted", "dropped", "slipped",
                                "rejected setpoints", "failsafe", "saturated")
 
 

@@ -68,7 +68,7 @@ def test_saturated_commands_are_reported_and_limited(spec, model, make_world):
     w.step()
     measured = (w.state(s).pin_v() - x0.pin_v()) / w.dt_s
     # the applied, not the requested, wrench moves the vehicle
-    tau = np.concatenate([[0.0, 0.0, report.mix.applied_thrust_n], report.mix.applied_tau_B_nm,
+    tau = np.concatenate([report.mix.force_B_n, report.mix.tau_B_nm,
                           report.joints.applied_nm])
     predicted = pin.aba(model.pin_model, model.pin_model.createData(), x0.pin_q(), x0.pin_v(), tau)
     np.testing.assert_allclose(measured, predicted, rtol=1e-3, atol=1e-3)

@@ -1,11 +1,17 @@
 """Wrist F/T convention, contact ground truth, end-effector pose and the resting object."""
 from __future__ import annotations
 
+import copy
+import dataclasses
+from pathlib import Path
+
 import numpy as np
 import pinocchio as pin
 import pytest
 
+from amcore.config import PadSpec, _read_toml, scenario_from_dict
 from amcore.so3 import Rz, quat_wxyz_to_R
+from simulator.inprocess import run
 from simulator.scene import table_geometry
 
 from .sim_testing import at_rest, facing_object, far_apart, hold_arm, hold_base, p_BE, push_link, push_object
@@ -54,13 +60,20 @@ def test_ft_wrench_is_what_the_environment_applies_on_E(spec, model, make_world,
     np.testing.assert_allclose(w.wrench_ee(sysid), expected, atol=2e-4)
 
 
-@pytest.fixture
-def squeezed(spec, model, make_world):
+# every pad face the simulator builds ([pad].shape), as two_am_robust sets the crowned one
+PAD_SHAPES = {
+    "flat": {},
+    "crowned": {"shape": "crowned", "crown_radius_m": 0.05, "rolling_friction_m": 0.005},
+}
+SHORT = Path(__file__).resolve().parents[2] / "configs" / "scenarios" / "two_am_short.toml"
+
+
+def _squeeze(spec, model, make_world):
     """Both AMs held facing the box, pads 1 cm inside its faces; the box is then pushed up
     by its weight plus 4 N and sideways by 1 N: it leaves the table and the pads hold it by
     friction."""
     q_ref = np.array(spec.vehicle.q_nominal_rad)
-    w = make_world(facing_object(spec, model, depth_m=0.01))
+    w = make_world(facing_object(spec, model, depth_m=0.01), spec)
     for s in w.sysids:
         hold_base(w, s)
     weight = spec.object.mass_kg * spec.vehicle.gravity_mps2
@@ -71,6 +84,11 @@ def squeezed(spec, model, make_world):
             push_object(w, [0.0, 1.0, weight + 4.0])
         w.step()
     return w
+
+
+@pytest.fixture
+def squeezed(spec, model, make_world):
+    return _squeeze(spec, model, make_world)
 
 
 def test_contact_ground_truth_reports_the_squeeze(spec, squeezed):
@@ -103,6 +121,42 @@ def test_ft_sensor_agrees_with_contact_ground_truth(squeezed):
         f_W = am.R_WE @ w.wrench_ee(s)[:3]
         np.testing.assert_allclose(f_W, am.pad_object_contact.force_W, atol=0.02 * np.linalg.norm(f_W))
         assert w.wrench_ee(s)[0] < -1.0  # pushing: the environment pushes E back along -x_E
+
+
+@pytest.mark.parametrize("pad", PAD_SHAPES, ids=list(PAD_SHAPES))
+def test_contact_truth_agrees_with_the_wrist_sensor_for_every_pad_shape(spec, model, make_world, pad):
+    """The friction part of the contact truth has the sign the wrist sensor measures, whatever
+    body Bullet's contact manifold puts first for the pad's collision shape: both pads carry
+    the 4 N up-push upwards (the object pushes them up)."""
+    shaped = dataclasses.replace(spec, vehicle=dataclasses.replace(spec.vehicle, pad=PadSpec(**PAD_SHAPES[pad])))
+    w = _squeeze(shaped, model, make_world)
+    gt = w.ground_truth()
+    for s in w.sysids:
+        am = gt.ams[s]
+        f_W = am.R_WE @ w.wrench_ee(s)[:3]
+        assert am.pad_object_contact.n_points > 0
+        np.testing.assert_allclose(am.pad_object_contact.force_W, f_W, atol=0.02 * np.linalg.norm(f_W))
+        assert am.pad_object_contact.tangential_force_W[2] > 1.0
+
+
+@pytest.mark.parametrize("pad", PAD_SHAPES, ids=list(PAD_SHAPES))
+def test_contact_truth_support_is_the_object_weight_in_the_hover(pad):
+    """The closed-loop short grasp, in-process: in the hover the pads' ground-truth contact
+    forces carry the object's weight, m g up on the object (the object pushes the pads down
+    with m g), nothing sideways."""
+    data = copy.deepcopy(_read_toml(SHORT))
+    if PAD_SHAPES[pad]:
+        data["pad"] = dict(PAD_SHAPES[pad])
+    scenario = scenario_from_dict(data, SHORT)
+    r = run(scenario)
+    assert r["verdict"]["status"] == "success", r["verdict"]["text"]
+    assert r["object"]["touching_in_hover"] == []
+    on_pads_W = sum(np.array(a["hover_mean_tangential_force_W_n"]) for a in r["ams"].values())
+    mg = scenario.object.mass_kg * scenario.vehicle.gravity_mps2
+    assert -on_pads_W[2] == pytest.approx(mg, rel=0.01)
+    np.testing.assert_allclose(on_pads_W[:2], 0.0, atol=0.01 * mg)
+    for a in r["ams"].values():  # each pad carries its share, none pulls the object down
+        assert -a["hover_mean_tangential_force_W_n"][2] > 0.25 * mg
 
 
 def test_object_rests_on_the_table(spec, make_world):

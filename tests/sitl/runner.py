@@ -42,7 +42,8 @@ class Sim:
 
     def __init__(self, scenario: str, run_dir: Path, *extra: str) -> None:
         self.proc = subprocess.Popen([script("simulator"), "--config", str(SCENARIOS / scenario), "--bind",
-                                      "udp:127.0.0.1:0", "--run-dir", str(run_dir), "--progress", "jsonl", *extra],
+                                      "udp:127.0.0.1:0", "--run-dir", str(run_dir), "--progress", "jsonl", "--insecure",
+                                      *extra],
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         self.run_dir = run_dir
         line = self.proc.stdout.readline()
@@ -62,5 +63,5 @@ class Sim:
 
 def companion(sysid: int, sim: str, scenario: str = "two_am_comp.toml", *extra: str) -> subprocess.Popen:
     return subprocess.Popen([script("companion"), "--sysid", str(sysid), "--sim", sim, "--config",
-                             str(SCENARIOS / scenario), *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             str(SCENARIOS / scenario), "--insecure", *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)

@@ -9,6 +9,8 @@ import subprocess
 
 import pytest
 
+from telemetry.keyfiles import write_run_keys
+
 from . import netns
 from .runner import SCENARIOS, script
 
@@ -28,18 +30,23 @@ def test_two_am_grasp_across_four_hosts(tmp_path):
         gs_endpoint = f"tcp/{lan.ip['gs']}:7447"
         sim_endpoint = f"udp:{lan.ip['sim']}:14550"
         mcap = tmp_path / "run.mcap"
-        rec = lan.popen("gs", [script("ground-station"), "record", "--out", str(mcap), "--zenoh-listen", gs_endpoint],
+        # the run's telemetry keys, as docs/architecture.md has them written for processes by hand
+        tkeys = write_run_keys(tmp_path / "keys", (4, 5))
+        rec = lan.popen("gs", [script("ground-station"), "record", "--out", str(mcap), "--zenoh-listen", gs_endpoint,
+                               "--telemetry-key-file", str(tkeys["recorder"])],
                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         procs.append(rec)
         # started by hand: each publisher waits for the recorder's subscription before its first
         # sample, as docs/telemetry.md says (zenoh drops what is put before the route exists)
         tele = ["--zenoh-connect", gs_endpoint, "--telemetry-wait", "30"]
         sim = lan.popen("sim", [script("simulator"), "--config", cfg, "--bind", "udp:0.0.0.0:14550", "--key-file",
-                                str(key), "--run-dir", str(tmp_path), "--peer-timeout", "60", *tele],
+                                str(key), "--run-dir", str(tmp_path), "--peer-timeout", "60", *tele,
+                                "--telemetry-key-file", str(tkeys["simulator"])],
                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         procs.append(sim)
         comps = {s: lan.popen(f"c{s}", [script("companion"), "--sysid", str(s), "--sim", sim_endpoint, "--config", cfg,
-                                          "--key-file", str(key), "--outcome", str(tmp_path / f"am{s}.json"), *tele],
+                                          "--key-file", str(key), "--outcome", str(tmp_path / f"am{s}.json"), *tele,
+                                          "--telemetry-key-file", str(tkeys[f"am{s}"])],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for s in (4, 5)}
         procs.extend(comps.values())
         out, err = sim.communicate(timeout=1500)

@@ -194,7 +194,11 @@ def test_nav_land_from_the_gcs_lands_that_vehicle(tmp_path):
         time.sleep(0.3)
     finally:
         gcs.finish()
-    assert r.code == 0, r.stderr
+    assert r.code == 4, r.stderr  # the mission ended by the GCS's command: failed, and the verdict says so
+    assert r.outcome["verdict"]["failure_class"] == "commanded"
+    assert r.outcome["verdict"]["failures"][0]["reason"].startswith("am5 landed by the GCS at t = ")
+    assert r.outcome["rejected_setpoints"] == 0 and r.outcome["ignored_setpoints"]["5"] > 0
+    assert gcs.texts(5)[-1].startswith("mission failed: am5 landed (GCS) at t = ")
     acks = [(m.get_srcSystem(), m.command, m.result) for m in gcs.msgs if m.get_type() == "COMMAND_ACK"]
     assert acks == [(5, mav.MAV_CMD_NAV_LAND, mav.MAV_RESULT_ACCEPTED)]
     assert "landing (GCS command)" in gcs.texts(5)

@@ -59,12 +59,33 @@ def test_bad_options_raise_typed_errors(tmp_path):
 def test_argparse_round_trip(role):
     ap = argparse.ArgumentParser()
     add_zenoh_arguments(ap, role)
-    default = options_from_args(ap.parse_args([]), role)
+    default = options_from_args(ap.parse_args(["--insecure"]), role)
     assert default == ZenohOptions(role=role)
-    a = ap.parse_args(["--zenoh-mode", "client", "--zenoh-connect", "tcp/192.168.1.5:7447", "--zenoh-connect",
+    a = ap.parse_args(["--insecure", "--zenoh-mode", "client", "--zenoh-connect", "tcp/192.168.1.5:7447", "--zenoh-connect",
                        "tcp/192.168.1.6:7447", "--zenoh-listen", "none", "--telemetry-prefix", "lab"])
     o = options_from_args(a, role)
     assert (o.mode, o.connect_endpoints, o.listen_endpoints, o.prefix) == (
         "client", ("tcp/192.168.1.5:7447", "tcp/192.168.1.6:7447"), (), "lab")
     if role == "publisher":
         assert options_from_args(ap.parse_args(["--no-telemetry"]), role).enabled is False
+
+
+@pytest.mark.parametrize("role", ["publisher", "recorder"])
+def test_without_a_telemetry_key_nothing_publishes_or_records_unless_insecure(role, tmp_path):
+    """Secure by default: no key is a configuration error that says how to pass one; --insecure
+    goes without, and a key file gives the options its key."""
+    ap = argparse.ArgumentParser()
+    add_zenoh_arguments(ap, role)
+    with pytest.raises(TelemetryConfigError) as err:
+        options_from_args(ap.parse_args([]), role)
+    msg = str(err.value)
+    assert "no telemetry key" in msg and "--telemetry-key-file FILE" in msg and "--insecure" in msg
+    assert "ground-station keys DIR" in msg
+    assert options_from_args(ap.parse_args(["--insecure"]), role).auth_key is None
+    key = tmp_path / "k"
+    key.write_text("ab" * 32 + "\n")
+    assert options_from_args(ap.parse_args(["--telemetry-key-file", str(key)]), role).auth_key == bytes.fromhex("ab" * 32)
+    if role == "publisher":  # publishing nothing needs no key
+        assert options_from_args(ap.parse_args(["--no-telemetry"]), role).enabled is False
+    else:
+        assert "--no-telemetry" not in msg

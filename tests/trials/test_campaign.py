@@ -181,3 +181,12 @@ def test_plots_of_a_campaign_with_no_success_are_drawn(tmp_path):
     rows = [{"verdict": "failed", "object_mass_kg": 0.5 + 0.05 * i} for i in range(30)]
     paths = plot_parameters(rows, ["object_mass_kg"], tmp_path, "no success")
     assert [p.name for p in paths] == ["success_vs_object_mass_kg.png"] and paths[0].stat().st_size > 0
+
+
+def test_redirected_output_has_no_progress_bar_and_no_worker_says_pybullets_build_time(tmp_path, capfd):
+    """A campaign whose output goes to a file (here, pytest's): the summary lines only."""
+    assert cli.main([str(SHORT), "--trials", "1", "--seed", "3", "--out", str(tmp_path / "o"), "--workers", "1",
+                     "--no-plots"]) in (0, 4)
+    err = capfd.readouterr().err
+    assert "am-trials: 1 trials of" in err
+    assert "trial/s" not in err and "succeeded]" not in err and "pybullet build time" not in err, err

@@ -1,0 +1,226 @@
+"""Control allocation from the rotors' effectiveness matrix, as PX4's control_allocator does
+(pure: numpy for set-up, Python floats per step).
+
+The rotor table (`amcore.config.RotorParams`, PX4's CA_ROTORn_*) gives each rotor i a position
+p_i, a unit thrust axis a_i and a signed moment ratio KM_i (> 0 for a ccw rotor). One newton of
+its thrust makes the wrench about the base's origin, in the base frame B (x forward, y left,
+z up), as ActuatorEffectivenessRotors::computeEffectivenessMatrix builds it:
+
+    F_i   = a_i
+    tau_i = p_i x a_i - KM_i a_i
+
+so B = [F_i; tau_i] (6 x n) maps rotor thrusts f [N] to the base wrench (F, tau). PX4's FRD
+frame and this FLU frame describe the same vectors; the formula holds in either.
+
+What the paper's law asks for is the thrust T along z_B and the body torque tau_B (eq. u3 and
+eq. ori_controller give them); the lateral force is held at zero. The allocation follows
+ControlAllocationPseudoInverse and ControlAllocationSequentialDesaturation (MC_AIRMODE = 0):
+
+1. mix = pinv(B) over the control axes (roll, pitch, yaw torque, F_x, F_y, F_z): where the
+   rotors can make lateral force (canted rotors) the pseudo-inverse solves for zero of it;
+   where they cannot (all axes parallel), those rows are zero and change nothing.
+2. The mix is normalized as PX4 normalizes it: roll and pitch by one scale such that a unit
+   command moves a quad X's rotors by +-0.707 of their range, yaw by its largest entry,
+   thrust by the mean of its nonzero entries. A normalized command u on an axis is the
+   physical torque u * torque_scale_nm (thrust: u * thrust_scale_n).
+3. Outputs (rotor thrust / its maximum) start from roll, pitch and thrust; desaturated along
+   thrust (only downwards), roll, then pitch; yaw is added last, with 15 % room above full
+   output, and desaturated alone (yaw is given up first); then thrust again, only downwards.
+   The outputs are clipped to each rotor's [thrust_min/thrust_max, 1].
+
+Torque mode (the companion's thrust and body torque) and the emulated PX4 (attitude mode)
+both call `Allocation.allocate`; torque mode converts its physical request with the scales.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:  # config imports this module to check rotor tables
+    from amcore.config import RotorParams
+
+_YAW_MARGIN = 0.15  # ControlAllocationSequentialDesaturation: yaw's room above full output
+_WEAK_EFFECTIVENESS = 0.2  # computeDesaturationGain ignores actuators weaker than this
+_SMALL_MIX = 1e-3  # normalizeControlAllocationMatrix: entries counted as nonzero for roll/pitch
+# an axis counts as saturated when its unallocated normalized command exceeds this: PX4's
+# ControlAllocator reports a setpoint achieved while |unallocated|^2 < 1e-6 (7 mN m of roll here)
+SATURATION_TOL = 1e-3
+AXES = ("roll", "pitch", "yaw", "thrust")
+
+
+def effectiveness(rotors: "RotorParams") -> np.ndarray:
+    """(6, n) wrench (F_x, F_y, F_z [N], tau_x, tau_y, tau_z [N m]) in B per newton of each
+    rotor's thrust (see the module docstring)."""
+    cols = []
+    for r in rotors.rotor:
+        a = np.asarray(r.axis, dtype=float)
+        a = a / np.linalg.norm(a)
+        p = np.asarray(r.position_m, dtype=float)
+        cols.append(np.concatenate([a, np.cross(p, a) - r.km * a]))
+    return np.array(cols).T
+
+
+@dataclass(frozen=True)
+class AllocationResult:
+    """One allocation: outputs (count,) in [min, max]; allocated and unallocated control in
+    normalized units (roll, pitch, yaw torque, thrust); saturated_axes: per axis of `AXES`,
+    whether its command was not met; saturated if any was."""
+
+    outputs: tuple[float, ...]
+    allocated: tuple[float, float, float, float]
+    unallocated: tuple[float, float, float, float]
+    saturated: bool
+    saturated_axes: tuple[bool, bool, bool, bool] = (False, False, False, False)
+
+
+@dataclass(frozen=True)
+class WrenchAllocation:
+    """A physical request allocated (torque mode): rotor thrusts [N], the wrench they make
+    (F_B [N], tau_B [N m], both in B; F_B's z is the thrust) and the normalized allocation."""
+
+    rotor_thrusts_n: tuple[float, ...]
+    force_B_n: tuple[float, float, float]
+    tau_B_nm: tuple[float, float, float]
+    allocation: AllocationResult
+
+    @property
+    def saturated(self) -> bool:
+        return self.allocation.saturated
+
+    @property
+    def applied_thrust_n(self) -> float:
+        return self.force_B_n[2]
+
+
+class Allocation:
+    """PX4's pseudo-inverse allocation with sequential desaturation, airmode off, for any
+    rotor table (see the module docstring)."""
+
+    def __init__(self, rotors: "RotorParams") -> None:
+        self.rotors = rotors
+        self.count = rotors.count
+        self.B = effectiveness(rotors)  # (6, n) per newton
+        self.f_max = np.array(rotors.thrust_max(), dtype=float)
+        self.f_min = np.array(rotors.thrust_min(), dtype=float)
+        B_out = self.B * self.f_max  # per unit output
+        # control axes in PX4's order: roll, pitch, yaw torque, thrust x, y, z
+        B_ctrl = np.vstack([B_out[3:6], B_out[0:3]])
+        mix = np.linalg.pinv(B_ctrl)  # (n, 6)
+        mix[np.abs(mix) < 1e-12] = 0.0
+        scale = np.ones(6)
+        n_rp = [int(np.sum(np.abs(mix[:, k]) > _SMALL_MIX)) for k in (0, 1)]
+        rp = max((math.sqrt(float(mix[:, k] @ mix[:, k]) / (n / 2.0)) for k, n in zip((0, 1), n_rp) if n), default=1.0)
+        scale[0] = scale[1] = rp
+        scale[2] = float(mix[:, 2].max())
+        for k in (5, 4, 3):  # thrust z first: an axis with no actuator takes its scale
+            nz = np.abs(mix[:, k]) > np.finfo(np.float32).eps
+            scale[k] = float(np.abs(mix[nz, k]).sum() / nz.sum()) if nz.any() else scale[5]
+        self.mix_full = mix / scale  # (n, 6) outputs per unit normalized command
+        # the four axes the law commands: roll, pitch, yaw, thrust z (lateral setpoints are 0)
+        self.mix = self.mix_full[:, [0, 1, 2, 5]]
+        self.effectiveness_normalized = B_ctrl[[0, 1, 2, 5]] * scale[[0, 1, 2, 5], None]
+        self.torque_scale_nm = tuple((1.0 / scale[:3]).tolist())  # physical torque per unit normalized torque
+        self.thrust_scale_n = float(1.0 / scale[5])  # physical thrust per unit normalized thrust
+        self.out_min = tuple((self.f_min / self.f_max).tolist())
+        self.out_max = 1.0
+        self._roll, self._pitch, self._yaw, self._thrust = (tuple(c) for c in self.mix.T.tolist())
+        self._eff = tuple(map(tuple, self.effectiveness_normalized.tolist()))
+        self._f_max = self.rotor_thrust_max_n = tuple(self.f_max.tolist())  # per rotor [N]
+        self._inv_scale = (scale[0], scale[1], scale[2], scale[5])
+
+    # ------------------------------------------------------------------ desaturation
+    def _gain(self, v, out, hi: float) -> float:
+        """computeDesaturationGain: k_min + k_max over the outputs outside [min, hi]."""
+        k_min = k_max = 0.0
+        for vi, x, lo in zip(v, out, self.out_min):
+            if abs(vi) < _WEAK_EFFECTIVENESS:
+                continue
+            if x < lo:
+                k = (lo - x) / vi
+                k_min, k_max = min(k_min, k), max(k_max, k)
+            if x > hi:
+                k = (hi - x) / vi
+                k_min, k_max = min(k_min, k), max(k_max, k)
+        return k_min + k_max
+
+    def _desaturate(self, out: list, v, hi: float, thrust_down_only: bool = False) -> list:
+        """desaturateActuators along v; with thrust_down_only, a move that would raise the
+        thrust (v is the thrust column, positive here in FLU) is not made."""
+        g = self._gain(v, out, hi)
+        if thrust_down_only and g > 0.0:
+            return out
+        out = [x + g * vi for x, vi in zip(out, v)]
+        g = 0.5 * self._gain(v, out, hi)
+        return [x + g * vi for x, vi in zip(out, v)]
+
+    def allocate(self, roll: float, pitch: float, yaw: float, thrust: float) -> AllocationResult:
+        """Outputs for normalized (roll, pitch, yaw) torque and thrust (mixAirmodeDisabled)."""
+        r, p, y, t = self._roll, self._pitch, self._yaw, self._thrust
+        lo, hi = self.out_min, self.out_max
+        out = [roll * a + pitch * b + thrust * c for a, b, c in zip(r, p, t)]
+        full = [x + yaw * a for x, a in zip(out, y)]
+        if all(x >= m for x, m in zip(out, lo)) and max(out) <= hi and all(x >= m for x, m in zip(full, lo)) \
+                and max(full) <= hi:
+            # inside the limits with and without yaw: every desaturation gain below is zero
+            return AllocationResult(tuple(full), (roll, pitch, yaw, thrust), (0.0, 0.0, 0.0, 0.0), False)
+        out = self._desaturate(out, t, hi, thrust_down_only=True)
+        out = self._desaturate(out, r, hi)
+        out = self._desaturate(out, p, hi)
+        out = [x + yaw * a for x, a in zip(out, y)]  # mixYaw
+        out = self._desaturate(out, y, hi + (hi - min(lo)) * _YAW_MARGIN)
+        out = self._desaturate(out, t, hi, thrust_down_only=True)
+        out = tuple(min(max(x, m), hi) for x, m in zip(out, lo))
+        allocated = tuple(sum(e * x for e, x in zip(row, out)) for row in self._eff)
+        unallocated = (roll - allocated[0], pitch - allocated[1], yaw - allocated[2], thrust - allocated[3])
+        axes = tuple(bool(abs(u) > SATURATION_TOL) for u in unallocated)
+        return AllocationResult(out, allocated, unallocated, any(axes), axes)
+
+    # ------------------------------------------------------------------ physical units
+    def normalized(self, thrust_n: float, tau_B_nm) -> tuple[float, float, float, float]:
+        """(roll, pitch, yaw, thrust) normalized commands of a physical request."""
+        s = self._inv_scale
+        return (tau_B_nm[0] * s[0], tau_B_nm[1] * s[1], tau_B_nm[2] * s[2], thrust_n * s[3])
+
+    def wrench(self, rotor_thrusts_n) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """(F_B [N], tau_B [N m]) the given rotor thrusts make: B f."""
+        w = (self.B @ np.array(rotor_thrusts_n, dtype=float)).tolist()  # one matmul: ~4x the Python rows' speed
+        return (w[0], w[1], w[2]), (w[3], w[4], w[5])
+
+    def allocate_wrench(self, thrust_n: float, tau_B_nm) -> WrenchAllocation:
+        """Rotor thrusts for T [N] along +z_B and tau_B [N m] about the base origin, in B, with
+        zero lateral force where the geometry allows; exact when feasible, else desaturated
+        as the module docstring says. ValueError for a non-finite request."""
+        tx, ty, tz = (float(x) for x in tau_B_nm)
+        thrust_n = float(thrust_n)
+        if not (math.isfinite(thrust_n) and math.isfinite(tx + ty + tz)):
+            raise ValueError(f"non-finite command: thrust_n = {thrust_n}, tau_B_nm = {[tx, ty, tz]}")
+        a = self.allocate(*self.normalized(thrust_n, (tx, ty, tz)))
+        f = tuple(u * m for u, m in zip(a.outputs, self._f_max))
+        F, tau = self.wrench(f)
+        return WrenchAllocation(f, F, tau, a)
+
+    # ------------------------------------------------------------------ authority
+    def authority(self, thrust_n: float, tau_B_nm=(0.0, 0.0, 0.0)) -> dict[str, tuple[float, float]]:
+        """Per torque axis, the most torque [N m] the allocation adds to the operating point
+        (T, tau_B) before a rotor leaves its range, downwards and upwards: {axis: (-lo, +hi)}.
+        Along the mix's column, as the allocator moves the rotors (no null-space search).
+        Both 0 if the operating point itself is infeasible."""
+        c = np.array(self.normalized(thrust_n, tau_B_nm))
+        u0 = self.mix @ c
+        lo, hi = np.array(self.out_min), self.out_max
+        if np.any(u0 < lo - 1e-12) or np.any(u0 > hi + 1e-12):
+            return {ax: (0.0, 0.0) for ax in AXES[:3]}
+        out = {}
+        for k, ax in enumerate(AXES[:3]):
+            col = self.mix[:, k]
+            up = down = math.inf
+            for x, v, m in zip(u0, col, lo):
+                if v > 0.0:
+                    up, down = min(up, (hi - x) / v), min(down, (x - m) / v)
+                elif v < 0.0:
+                    up, down = min(up, (m - x) / v), min(down, (x - hi) / v)
+            out[ax] = (down * self.torque_scale_nm[k], up * self.torque_scale_nm[k])
+        return out

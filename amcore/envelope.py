@@ -1,0 +1,134 @@
+"""What a team of these AMs can hold: the squeeze a grasp needs against the squeeze each AM
+can push in a loaded hover with margin left (pure: amcore.authority's static hover).
+
+A team of n AMs holds an object of mass m by friction: each pad pushes
+
+    N_req = margin * m g / (n mu)
+
+at the lowest friction mu planned for. An AM can push N in the loaded hover (its share m / n
+on the pad) while the allocation keeps every rotor at or below `thrust_fraction_max` of its
+range and leaves at least `yaw_reserve_nm` of yaw torque both ways (contact moments about the
+pad, a pad pushed off its face's normal: 0.15-0.34 N m, docs/robust_grasp.md), and every arm
+joint holds its static torque within `joint_fraction_max` of its limit. Its capacity
+N_max(m / n) is the largest such N (bisection; the margins only shrink as N grows). The team
+holds m when N_req <= N_max(m / n); its payload is the largest such m.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .allocation import Allocation
+from .authority import operating_point
+from .config import VehicleParams
+from .model import AmModel, build_model
+
+_SQUEEZE_CEILING_N = 200.0  # no AM of this project pushes more; the bisection's upper end
+
+
+@dataclass(frozen=True)
+class Margins:
+    """What the loaded hover must leave: busiest rotor at most this share of its range, and
+    this much yaw torque both ways [N m]."""
+
+    thrust_fraction_max: float = 0.8
+    yaw_reserve_nm: float = 0.3
+    joint_fraction_max: float = 0.8  # each arm joint at most this share of its torque limit
+
+
+@dataclass(frozen=True)
+class TeamFit:
+    """One team and object: the squeeze needed and the squeeze each AM can push [N]."""
+
+    n_ams: int
+    mass_kg: float
+    friction: float
+    friction_margin: float
+    required_n: float
+    capacity_n: float
+
+    @property
+    def holds(self) -> bool:
+        return self.required_n <= self.capacity_n
+
+
+def required_squeeze_n(mass_kg: float, n_ams: int, friction: float, friction_margin: float,
+                       gravity_mps2: float = 9.81) -> float:
+    """N_req of the module docstring [N]."""
+    return friction_margin * mass_kg * gravity_mps2 / (n_ams * friction)
+
+
+class Envelope:
+    """One vehicle's loaded-hover capacity, cached per load share (see the module docstring)."""
+
+    def __init__(self, vehicle: VehicleParams, margins: Margins = Margins(), model: AmModel | None = None):
+        self.vehicle, self.margins = vehicle, margins
+        self.model = model or build_model(vehicle)
+        self.alloc = Allocation(vehicle.rotors)
+        self.q = np.array(vehicle.q_nominal_rad, dtype=float)
+        self._cache: dict[float, float] = {}
+
+    def _ok(self, squeeze_n: float, load_kg: float) -> bool:
+        op = operating_point(self.vehicle, self.model, self.q, squeeze_n, load_kg, self.alloc)
+        down, up = op.authority_nm["yaw"]
+        return (op.feasible and max(op.rotor_fractions) <= self.margins.thrust_fraction_max
+                and min(down, up) >= self.margins.yaw_reserve_nm
+                and max(op.joint_fractions) <= self.margins.joint_fraction_max)
+
+    def capacity_n(self, load_kg: float, tol_n: float = 0.01) -> float:
+        """N_max: the most squeeze [N] with the margins kept, carrying load_kg; 0.0 if even no
+        squeeze keeps them."""
+        key = round(load_kg, 6)
+        if key in self._cache:
+            return self._cache[key]
+        if not self._ok(0.0, load_kg):
+            cap = 0.0
+        elif self._ok(_SQUEEZE_CEILING_N, load_kg):
+            cap = _SQUEEZE_CEILING_N
+        else:
+            lo, hi = 0.0, _SQUEEZE_CEILING_N
+            while hi - lo > tol_n:
+                mid = 0.5 * (lo + hi)
+                lo, hi = (mid, hi) if self._ok(mid, load_kg) else (lo, mid)
+            cap = lo
+        self._cache[key] = cap
+        return cap
+
+    def fit(self, mass_kg: float, n_ams: int, friction: float, friction_margin: float) -> TeamFit:
+        req = required_squeeze_n(mass_kg, n_ams, friction, friction_margin, self.vehicle.gravity_mps2)
+        return TeamFit(n_ams, mass_kg, friction, friction_margin, req, self.capacity_n(mass_kg / n_ams))
+
+    def payload_kg(self, n_ams: int, friction: float, friction_margin: float, tol_kg: float = 0.005) -> float:
+        """The heaviest object [kg] the team holds (bisection on the mass; 0.0 if none)."""
+        lo, hi = 0.0, 1.0
+        while self.fit(hi, n_ams, friction, friction_margin).holds:
+            lo, hi = hi, 2.0 * hi
+            if hi > 1e3:
+                return math.inf
+        while hi - lo > tol_kg:
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if self.fit(mid, n_ams, friction, friction_margin).holds else (lo, mid)
+        return lo
+
+    def smallest_team(self, mass_kg: float, friction: float, friction_margin: float, most: int = 32) -> int | None:
+        """The fewest AMs (up to `most`) that hold mass_kg; None if no team that size does."""
+        for n in range(1, most + 1):
+            if self.fit(mass_kg, n, friction, friction_margin).holds:
+                return n
+        return None
+
+
+def verdict_line(env: Envelope, mass_kg: float, n_ams: int, friction: float, friction_margin: float) -> str:
+    """One line a user reads before flight, e.g. "2.5 kg at friction 0.5 needs 14.7 N per pad
+    from 2 AMs; this team of 2 holds 11.2 N per pad: use 4 AMs"."""
+    f = env.fit(mass_kg, n_ams, friction, friction_margin)
+    can = (f"each of them can push {f.capacity_n:.1f} N" if f.capacity_n > 0.0 else
+           f"none of them keeps its margins carrying its {mass_kg / n_ams:.2f} kg share")
+    head = (f"{mass_kg:g} kg at friction {friction:g} (margin {friction_margin:g}) needs {f.required_n:.1f} N per pad "
+            f"from {n_ams} AMs; {can}")
+    if f.holds:
+        return head + ": inside the envelope"
+    n = env.smallest_team(mass_kg, friction, friction_margin)
+    return head + (f": use {n} AMs" if n else ": no team of up to 32 of these AMs holds it")

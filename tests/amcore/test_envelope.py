@@ -1,0 +1,85 @@
+"""The static loaded hover (amcore.authority) against pinocchio's own statics, and the team's
+envelope (amcore.envelope) at its edge, both ways."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from amcore.authority import operating_point
+from amcore.config import load_vehicle
+from amcore.envelope import Envelope, Margins, required_squeeze_n, verdict_line
+from amcore.model import build_model
+
+VEHICLES = Path(__file__).resolve().parents[2] / "configs" / "vehicles"
+
+
+@pytest.fixture(scope="module")
+def hexa():
+    return load_vehicle(VEHICLES / "hex3dof.toml")
+
+
+@pytest.fixture(scope="module")
+def env(hexa):
+    return Envelope(hexa)
+
+
+@pytest.mark.parametrize("squeeze_n,load_kg", [(0.0, 0.0), (9.0, 0.5), (20.0, 0.3)])
+def test_the_loaded_hover_balances_every_generalized_force(hexa, squeeze_n, load_kg):
+    """Whole-body statics by pinocchio: g(q) - J_E^T W must be the rotors' wrench (0, 0, T,
+    tau_B) on the base, in its own frame, and the joint torques the point reports."""
+    model = build_model(hexa)
+    op = operating_point(hexa, model, np.array(hexa.q_nominal_rad), squeeze_n, load_kg)
+    assert op.feasible
+    # rebuild the pose: base pitched by op.pitch_rad; the arm angles are not returned, so
+    # recover them by the same balance: the pad where it was, seen from the turned base
+    from amcore.authority import _hold_pad
+    c, s = math.cos(op.pitch_rad), math.sin(op.pitch_rad)
+    R = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    data = model.pin_model.createData()
+    q = _hold_pad(model, data, np.array(hexa.q_nominal_rad), R)
+    q_pin = np.concatenate([[0.0, 0.0, 0.0], pin.Quaternion(R).coeffs(), q])
+    g = pin.computeGeneralizedGravity(model.pin_model, data, q_pin)
+    J = pin.computeFrameJacobian(model.pin_model, data, q_pin, model.ee_frame_id, pin.LOCAL_WORLD_ALIGNED)
+    W = np.array([-squeeze_n, 0.0, -load_kg * hexa.gravity_mps2, 0.0, 0.0, 0.0])
+    need = g - J.T @ W
+    np.testing.assert_allclose(need[0:3], [0.0, 0.0, op.thrust_n], atol=1e-9)
+    np.testing.assert_allclose(need[3:6], op.tau_B_nm, atol=1e-9)
+    np.testing.assert_allclose(need[6:], op.joint_torques_nm, atol=1e-12)
+    # and the pad is where it was: only the base turned
+    pin.framesForwardKinematics(model.pin_model, data, q_pin)
+    pad = data.oMf[model.ee_frame_id]
+    pin.framesForwardKinematics(model.pin_model, data, np.concatenate([[0, 0, 0, 0, 0, 0, 1.0], hexa.q_nominal_rad]))
+    assert np.allclose(pad.translation, data.oMf[model.ee_frame_id].translation, atol=1e-8)
+
+
+def test_the_required_squeeze_is_friction_with_its_margin():
+    assert required_squeeze_n(2.5, 4, 0.5, 1.0, 9.81) == pytest.approx(2.5 * 9.81 / 2.0)
+    assert required_squeeze_n(1.0, 2, 0.5, 1.2, 9.81) == pytest.approx(11.772)
+
+
+def test_the_payload_is_the_envelope_edge_both_ways(env):
+    m = env.payload_kg(2, 0.5, 1.2)
+    assert 1.0 < m < 3.0
+    assert env.fit(m - 0.02, 2, 0.5, 1.2).holds
+    assert not env.fit(m + 0.02, 2, 0.5, 1.2).holds
+    assert env.payload_kg(4, 0.5, 1.2) > m  # more AMs hold more
+    assert env.payload_kg(2, 1.0, 1.2) >= m  # and more friction
+
+
+def test_outside_the_envelope_the_line_names_the_smallest_team(env):
+    heavy = 2.0 * env.payload_kg(2, 0.5, 1.2)
+    line = verdict_line(env, heavy, 2, 0.5, 1.2)
+    n = env.smallest_team(heavy, 0.5, 1.2)
+    assert n is not None and n > 2 and f": use {n} AMs" in line and "needs" in line
+    assert not env.fit(heavy, n - 1, 0.5, 1.2).holds and env.fit(heavy, n, 0.5, 1.2).holds
+    assert verdict_line(env, 1.0, 2, 0.5, 1.2).endswith("inside the envelope")
+
+
+def test_the_quad_has_no_yaw_reserve_for_a_grasp():
+    quad = load_vehicle(VEHICLES / "am3dof.toml")
+    assert Envelope(quad).capacity_n(0.5) == 0.0  # 0.25 N m of yaw at hover < the 0.3 N m reserve
+    assert Envelope(quad, Margins(yaw_reserve_nm=0.05)).capacity_n(0.5) > 5.0
