@@ -317,7 +317,7 @@ def am_truth(t_s: float, sysid: int, am) -> Pending:
                                        getattr(am, "joint_saturated_steps", 0),
                                        *getattr(am, "axis_saturated_steps", (0, 0, 0, 0)),
                                        getattr(am, "rotor_fraction_max", 0.0),
-                                       getattr(am, "rotor_fraction_min", 0.0))), _ESTIMATE.pack(*est)))
+                                       getattr(am, "rotor_fraction_min", 0.0)), _ESTIMATE.pack(*est)))
         if len(pre) == finisher.pre_size and _LITTLE:
             return finisher, pre
     except (TypeError, ValueError, BufferError, struct.error):
