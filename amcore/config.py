@@ -452,6 +452,135 @@ class SensorSpec:
 
 
 @dataclass(frozen=True)
+class ImuSpec:
+    """[devices.imu]: the flight controller's IMU, sampled every physics step, with the
+    parameters of PX4's Gazebo IMU plugin (gazebo_imu_plugin, after Nikolic's Kalibr noise
+    model): white noise of density *_noise_density, a bias that is a first-order Gauss-Markov
+    process of correlation time *_bias_correlation_time_s driven by *_random_walk, started at
+    a turn-on bias drawn once with standard deviation *_turn_on_bias_sigma. Gyroscope in
+    rad/s/sqrt(Hz), rad/s^2/sqrt(Hz), s, rad/s; accelerometer (specific force, body frame)
+    in m/s^2/sqrt(Hz), m/s^3/sqrt(Hz), s, m/s^2. Values and sources:
+    configs/randomize/default.toml."""
+
+    gyroscope_noise_density: float = 0.0
+    gyroscope_random_walk: float = 0.0
+    gyroscope_bias_correlation_time_s: float = 1000.0
+    gyroscope_turn_on_bias_sigma: float = 0.0
+    accelerometer_noise_density: float = 0.0
+    accelerometer_random_walk: float = 0.0
+    accelerometer_bias_correlation_time_s: float = 300.0
+    accelerometer_turn_on_bias_sigma: float = 0.0
+
+
+@dataclass(frozen=True)
+class MocapSpec:
+    """[devices.mocap]: motion capture of the base pose. A frame every 1 / rate_hz s (a whole
+    number of physics steps), latency_s old when it arrives (whole physics steps), with white
+    noise per frame (position [m], attitude as a body-side rotation vector [rad]), a fixed
+    body-frame attitude bias and a fixed position bias drawn once per AM (standard
+    deviations), and each frame lost with probability drop_probability."""
+
+    rate_hz: float = 100.0
+    latency_s: float = 0.0
+    position_noise_m: float = 0.0
+    attitude_noise_rad: float = 0.0
+    position_bias_m: float = 0.0
+    attitude_bias_rad: float = 0.0
+    drop_probability: float = 0.0
+
+
+@dataclass(frozen=True)
+class ForceTorqueSpec:
+    """[devices.ft]: the wrist F/T sensor. White noise per sample (force [N], torque [N m]),
+    an offset at power-on (standard deviation per axis) that drifts as a random walk
+    (*_drift per sqrt(s)), and a tare (the driver's bias command) at tare_at_s: the mean of
+    the readings over the tare_window_s before it is subtracted from then on (tare_at_s < 0:
+    never tared)."""
+
+    force_noise_n: float = 0.0
+    torque_noise_nm: float = 0.0
+    force_offset_n: float = 0.0
+    torque_offset_nm: float = 0.0
+    force_drift_n_per_sqrt_s: float = 0.0
+    torque_drift_nm_per_sqrt_s: float = 0.0
+    tare_at_s: float = -1.0
+    tare_window_s: float = 0.2
+
+
+@dataclass(frozen=True)
+class EncoderSpec:
+    """[devices.encoders]: the arm's joint encoders: position quantized to counts_per_rev
+    counts per revolution (0: exact), velocity as the servo reports it, quantized to
+    velocity_quantum_radps (0: exact)."""
+
+    counts_per_rev: int = 0
+    velocity_quantum_radps: float = 0.0
+
+
+@dataclass(frozen=True)
+class EstimatorSpec:
+    """[devices.estimator]: the flight controller's state estimator (amcore.estimator):
+    bandwidths [rad/s] of its attitude and position loops, the gyro low-pass cutoff of its
+    body-rate output (PX4's IMU_GYRO_CUTOFF, Hz; 0: none), and its history length
+    (physics steps; at least the motion capture's latency)."""
+
+    attitude_bandwidth_radps: float = 4.0
+    position_bandwidth_radps: float = 8.0
+    gyro_cutoff_hz: float = 0.0
+    history_steps: int = 64
+
+
+@dataclass(frozen=True)
+class DevicesSpec:
+    """[devices] table: sensors as devices produce them (simulator.devices) and the flight
+    controller's estimator between them and the sensor frames (amcore.estimator). Off by
+    default: the frames are then exact, or follow [sensors] (white noise on the states, kept
+    as a stress option). scale multiplies every noise, random walk, bias, offset and drift."""
+
+    enabled: bool = False
+    scale: float = 1.0
+    imu: ImuSpec = ImuSpec()
+    mocap: MocapSpec = MocapSpec()
+    ft: ForceTorqueSpec = ForceTorqueSpec()
+    encoders: EncoderSpec = EncoderSpec()
+    estimator: EstimatorSpec = EstimatorSpec()
+
+
+def devices_from_table(table: dict, where: str) -> DevicesSpec:
+    """A [devices] table as a DevicesSpec; errors name `where` and the key."""
+    parts = {"imu": ImuSpec, "mocap": MocapSpec, "ft": ForceTorqueSpec, "encoders": EncoderSpec,
+             "estimator": EstimatorSpec}
+    kw = _build(DevicesSpec, {k: v for k, v in table.items() if k not in parts}, f"{where}: [devices]",
+                skip=tuple(parts))
+    for name, cls in parts.items():
+        sub = table.get(name, {})
+        if not isinstance(sub, dict):
+            raise ConfigError(f"{where}: [devices.{name}] must be a table")
+        kw[name] = cls(**_build(cls, sub, f"{where}: [devices.{name}]"))
+    spec = DevicesSpec(**kw)
+    for part in ("imu", "mocap", "ft", "encoders", "estimator"):
+        sub = getattr(spec, part)
+        for f in dataclasses.fields(sub):
+            v = getattr(sub, f.name)
+            if f.name != "tare_at_s" and v < 0:
+                raise ConfigError(f"{where}: [devices.{part}].{f.name}: must be >= 0, got {v!r}")
+    m, e = spec.mocap, spec.estimator
+    if spec.scale < 0.0:
+        raise ConfigError(f"{where}: [devices].scale: must be >= 0, got {spec.scale!r}")
+    if not 1.0 <= m.rate_hz <= 1000.0:
+        raise ConfigError(f"{where}: [devices.mocap].rate_hz: must be in 1..1000 Hz, got {m.rate_hz!r}")
+    if m.drop_probability >= 1.0:
+        raise ConfigError(f"{where}: [devices.mocap].drop_probability: must be < 1, got {m.drop_probability!r}")
+    if e.attitude_bandwidth_radps <= 0.0 or e.position_bandwidth_radps <= 0.0:
+        raise ConfigError(f"{where}: [devices.estimator]: bandwidths must be > 0")
+    if e.history_steps < 1:
+        raise ConfigError(f"{where}: [devices.estimator].history_steps: must be >= 1, got {e.history_steps!r}")
+    if spec.ft.tare_window_s <= 0.0:
+        raise ConfigError(f"{where}: [devices.ft].tare_window_s: must be > 0, got {spec.ft.tare_window_s!r}")
+    return spec
+
+
+@dataclass(frozen=True)
 class SuccessCriteria:
     """[success] table: what a successful mission is, judged from the simulator's ground
     truth (`simulator.verdict`). The mission fails on the first criterion it misses:
@@ -487,6 +616,7 @@ class ScenarioSpec:
     seed: int = 0
     link: LinkSpec = LinkSpec()
     sensors: SensorSpec = SensorSpec()
+    devices: DevicesSpec = DevicesSpec()
     success: SuccessCriteria = SuccessCriteria()
     path: Path | None = None
 
@@ -897,7 +1027,7 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
 
 
 SCENARIO_TABLES = ("scenario", "object", "mission", "am", "options", "safety", "pad", "flight_controller",
-                   "rotors", "link", "sensors", "success", "randomize")
+                   "rotors", "link", "sensors", "devices", "success", "randomize")
 
 
 def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
@@ -931,7 +1061,7 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
             raise ConfigError(f"{where}: [{named[0]}] (merged onto the vehicle's): {exc}") from None
         raise
     kw = _build(ScenarioSpec, sc, f"{where}: [scenario]",
-                skip=("vehicle", "object", "mission", "ams", "path", "link", "sensors", "success"))
+                skip=("vehicle", "object", "mission", "ams", "path", "link", "sensors", "devices", "success"))
     if "object" not in data:
         raise ConfigError(f"{where}: missing table [object]")
     obj = ObjectSpec(**_build(ObjectSpec, data["object"], f"{where}: [object]"))
@@ -1020,12 +1150,15 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     for f in dataclasses.fields(SensorSpec):
         if getattr(sensors, f.name) < 0.0:
             raise ConfigError(f"{where}: [sensors].{f.name}: must be >= 0, got {getattr(sensors, f.name)!r}")
+    devices = devices_from_table(_table(data, "devices", where), where)
+    if devices.enabled and not sensors.exact:
+        raise ConfigError(f"{where}: [devices].enabled: the device models replace [sensors]; use one or the other")
     success = SuccessCriteria(**_build(SuccessCriteria, _table(data, "success", where), f"{where}: [success]"))
     for f in dataclasses.fields(SuccessCriteria):
         if f.name != "min_lift_m" and not getattr(success, f.name) >= 0.0:
             raise ConfigError(f"{where}: [success].{f.name}: must be >= 0, got {getattr(success, f.name)!r}")
     spec = ScenarioSpec(vehicle=vehicle, object=obj, mission=mission, ams=ams, path=path, link=link,
-                        sensors=sensors, success=success, **kw)
+                        sensors=sensors, devices=devices, success=success, **kw)
     _check_name(spec.name, f"{where}: [scenario].name")
     if not 0 <= spec.seed <= SEED_MAX:
         raise ConfigError(f"{where}: [scenario].seed: must be in 0..{SEED_MAX} (uint32), got {spec.seed}")

@@ -19,7 +19,19 @@ sys.path.insert(0, str(ROOT))
 from amcore.config import _read_toml  # noqa: E402
 from trials.randomize import load_randomize  # noqa: E402
 
-SENSORS = load_randomize(ROOT / "configs" / "randomize" / "default.toml").sensors
+SENSORS = load_randomize(ROOT / "configs" / "randomize" / "stress_states.toml").sensors  # white noise on the states
+DEVICES = load_randomize(ROOT / "configs" / "randomize" / "default.toml").devices  # devices and estimator
+
+
+def _devices_only(part: str) -> dict:
+    """The default devices with every level zeroed but those of [devices.<part>]."""
+    d = copy.deepcopy(DEVICES)
+    for name, table in d.items():
+        if isinstance(table, dict) and name not in (part, "estimator"):
+            for k, v in table.items():
+                if not k.endswith(("rate_hz", "latency_s", "correlation_time_s", "tare_at_s", "tare_window_s")):
+                    table[k] = type(v)(0)
+    return d
 
 
 def variations(base: dict) -> dict[str, dict]:
@@ -37,7 +49,12 @@ def variations(base: dict) -> dict[str, dict]:
     size = base["object"].get("size_m", [0.2, 0.2, 0.2])
     return {
         "nominal": with_(),
-        "sensors (default levels)": with_(sensors=SENSORS),
+        "sensors on the states (stress)": with_(sensors=SENSORS),
+        "devices (default levels)": with_(devices=DEVICES),
+        "devices: IMU only": with_(devices=_devices_only("imu")),
+        "devices: motion capture only": with_(devices=_devices_only("mocap")),
+        "devices: F/T only": with_(devices=_devices_only("ft")),
+        "devices: encoders only": with_(devices=_devices_only("encoders")),
         "sensor latency 2 ms": with_(sensors={"latency_s": 0.002}),
         f"am{first} start offset 5 cm, 5 deg": with_(am0={"start_offset_m": [0.05, 0.05, 0.05],
                                                          "start_heading_deg": 5.0}),

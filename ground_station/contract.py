@@ -79,6 +79,12 @@ def contact_topic(sysid: int) -> str:
     return f"/sim/am/{sysid}/contact"
 
 
+def truth_topic(sysid: int) -> str:
+    """The AM's ground truth as sent, beside /tf: it carries the flight controller's estimate
+    of the base (p_WB_est, ...) next to the true pose, to plot one against the other."""
+    return f"/sim/am/{sysid}/truth"
+
+
 def am_event_topic(sysid: int) -> str:
     return f"/am/{sysid}/event"
 
@@ -339,7 +345,8 @@ class Translator:
                 self._scene.truth[sysid] = raw
                 tf = _tf_spliced(t, sysid, raw)  # None: not our encoder's layout, the slow, general way
                 return [Out(TF_TOPIC, "foxglove.FrameTransforms", ns,
-                            tf if tf is not None else _tf_of(t, sysid, *_poses(parsed or json.loads(raw))))]
+                            tf if tf is not None else _tf_of(t, sysid, *_poses(parsed or json.loads(raw)))),
+                        self._as_received(truth_topic(sysid), ch, ns, raw, parsed)]
             if ch is Channel.OBJECT:
                 pose = _pose_spliced(t, raw)
                 if pose is None:
@@ -378,7 +385,8 @@ class Translator:
                 self._scene.truth[sysid] = (ch, raw)
                 v = TRUTH_POSES.unpack_from(raw)
                 tf = _tf_of(t, sysid, v[3:6], v[6:10], v[10:13], v[13:17])  # p_WB, q_WB, p_WE, q_WE
-                return [Out(TF_TOPIC, "foxglove.FrameTransforms", ns, tf)]
+                return [Out(TF_TOPIC, "foxglove.FrameTransforms", ns, tf),
+                        self._as_received(truth_topic(sysid), ch, ns, raw, None, True)]
             v = OBJECT_POSE.unpack_from(raw)
             state = self._as_received(OBJECT_STATE_TOPIC, ch, ns, raw, None, True)
             return self._object(t, ns, _pose_of(t, v[2:5], v[5:9]), state, lambda: to_dict(ch, raw))

@@ -49,6 +49,7 @@ from .failsafe import Failsafe, FailsafeGains
 from .fcstate import FcMode, FleetSnapshot, VehicleSnapshot
 from .flight_controller import FlightController
 from .outcome import RunOutcome
+from .devices import DeviceSuite
 from .sensors import SensorModel
 from .verdict import judge
 from .world import World
@@ -93,6 +94,10 @@ class SitlCore:
             dataclasses.replace(spec, link=am.link or spec.link)), stream=am.sysid) for am in spec.ams}
         self.sensors = {} if spec.sensors.exact else {
             am.sysid: SensorModel(spec.sensors, self.model.n, spec.control_dt_s, spec.seed, am.sysid) for am in spec.ams}
+        # [devices]: each AM's sensors and estimator, sampled every physics step (made at the first)
+        self.devices: dict[int, DeviceSuite] = {}
+        self._odometry: dict[int, list[float]] = {}  # the estimator's last frame values, per AM
+        self._reported: dict[int, list[float]] = {}  # the last frame's base state, per AM (telemetry)
         self.failsafes: dict[int, Failsafe] = {}  # companion lost
         self.landing: dict[int, Failsafe] = {}  # landing on a GCS command (companion ignored)
         self.disarmed: set[int] = set()  # disarmed by a GCS command: motors off, joints limp
@@ -147,11 +152,31 @@ class SitlCore:
         self._k, self._actuated = k, set()
         for s in self.sysids:
             values[s] = v = w.sensor_values(s)
-            sensor = self.sensors.get(s)  # none: exact frames
-            out[s] = f = sensor_frame_from_wire(k, t, v if sensor is None else sensor(v), n, 0)
+            if self.spec.devices.enabled:
+                reported = self._sense(s, v, t)
+            else:
+                sensor = self.sensors.get(s)  # none: exact frames
+                reported = v if sensor is None else sensor(v)
+            out[s] = f = sensor_frame_from_wire(k, t, reported, n, 0)
+            self._reported[s] = reported
             yield s, f
         self._unobserved = (k, values, out)
         self._values, self._values_t = values, t
+
+    @property
+    def exact_values(self) -> dict[int, list[float]]:
+        """The exact values (`World.sensor_values`) behind the last frames, per sysid."""
+        return self._values
+
+    def _sense(self, s: int, values: list[float], t: float) -> list[float]:
+        """One physics step of AM s's devices and estimator ([devices]): the frame's values."""
+        dev = self.devices.get(s)
+        if dev is None:
+            sp = self.spec
+            dev = self.devices[s] = DeviceSuite(sp.devices, self.model.n, sp.dt_s, sp.vehicle.gravity_mps2,
+                                                sp.seed, s, values)
+        self._odometry[s] = out = dev.step(values, t)
+        return out
 
     def observe(self) -> None:
         """Bookkeeping of the last `frames` call (once): every frame into the state digest, and
@@ -169,6 +194,9 @@ class SitlCore:
         gt = self.world.ground_truth()
         self.outcome.add(gt, wrench_E)
         if self.on_truth is not None:
+            if self._reported:  # the reported base state beside the truth (telemetry)
+                gt = dataclasses.replace(gt, ams={s: dataclasses.replace(a, estimate=tuple(self._reported[s][:13]))
+                                                  if s in self._reported else a for s, a in gt.ams.items()})
             self.on_truth(gt)
 
     def hold(self, k: int, lost: Collection[int] = ()) -> None:
@@ -176,6 +204,10 @@ class SitlCore:
         controller flies on what it holds (its failsafe while its companion is lost), and
         ground truth is sampled as on control steps."""
         self.observe()
+        if self.spec.devices.enabled:  # the devices and the estimator run at the IMU rate
+            t = self.world.time_s
+            for s in self.sysids:
+                self._sense(s, self.world.sensor_values(s), t)
         if k % TRUTH_EVERY == 0:
             self._truth({s: self.world.wrench_ee(s) for s in self.sysids})
         self.actuate(k, {}, lost)
@@ -241,7 +273,8 @@ class SitlCore:
         if sp is None:  # nothing has reached this flight controller yet: keep the last command
             return
         if self.fcs:
-            quat, w_B = self.world.attitude_and_rate(s)
+            odo = self._odometry.get(s)  # [devices]: the autopilot flies on its estimator
+            quat, w_B = self.world.attitude_and_rate(s) if odo is None else (odo[3:7], odo[10:13])
             out = self.fcs[s].step(quat, w_B, sp.attitude)
             axes = out.allocation.saturated_axes
             joints = self.world.apply_rotors(s, out.rotor_thrusts_n, sp.tau_q_nm, axes)

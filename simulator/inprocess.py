@@ -53,7 +53,8 @@ def setpoint_as_on_the_wire(sp: TorqueSetpoint | AttitudeSetpoint) -> TorqueSetp
 def run(spec: ScenarioSpec, duration_s: float | None = None,
         lost: Callable[[float], set[int]] = lambda _t: set(),
         progress: Callable[[float], None] | None = None,
-        failsafe_after_rejected: int | None = None) -> dict:  # fmt: skip
+        failsafe_after_rejected: int | None = None,
+        on_frames: Callable[[float, dict, dict], None] | None = None) -> dict:  # fmt: skip
     """Run a scenario in-process; `lost(t)` -> sysids whose companion is silent at t (tests).
 
     As the UDP simulator does, a setpoint outside the plausibility bounds (`amlink.limits`)
@@ -62,7 +63,9 @@ def run(spec: ScenarioSpec, duration_s: float | None = None,
     failsafe for good (`simulator.core`); a controller
     that raises is treated as a companion that died (failsafe) and reported. The result's
     "verdict" judges the mission (`simulator.verdict`). `progress(t)`, if given, is called
-    about every simulated second."""
+    about every simulated second. `on_frames(t, exact, frames)`, if given, sees every control
+    step's exact values (`World.sensor_values` per sysid) beside the frames sent (estimator
+    accuracy, `experiments/estimator_accuracy.py`)."""
     core = SitlCore(spec, failsafe_after_rejected=failsafe_after_rejected)
     pilots = {s: Pilot(spec, s, model=core.model) for s in core.sysids}
     jitcache.warm(pilots[core.sysids[0]].warm_up)  # compiles the law once per machine, else loads it
@@ -78,6 +81,8 @@ def run(spec: ScenarioSpec, duration_s: float | None = None,
         for k in range(n):
             if core.is_control_step(k):
                 frames = core.frames(k)
+                if on_frames is not None:
+                    on_frames(core.time_s, core.exact_values, frames)
                 gone = lost(core.time_s) | crashed
                 setpoints = {}
                 for s, f in frames.items():

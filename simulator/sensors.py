@@ -1,4 +1,5 @@
-"""Sensor realism of the emulated flight controller (pure: numpy only).
+"""Sensor realism of the emulated flight controller as white noise on the states, the stress
+option (pure: numpy only); sensors as devices with an estimator are `simulator.devices`.
 
 `SensorModel(spec, ...)` turns one AM's exact sensor values (the order of
 `World.sensor_values`: p_WB, quat_WB (w, x, y, z), v_B, w_B, q, qdot, wrench_E) into what its

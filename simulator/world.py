@@ -101,6 +101,9 @@ class AmTruth:
     # the busiest rotor's thrust as a fraction of its range (0: at its least, 1: at its most), now
     rotor_fraction_max: float = 0.0
     rotor_fraction_min: float = 0.0  # the idlest rotor's, likewise
+    # what the flight controller reports of the base (simulator.core): p_WB, quat_WB (w, x, y, z),
+    # v_B, w_B, its estimator's odometry with [devices]; empty before its first frame
+    estimate: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)

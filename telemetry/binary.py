@@ -76,6 +76,10 @@ uint64 joint_saturated_steps  # commands so far with a joint torque clipped (cum
 uint64[4] axis_saturated_steps  # commands so far whose roll, pitch, yaw torque, thrust fell short (cumulative)
 float64 rotor_fraction_max  # the busiest rotor's thrust as a fraction of its range, now
 float64 rotor_fraction_min  # the idlest rotor's
+float64[3] p_WB_est      # the base position the flight controller reports (its estimate) [m]; all 4 zero: none yet
+float64[4] q_WB_est      # its base attitude (w, x, y, z)
+float64[3] v_B_est       # its base velocity in B [m/s]
+float64[3] w_B_est       # its body rate [rad/s]
 """
 
 CONTACT_MSG = """\
@@ -163,5 +167,6 @@ def from_dict(channel: Channel, payload: Mapping[str, Any]) -> bytes:
                    "joint_saturated_steps": payload.get("joint_saturated_steps", 0),
                    "axis_saturated_steps": payload.get("axis_saturated_steps", [0, 0, 0, 0]),
                    "rotor_fraction_max": payload.get("rotor_fraction_max", 0.0),
-                   "rotor_fraction_min": payload.get("rotor_fraction_min", 0.0)}
+                   "rotor_fraction_min": payload.get("rotor_fraction_min", 0.0),
+                   **{k: payload.get(k, [0.0] * n) for k, n in schema.ESTIMATE_FIELDS.items()}}
     return MESSAGES[channel].encode(payload)

@@ -282,21 +282,23 @@ def controller(t_s: float, phase: str, diag, cmd, sysid: int = 0) -> Pending:
 # ----------------------------------------------------------------------------- ground truth
 _TRUTH_HEAD = _padded_head("<dQI")
 _COUNTERS = struct.Struct("<QQ4Qdd")  # rotor, joint, per-axis saturation counts; rotor fractions
+_ESTIMATE = struct.Struct("<13d")  # p_WB_est, q_WB_est, v_B_est, w_B_est
+_NO_ESTIMATE = (0.0,) * 13
 _truth_finishers: dict[int, Finisher] = {}
 
 
 def _truth_finisher(n: int) -> Finisher:
     """Pre-sample: the header (t, seq, sysid, padded), p_WB, p_WE, R_WB, R_WE, the n joint
-    origins, the two counters (uint64)."""
+    origins, the two counters (uint64), the reported base state (13 doubles)."""
     h = _TRUTH_HEAD.size
-    f = Finisher(h + 8 * (24 + 3 * n) + _COUNTERS.size)
+    f = Finisher(h + 8 * (24 + 3 * n) + _COUNTERS.size + 8 * 13)
     f.copy(0, 20)  # t, seq, sysid
     f.copy(h, 24)  # p_WB
     f.quaternion(h + 48)  # q_WB
     f.copy(h + 24, 24)  # p_WE
     f.quaternion(h + 120)  # q_WE
     f.constant(_U32.pack(3 * n))
-    f.copy(h + 192, 24 * n + _COUNTERS.size)  # p_W_joints, the counters
+    f.copy(h + 192, 24 * n + _COUNTERS.size + 8 * 13)  # p_W_joints, the counters, the estimate
     return f.done()
 
 
@@ -309,12 +311,13 @@ def am_truth(t_s: float, sysid: int, am) -> Pending:
     if finisher is None:
         finisher = _truth_finishers.setdefault(n, _truth_finisher(n))
     try:
+        est = getattr(am, "estimate", ()) or _NO_ESTIMATE
         pre = b"".join((_TRUTH_HEAD.pack(t_s, 0, sysid), am.p_WB, am.p_WE, am.R_WB, am.R_WE, *joints,
                         _COUNTERS.pack(getattr(am, "rotor_saturated_steps", 0),
                                        getattr(am, "joint_saturated_steps", 0),
                                        *getattr(am, "axis_saturated_steps", (0, 0, 0, 0)),
                                        getattr(am, "rotor_fraction_max", 0.0),
-                                       getattr(am, "rotor_fraction_min", 0.0))))
+                                       getattr(am, "rotor_fraction_min", 0.0)), _ESTIMATE.pack(*est)))
         if len(pre) == finisher.pre_size and _LITTLE:
             return finisher, pre
     except (TypeError, ValueError, BufferError, struct.error):

@@ -207,8 +207,13 @@ AM_TRUTH_SCHEMA = _object("amstack.AmTruth", "Ground-truth base and end-effector
     "rotor_fraction_max": {"type": "number", "description": "the busiest rotor's thrust as a fraction of its range "
                                                             "(optional)"},
     "rotor_fraction_min": {"type": "number", "description": "the idlest rotor's (optional)"},
+    "p_WB_est": _vec(3, "the base position the flight controller reports (its estimator's, with [devices]) [m]"),
+    "q_WB_est": _vec(4, "its base attitude (w, x, y, z)"),
+    "v_B_est": _vec(3, "its base velocity in B [m/s]"),
+    "w_B_est": _vec(3, "its body rate [rad/s]"),
 }, optional=("p_W_joints", "rotor_saturated_steps", "joint_saturated_steps", "axis_saturated_steps",
-             "rotor_fraction_max", "rotor_fraction_min"))
+             "rotor_fraction_max", "rotor_fraction_min", "p_WB_est", "q_WB_est", "v_B_est", "w_B_est"))
+ESTIMATE_FIELDS = {"p_WB_est": 3, "q_WB_est": 4, "v_B_est": 3, "w_B_est": 3}  # AmTruth.estimate, in order
 
 CONTACT_SCHEMA = _object("amstack.PadContact", "Force the object applies on one AM's pad, ground truth", {
     "sysid": {"type": "integer"},
@@ -312,6 +317,11 @@ def am_truth_sample(t_s: float, sysid: int, am, seq: int = 0) -> dict:
     out["axis_saturated_steps"] = [int(x) for x in getattr(am, "axis_saturated_steps", (0, 0, 0, 0))]
     for key in ("rotor_fraction_max", "rotor_fraction_min"):
         out[key] = float(getattr(am, key, 0.0))
+    est = [float(x) for x in getattr(am, "estimate", ())] or [0.0] * 13  # zeros: nothing reported yet
+    i = 0
+    for key, n in ESTIMATE_FIELDS.items():
+        out[key] = est[i:i + n]
+        i += n
     return out
 
 

@@ -14,7 +14,7 @@ real processes, with its MCAP log. Several --controller options run the same tri
 each law (DIR/<controller>/...) and write DIR/comparison.md. --set changes the base
 scenario before the draws (a value in TOML syntax; `am.KEY` sets it on every [[am]]), e.g.
 `--set mission.squeeze_sizing=true --set pad.shape='"crowned"'`: a campaign with and without
-an option on the same trials.
+an option on the same trials; `--set devices.estimator.gyro_cutoff_hz=0` sets a key of a sub-table.
 Exit codes: 0 the campaign ran (whatever its success rate), 2 bad arguments or
 configuration, 1 a trial raised (a bug: failed missions are verdicts, not errors).
 """
@@ -90,7 +90,8 @@ def apply_overrides(base: dict, overrides: list[str]) -> dict:
     for text in overrides:
         name, eq, value = text.partition("=")
         table, dot, key = name.strip().partition(".")
-        if not (eq and dot and table and key) or "." in key:
+        *subs, key = key.split(".")  # TABLE.SUB.KEY: a key of a sub-table ([devices.estimator])
+        if not (eq and dot and table and key) or not all(subs) or (subs and table == "am"):
             raise ConfigError(f"--set {text!r}: expected TABLE.KEY=VALUE, e.g. mission.squeeze_sizing=true")
         try:
             v = tomllib.loads(f"v = {value.strip()}")["v"]
@@ -102,8 +103,12 @@ def apply_overrides(base: dict, overrides: list[str]) -> dict:
                 entry[key] = v
         else:
             t = data.setdefault(table, {})
+            for sub in subs:
+                if not isinstance(t, dict):
+                    break
+                t = t.setdefault(sub, {})
             if not isinstance(t, dict):
-                raise ConfigError(f"--set {text!r}: [{table}] is not a table")
+                raise ConfigError(f"--set {text!r}: [{'.'.join([table, *subs])}] is not a table")
             t[key] = v
     return data
 

@@ -16,6 +16,10 @@ it replays with `am-run`. Ranges are uniform:
     start_heading_deg = h         per AM, uniform in [-h, h] ([[am]].start_heading_deg)
     [randomize.sensors]           the [sensors] levels every trial gets (noise and bias standard
                                   deviations; each trial's noise and biases follow its own seed)
+    [randomize.devices]           the [devices] every trial gets (sensor devices and the flight
+                                  controller's estimator, `simulator.devices`); each trial's noise
+                                  and biases follow its own seed. A key the scenario itself sets
+                                  under [devices] (or `--set devices.KEY=...`) wins over it.
 
 Each trial draws from its own generator, seeded by (campaign seed, trial index), in a fixed
 order, so a trial's variation does not depend on how many trials run or where.
@@ -30,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from amcore.config import ConfigError, SensorSpec, _build, _read_toml
+from amcore.config import ConfigError, SensorSpec, _build, _read_toml, devices_from_table
 
 Range = tuple[float, ...]
 
@@ -46,6 +50,7 @@ class RandomizeSpec:
     start_offset_m: float = 0.0
     start_heading_deg: float = 0.0
     sensors: dict = dataclasses.field(default_factory=dict)  # a [sensors] table
+    devices: dict = dataclasses.field(default_factory=dict)  # a [devices] table
 
     def ranges(self) -> dict[str, Range]:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
@@ -63,15 +68,19 @@ def randomize_from_table(table: dict, where: str) -> RandomizeSpec:
     if not isinstance(table, dict):
         raise ConfigError(f"{where}: [randomize] must be a table")
     sensors = table.get("sensors", {})
-    kw = _build(RandomizeSpec, {k: v for k, v in table.items() if k != "sensors"}, f"{where}: [randomize]",
-                skip=("sensors",))
+    devices = table.get("devices", {})
+    kw = _build(RandomizeSpec, {k: v for k, v in table.items() if k not in ("sensors", "devices")},
+                f"{where}: [randomize]", skip=("sensors", "devices"))
+    if not isinstance(devices, dict):
+        raise ConfigError(f"{where}: [randomize.devices] must be a table")
+    devices_from_table(devices, f"{where}: [randomize]")
     if not isinstance(sensors, dict):
         raise ConfigError(f"{where}: [randomize.sensors] must be a table")
     levels = SensorSpec(**_build(SensorSpec, sensors, f"{where}: [randomize.sensors]"))
     for f in dataclasses.fields(SensorSpec):
         if getattr(levels, f.name) < 0.0:
             raise ConfigError(f"{where}: [randomize.sensors].{f.name}: must be >= 0")
-    spec = RandomizeSpec(**kw, sensors=dict(sensors))
+    spec = RandomizeSpec(**kw, sensors=dict(sensors), devices=copy.deepcopy(devices))
     for name, rng in spec.ranges().items():
         lowest, strict, highest = _LIMITS[name]
         if len(rng) != 2 or not rng[0] <= rng[1]:
@@ -125,6 +134,8 @@ def draw_trial(base: dict, rand: RandomizeSpec, campaign_seed: int, index: int) 
         sensors.update(rand.sensors)
         if rand.sensor_latency_s:
             sensors["latency_s"] = p["sensor_latency_s"] = _uniform(rng, rand.sensor_latency_s)
+    if rand.devices:
+        data["devices"] = _merged(rand.devices, data.get("devices", {}))
     for am in data.get("am", []):
         s = am["sysid"]
         if rand.misalignment_deg:
@@ -142,6 +153,14 @@ def draw_trial(base: dict, rand: RandomizeSpec, campaign_seed: int, index: int) 
     sc["seed"] = p["seed"] = int(rng.integers(0, 2**31 - 1))
     sc["name"] = f"{str(sc.get('name', 'trial'))[:26]}-{index:04d}"
     return data, p
+
+
+def _merged(under: dict, over: dict) -> dict:
+    """Table `under` with `over`'s keys on top, sub-tables merged key by key."""
+    out = copy.deepcopy(under)
+    for k, v in over.items():
+        out[k] = _merged(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else copy.deepcopy(v)
+    return out
 
 
 def relocate(data: dict, src: Path, dst_dir: Path) -> dict:

@@ -39,12 +39,14 @@ def test_real_run_maps_to_the_documented_topics_and_schemas(capture, form):
     sysids = [a.sysid for a in capture.spec.ams]
     expected = {c.TF_TOPIC, c.SCENE_TOPIC, c.OBJECT_POSE_TOPIC, c.OBJECT_STATE_TOPIC, c.SIM_EVENT_TOPIC, c.EVENTS_TOPIC}
     expected |= {c.controller_topic(s) for s in sysids} | {c.contact_topic(s) for s in sysids}
+    expected |= {c.truth_topic(s) for s in sysids}  # the truth as sent, the estimate beside it
     assert {o.topic for o in outs} == expected
     schema_of = {}
     for o in outs:
         assert schema_of.setdefault(o.topic, o.schema) == o.schema  # one schema per topic
         assert errors(_fields(o), c.json_schema(o.schema)) == [], (o.topic, o.data[:200])
     hot = {c.controller_topic(s) for s in sysids} | {c.contact_topic(s) for s in sysids} | {c.OBJECT_STATE_TOPIC}
+    hot |= {c.truth_topic(s) for s in sysids}
     assert {o.topic for o in outs if o.encoding == c.ROS1} == (hot if form == "binary" else set())
     if form == "binary":
         assert schema_of[c.controller_topic(sysids[0])] == "amstack/ControllerState"

@@ -70,8 +70,10 @@ def test_log_holds_every_documented_topic_with_valid_schemas_and_monotonic_time(
     documented = {c.TF_TOPIC, c.SCENE_TOPIC, c.STATS_TOPIC, c.OBJECT_POSE_TOPIC, c.OBJECT_STATE_TOPIC,
                   c.SIM_EVENT_TOPIC, c.EVENTS_TOPIC, c.publisher_topic("simrun")}
     documented |= {c.controller_topic(s) for s in sysids} | {c.contact_topic(s) for s in sysids}
+    documented |= {c.truth_topic(s) for s in sysids}
     assert set(log.messages) == documented
     hot = {c.controller_topic(s) for s in sysids} | {c.contact_topic(s) for s in sysids} | {c.OBJECT_STATE_TOPIC}
+    hot |= {c.truth_topic(s) for s in sysids}
     assert {t for t, e in log.encodings.items() if e == c.ROS1} == hot  # the binary channels, with their .msg
     for topic, msgs in log.messages.items():
         # the JSON Schema as stored in the file, or the payload's for a ros1 channel (decoded with the stored .msg)
@@ -86,6 +88,7 @@ def test_log_holds_every_documented_topic_with_valid_schemas_and_monotonic_time(
     for s in sysids:
         assert len(log.messages[c.controller_topic(s)]) == counts[KEYS.controller(s)]
         assert len(log.messages[c.contact_topic(s)]) == counts[KEYS.contact(s)]
+        assert len(log.messages[c.truth_topic(s)]) == counts[KEYS.am_truth(s)]
     assert len(log.messages[c.TF_TOPIC]) == sum(counts[KEYS.am_truth(s)] for s in sysids)
     assert len(log.messages[c.OBJECT_POSE_TOPIC]) == counts[KEYS.object]
     # log time is simulation time

@@ -39,7 +39,7 @@ def test_impaired_link_is_deterministic_across_runs_and_transports(tmp_path):
 
 
 def test_a_drawn_trial_is_bit_identical_in_process_and_through_the_processes(tmp_path):
-    """A trial of the default randomization (sensor noise, bias and latency, setpoint loss,
+    """A trial of the default randomization (sensor devices and the estimator, setpoint loss,
     misalignment, start offsets, another object) written as a scenario file: `am-run` and the
     in-process runner agree bit for bit, so a campaign's rows replay through the processes."""
     from amcore.config import _read_toml
@@ -49,7 +49,8 @@ def test_a_drawn_trial_is_bit_identical_in_process_and_through_the_processes(tmp
     base = SCENARIOS / "two_am_comp.toml"
     task = build_tasks(_read_toml(base), base, load_randomize(DEFAULT_RANDOMIZE), 11, 1, tmp_path, None)[0]
     spec = load_scenario(task.path)
-    assert spec.sensors.force_noise_n > 0 and spec.link.loss > 0 and spec.am(4).misalignment_deg != 0
+    assert spec.devices.enabled and spec.devices.ft.force_noise_n > 0  # sensor devices and the estimator
+    assert spec.link.loss > 0 and spec.am(4).misalignment_deg != 0
     ours = run(spec, duration_s=0.4)
     sitl = am_run(task.path, tmp_path / "r", "--duration", "0.4", "--no-telemetry", timeout_s=300)
     assert sitl.code == (4 if ours["verdict"]["status"] == "failed" else 0), sitl.stderr

@@ -187,3 +187,17 @@ def test_the_laws_q_d_is_the_same_rotation_not_the_same_bits(step_result):
     assert np.allclose(d.q_d, q, rtol=0.0, atol=4 * np.finfo(float).eps)
     sent = binary.to_dict(Channel.CONTROLLER, finished(capture.controller(0.7, "grasp", d, step_result.command)))
     assert sent["q_WB_d"] == q.tolist()
+
+
+def test_the_reported_base_state_rides_beside_the_truth():
+    rng = np.random.default_rng(9)
+    est = tuple(rng.normal(size=13).tolist())
+    am = NS(p_WB=rng.normal(size=3), R_WB=np.eye(3), p_WE=rng.normal(size=3), R_WE=np.eye(3), p_W_joints=(),
+            rotor_saturated_steps=0, joint_saturated_steps=0, estimate=est)
+    pending = capture.am_truth(0.5, 4, am)
+    assert type(pending) is tuple  # the fast path
+    got = binary.to_dict(Channel.AM_TRUTH, finished(pending))
+    assert got == schema.am_truth_sample(0.5, 4, am)
+    assert got["p_WB_est"] + got["q_WB_est"] + got["v_B_est"] + got["w_B_est"] == list(est)
+    none = binary.to_dict(Channel.AM_TRUTH, finished(capture.am_truth(0.5, 4, NS(**{**vars(am), "estimate": ()}))))
+    assert none["q_WB_est"] == [0.0] * 4  # nothing reported yet

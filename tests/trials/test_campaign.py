@@ -139,6 +139,8 @@ def test_set_changes_the_base_scenario_of_every_trial_and_only_what_it_names(tmp
                                       "am.misalignment_deg=1.5"])
     assert data["mission"]["squeeze_sizing"] is True and data["pad"]["shape"] == "crowned"
     assert [a["misalignment_deg"] for a in data["am"]] == [1.5] * len(base["am"])
+    nested = cli.apply_overrides(base, ["devices.estimator.gyro_cutoff_hz=0.0", "devices.scale=2.0"])
+    assert nested["devices"] == {"estimator": {"gyro_cutoff_hz": 0.0}, "scale": 2.0}
     assert data["object"] == base["object"] and "pad" not in base  # the base is left as it was
     rand = load_randomize(cli.DEFAULT_RANDOMIZE)
     plain = cli.build_tasks(base, SHORT, rand, 5, 2, tmp_path / "a", None)
@@ -152,6 +154,8 @@ def test_set_changes_the_base_scenario_of_every_trial_and_only_what_it_names(tmp
 
 @pytest.mark.parametrize("override,words", [
     ("mission.squeeze_sizing", "expected TABLE.KEY=VALUE"),
+    ("devices..scale=1.0", "expected TABLE.KEY=VALUE"),
+    ("devices.estimator.gyro_cut=1.0", "[devices.estimator]: unknown key 'gyro_cut'"),
     ("squeeze_sizing=true", "expected TABLE.KEY=VALUE"),
     ("pad.shape=crowned", "VALUE is not a TOML value"),
     ("mission.squeeze_size=true", "[mission]: unknown key 'squeeze_size'"),

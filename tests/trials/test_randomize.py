@@ -35,8 +35,9 @@ def test_draws_stay_in_the_default_ranges_and_make_valid_scenarios():
         spec = scenario_from_dict(data, SCENARIO)
         assert 0.5 <= spec.object.mass_kg <= 2.0 and 0.5 <= spec.object.pad_object_friction <= 1.2
         assert spec.object.size_m[0] == pytest.approx(0.2 * p["object_size_scale"]) and 0.16 <= spec.object.size_m[0] <= 0.24
-        assert 0.0 <= spec.link.loss <= 0.1 and 0.0 <= spec.sensors.latency_s <= 0.002
-        assert spec.sensors.force_noise_n == DEFAULT.sensors["force_noise_n"]
+        assert 0.0 <= spec.link.loss <= 0.1 and spec.sensors.exact
+        assert spec.devices.enabled and spec.devices.mocap.latency_s == DEFAULT.devices["mocap"]["latency_s"]
+        assert spec.devices.imu.gyroscope_noise_density == DEFAULT.devices["imu"]["gyroscope_noise_density"]
         for am in spec.ams:
             assert abs(am.misalignment_deg) <= 5.0 and abs(am.start_heading_deg) <= 5.0
             assert max(map(abs, am.start_offset_m)) <= 0.05
@@ -60,6 +61,7 @@ def test_a_written_trial_reads_back_as_the_same_scenario(tmp_path):
     assert tomllib.loads(out.read_text()) == moved
     a, b = scenario_from_dict(data, SCENARIO), scenario_from_dict(tomllib.loads(out.read_text()), out)
     assert a.vehicle == b.vehicle and a.object == b.object and a.ams == b.ams and a.sensors == b.sensors
+    assert a.devices == b.devices
     assert a.link == b.link and a.seed == b.seed
 
 
@@ -87,3 +89,27 @@ def test_a_bad_randomize_table_names_the_key(table, words):
     with pytest.raises(ConfigError) as e:
         randomize_from_table(table, "r.toml")
     assert "r.toml" in str(e.value) and words in str(e.value)
+
+
+def test_the_stress_option_draws_white_noise_on_the_states():
+    stress = load_randomize(ROOT / "configs" / "randomize" / "stress_states.toml")
+    data, _ = draw_trial(_read_toml(SCENARIO), stress, 1, 0)
+    spec = scenario_from_dict(data, SCENARIO)
+    assert not spec.devices.enabled and spec.sensors.force_noise_n == stress.sensors["force_noise_n"]
+    assert 0.0 <= spec.sensors.latency_s <= 0.002
+
+
+def test_the_sensors_only_campaign_has_the_default_device_levels_and_nothing_else():
+    only = load_randomize(ROOT / "configs" / "randomize" / "sensors_only.toml")
+    assert only.devices == DEFAULT.devices  # one set of levels: the two files may not drift apart
+    assert only.ranges() == {} and not only.sensors
+    assert (only.misalignment_deg, only.start_offset_m, only.start_heading_deg) == (0.0, 0.0, 0.0)
+
+
+def test_a_scenarios_own_device_keys_win_over_the_randomized_ones():
+    base = _read_toml(SCENARIO)
+    base["devices"] = {"scale": 3.0, "estimator": {"gyro_cutoff_hz": 0.0}}
+    spec = scenario_from_dict(draw_trial(base, DEFAULT, 1, 0)[0], SCENARIO)
+    assert spec.devices.scale == 3.0 and spec.devices.estimator.gyro_cutoff_hz == 0.0
+    assert spec.devices.estimator.history_steps == DEFAULT.devices["estimator"]["history_steps"]
+    assert spec.devices.imu.gyroscope_noise_density == DEFAULT.devices["imu"]["gyroscope_noise_density"]

@@ -1,0 +1,281 @@
+"""The flight controller's state estimator: a complementary filter fusing a 1 kHz IMU with
+motion capture, as PX4's EKF2 fuses external vision (pure math: numpy and numba, no I/O).
+
+State (world frame W, ENU; body frame B, FLU): position p_WB [m], velocity v_WB_W [m/s],
+attitude q_WB (w, x, y, z), gyroscope bias b_g [rad/s] and accelerometer bias b_a [m/s^2]
+in B. Every IMU sample propagates it (strapdown, `predict`):
+
+    w = omega_m - b_g,   a_W = R_WB (f_m - b_a) - g e_3
+    q <- q (x) exp(w dt),   p <- p + v dt + a_W dt^2 / 2,   v <- v + a_W dt
+
+(f_m measured over the step that ends at the sample, rotated by the attitude at its end; the
+first sample only stores the initial state).
+
+A motion-capture pose (p_m, q_m) measured L steps ago (its latency) is fused against the
+state of that time, kept in a history of the last N steps (EKF2's delayed-fusion horizon),
+and the correction is carried forward to now, as EKF2's output predictor carries its
+delayed-horizon correction to the IMU-rate output (`fuse_pose`). The innovations are
+
+    r = p_m - p(k - L)                       (world frame)
+    e = log(q(k - L)^-1 (x) q_m)              (body frame)
+
+and the gains of a third-order position loop and a second-order attitude loop with all
+poles at -omega_p and -omega_R (critically damped), applied once per frame of period T_m:
+
+    delta_p = 3 omega_p T_m r,   delta_v = 3 omega_p^2 T_m r,   b_a <- b_a - omega_p^3 T_m R^T r
+    delta_theta = 2 omega_R T_m e,                               b_g <- b_g - omega_R^2 T_m e
+
+(the loop's characteristic polynomials are (s + omega_p)^3 and (s + omega_R)^2). A state i
+steps after the measurement takes p += delta_p + i dt delta_v, v += delta_v, q <- q (x)
+exp(delta_theta): exact for the position and velocity, whose error propagates linearly,
+and to first order in the rotation over the lag for the attitude.
+
+The body rate handed to the law is omega_m - b_g, optionally through PX4's 2nd-order
+Butterworth low-pass (IMU_GYRO_CUTOFF; `biquad_coefficients`).
+
+Why a complementary filter, not an error-state EKF: with a motion-capture pose at 100 Hz
+and a tactical-grade-or-better IMU the EKF's gains reach a steady state within a second;
+fixed gains of that shape give the same smooth output at a fraction of the cost (no 15x15
+covariance per step) and are set by two bandwidths a user can reason about.
+
+Kernels here call only kernels of this file (numba's cache is keyed per source file; see
+amcore.jit).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .jit import kernel
+
+# indices into the state vector x
+P, V, Q, BG, BA = 0, 3, 6, 10, 13
+N_STATE = 16
+# indices into the output (one odometry frame): p_WB, quat_WB (w, x, y, z; w >= 0), v_B, w_B
+N_OUT = 13
+
+
+# ----------------------------------------------------------------------------- quaternions
+@kernel
+def quat_mul(a, b):
+    """a (x) b, (w, x, y, z)."""
+    return np.array([a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+                     a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+                     a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+                     a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]])
+
+
+@kernel
+def quat_exp(d):
+    """The unit quaternion of rotation vector d [rad]."""
+    a = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    if a < 1e-12:
+        return np.array([1.0, 0.5 * d[0], 0.5 * d[1], 0.5 * d[2]])
+    k = math.sin(0.5 * a) / a
+    return np.array([math.cos(0.5 * a), k * d[0], k * d[1], k * d[2]])
+
+
+@kernel
+def quat_log(q):
+    """The rotation vector [rad] of unit quaternion q (the shorter way round)."""
+    w = q[0]
+    s = 1.0
+    if w < 0.0:
+        s = -1.0
+        w = -w
+    n = math.sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    if n < 1e-12:
+        return np.array([2.0 * s * q[1], 2.0 * s * q[2], 2.0 * s * q[3]])
+    k = s * 2.0 * math.atan2(n, w) / n
+    return np.array([k * q[1], k * q[2], k * q[3]])
+
+
+@kernel
+def quat_conj(q):
+    return np.array([q[0], -q[1], -q[2], -q[3]])
+
+
+@kernel
+def quat_normalized(q):
+    return q / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+
+
+@kernel
+def rotation(q):
+    """R_WB of unit quaternion q_WB."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return np.array([[1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
+                     [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
+                     [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)]])
+
+
+# ----------------------------------------------------------------------------- gyro low-pass
+def biquad_coefficients(sample_hz: float, cutoff_hz: float) -> np.ndarray:
+    """(b0, b1, b2, a1, a2) of PX4's math::LowPassFilter2p (2nd-order Butterworth by the
+    bilinear transform); cutoff 0 gives the pass-through (1, 0, 0, 0, 0)."""
+    if cutoff_hz <= 0.0:
+        return np.array([1.0, 0.0, 0.0, 0.0, 0.0])
+    if not cutoff_hz < 0.5 * sample_hz:
+        raise ValueError(f"gyro cutoff {cutoff_hz} Hz must be below half the IMU rate {sample_hz} Hz")
+    ohm = math.tan(math.pi * cutoff_hz / sample_hz)
+    c = 1.0 + 2.0 * math.cos(math.pi / 4.0) * ohm + ohm * ohm
+    b0 = ohm * ohm / c
+    return np.array([b0, 2.0 * b0, b0, 2.0 * (ohm * ohm - 1.0) / c,
+                     (1.0 - 2.0 * math.cos(math.pi / 4.0) * ohm + ohm * ohm) / c])
+
+
+@kernel
+def biquad_step(d, coef, x):
+    """One step of the biquad (direct form II) per axis; d (2, 3) its delay state, updated."""
+    y = np.empty(3)
+    for i in range(3):
+        d0 = x[i] - d[0, i] * coef[3] - d[1, i] * coef[4]
+        y[i] = d0 * coef[0] + d[0, i] * coef[1] + d[1, i] * coef[2]
+        d[1, i] = d[0, i]
+        d[0, i] = d0
+    return y
+
+
+@kernel
+def biquad_reset(d, coef, x):
+    """Delay state at steady state on input x (PX4's reset(sample))."""
+    s = coef[0] + coef[1] + coef[2]
+    for i in range(3):
+        d[0, i] = x[i] / s
+        d[1, i] = x[i] / s
+
+
+# ----------------------------------------------------------------------------- the filter
+@kernel
+def predict(x, hist, k, omega_m, f_m, dt, g):
+    """Strapdown propagation over one IMU sample (module doc); stores the state of step k
+    in hist[k % N] (p, v, q)."""
+    w = omega_m - x[BG:BG + 3]
+    a_B = f_m - x[BA:BA + 3]
+    x[Q:Q + 4] = quat_normalized(quat_mul(x[Q:Q + 4], quat_exp(w * dt)))
+    R = rotation(x[Q:Q + 4])  # the sample's specific force is taken at the end of its interval
+    a_W = np.zeros(3)
+    for i in range(3):
+        a_W[i] = R[i, 0] * a_B[0] + R[i, 1] * a_B[1] + R[i, 2] * a_B[2]
+    a_W[2] -= g
+    for i in range(3):
+        x[P + i] += x[V + i] * dt + 0.5 * a_W[i] * dt * dt
+        x[V + i] += a_W[i] * dt
+    j = k % hist.shape[0]
+    hist[j, 0:10] = x[0:10]
+
+
+@kernel
+def fuse_pose(x, hist, k, lag, p_m, q_m, gains, dt):
+    """Fuse a pose measured at step k - lag (lag < N) into the state of step k and into the
+    history after the measurement (module doc). gains: (k_p, k_v, k_a, k_R, k_g), already
+    times the frame period. Returns the innovations (r [m], e [rad]) as one (6,) array."""
+    N = hist.shape[0]
+    j0 = (k - lag) % N
+    p_past = hist[j0, 0:3]
+    q_past = hist[j0, 6:10]
+    r = p_m - p_past
+    e = quat_log(quat_mul(quat_conj(q_past), q_m))
+    R_past = rotation(q_past)
+    dp = gains[0] * r
+    dv = gains[1] * r
+    dq = quat_exp(gains[3] * e)
+    for i in range(3):
+        x[BA + i] -= gains[2] * (R_past[0, i] * r[0] + R_past[1, i] * r[1] + R_past[2, i] * r[2])
+        x[BG + i] -= gains[4] * e[i]
+    for a in range(lag + 1):  # the history from the measurement's step to now
+        j = (k - lag + a) % N
+        for i in range(3):
+            hist[j, i] += dp[i] + a * dt * dv[i]
+            hist[j, 3 + i] += dv[i]
+        hist[j, 6:10] = quat_normalized(quat_mul(hist[j, 6:10], dq))
+    x[0:10] = hist[k % N, 0:10]
+    out = np.empty(6)
+    out[0:3] = r
+    out[3:6] = e
+    return out
+
+
+@kernel
+def odometry(x, lpf, coef, omega_m, out):
+    """The odometry frame of the current state into out (N_OUT,): p_WB, quat_WB (w >= 0),
+    v_B = R^T v_W, w_B = lowpass(omega_m - b_g)."""
+    q = x[Q:Q + 4]
+    s = 1.0 if q[0] >= 0.0 else -1.0
+    R = rotation(q)
+    w = biquad_step(lpf, coef, omega_m - x[BG:BG + 3])
+    for i in range(3):
+        out[i] = x[P + i]
+        out[7 + i] = R[0, i] * x[V] + R[1, i] * x[V + 1] + R[2, i] * x[V + 2]
+        out[10 + i] = w[i]
+    for i in range(4):
+        out[3 + i] = s * q[i]
+
+
+@kernel
+def estimator_step(x, hist, lpf, coef, k, omega_m, f_m, dt, g, has_pose, lag, p_m, q_m, gains, out):
+    """One IMU step: `predict`, then `fuse_pose` if a pose arrived this step, then the
+    odometry frame into out. Returns the innovations (zero without a pose)."""
+    predict(x, hist, k, omega_m, f_m, dt, g)
+    nu = np.zeros(6)
+    if has_pose:
+        nu = fuse_pose(x, hist, k, lag, p_m, q_m, gains, dt)
+    odometry(x, lpf, coef, omega_m, out)
+    return nu
+
+
+# ----------------------------------------------------------------------------- set-up (Python)
+def loop_gains(attitude_bandwidth_radps: float, position_bandwidth_radps: float, frame_period_s: float) -> np.ndarray:
+    """(k_p, k_v, k_a, k_R, k_g) of the module doc for frames every frame_period_s."""
+    wp, wR, T = position_bandwidth_radps, attitude_bandwidth_radps, frame_period_s
+    return np.array([3.0 * wp * T, 3.0 * wp * wp * T, wp ** 3 * T, 2.0 * wR * T, wR * wR * T])
+
+
+class Estimator:
+    """One vehicle's filter: the state, its history and the gyro low-pass, and `step` once per
+    IMU sample. Construct it at the vehicle's first pose (at rest: v = 0, biases 0)."""
+
+    def __init__(self, p_WB, quat_WB_wxyz, dt_s: float, frame_period_s: float, g: float,
+                 attitude_bandwidth_radps: float, position_bandwidth_radps: float,
+                 gyro_cutoff_hz: float, history_steps: int) -> None:
+        self.x = np.zeros(N_STATE)
+        self.x[P:P + 3] = p_WB
+        self.x[Q:Q + 4] = quat_WB_wxyz
+        self.hist = np.tile(self.x[0:10], (history_steps, 1))
+        self.coef = biquad_coefficients(1.0 / dt_s, gyro_cutoff_hz)
+        self.lpf = np.zeros((2, 3))
+        self.gains = loop_gains(attitude_bandwidth_radps, position_bandwidth_radps, frame_period_s)
+        self.dt, self.g = dt_s, g
+        self.out = np.zeros(N_OUT)
+        self.innovation = np.zeros(6)
+        self._started = False
+        self._none = np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
+
+    def step(self, k: int, omega_m: np.ndarray, f_m: np.ndarray, pose=None, lag: int = 0) -> np.ndarray:
+        """The odometry (N_OUT,) after IMU sample k; pose (p_m, q_m) measured lag steps ago
+        if a motion-capture frame arrived now. lag must be below the history length."""
+        dt = self.dt
+        if not self._started:  # the first sample ends no interval
+            biquad_reset(self.lpf, self.coef, omega_m)
+            self._started = True
+            dt = 0.0
+        if pose is None:
+            p_m, q_m = self._none
+            has = False
+        else:
+            p_m, q_m = pose
+            has = True
+            if not 0 <= lag < self.hist.shape[0]:
+                raise ValueError(f"pose lag {lag} steps outside the estimator's history ({self.hist.shape[0]})")
+        self.innovation = estimator_step(self.x, self.hist, self.lpf, self.coef, k, omega_m, f_m, dt, self.g,
+                                         has, lag, p_m, q_m, self.gains, self.out)
+        return self.out
+
+    @property
+    def b_g(self) -> np.ndarray:
+        return self.x[BG:BG + 3].copy()
+
+    @property
+    def b_a(self) -> np.ndarray:
+        return self.x[BA:BA + 3].copy()

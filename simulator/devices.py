@@ -1,0 +1,219 @@
+"""Sensors as devices produce them, and the flight controller's estimator between them and the
+sensor frames (pure: numpy, and amcore's estimator; no I/O).
+
+Each device is a small object with its own seeded generator and a `sample(truth, t)` step,
+parameters under the names of its reference model ([devices] in a scenario,
+`amcore.config.DevicesSpec`; values and sources in configs/randomize/default.toml):
+
+- `Imu`: gyroscope and accelerometer as PX4's Gazebo IMU plugin models them (white noise of
+  a given density, a Gauss-Markov bias driven by a random walk, a turn-on bias), every
+  physics step. The accelerometer measures specific force in the body frame,
+  f_B = R_WB^T (a_W + g e_3), with a_W the base's acceleration over the last physics step
+  (the difference of PyBullet's velocities).
+- `Mocap`: the base pose every 1 / rate_hz s, delivered latency_s later, with white noise,
+  a fixed position and body-frame attitude bias, and frames dropped at random.
+- `ForceTorque`: the wrist F/T reading with white noise, a power-on offset that drifts as a
+  random walk, and a tare (the driver's bias command) at a set time.
+- `Encoders`: joint positions quantized to whole counts, velocities to the servo's unit.
+
+`DeviceSuite` holds one AM's devices and its `amcore.estimator.Estimator` (it runs where PX4
+runs EKF2, in the flight controller, and its output is the frame's odometry, as PX4 streams
+ODOMETRY). `step(values, k)` takes the AM's exact values (the order of
+`World.sensor_values`) every physics step and returns the frame's values in that order.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import NamedTuple
+
+import numpy as np
+
+from amcore.config import DevicesSpec, EncoderSpec, ForceTorqueSpec, ImuSpec, MocapSpec
+from amcore.estimator import Estimator, quat_exp, quat_mul, rotation
+
+_STREAM = 0xDE71  # distinguishes the devices' streams from the other seeded streams of an AM
+IMU, MOCAP, FT = 1, 2, 3  # each device's sub-stream
+
+
+class BodyTruth(NamedTuple):
+    """The base's exact state at one physics step: p_WB [m], quat_WB (w, x, y, z), R_WB,
+    v_W [m/s], w_B [rad/s], a_W [m/s^2] (its acceleration over the last step)."""
+
+    p_WB: np.ndarray
+    quat_WB: np.ndarray
+    R_WB: np.ndarray
+    v_W: np.ndarray
+    w_B: np.ndarray
+    a_W: np.ndarray
+
+
+def _gauss_markov(sigma_rw: float, tau_s: float, dt_s: float) -> tuple[float, float]:
+    """(phi, sigma_d) of the bias's discrete update b <- phi b + sigma_d N(0, 1), as the Gazebo
+    IMU plugin discretizes a first-order Gauss-Markov process of correlation time tau_s driven
+    by a random walk of sigma_rw."""
+    if tau_s <= 0.0:
+        return 1.0, sigma_rw * math.sqrt(dt_s)
+    return math.exp(-dt_s / tau_s), math.sqrt(-sigma_rw ** 2 * tau_s / 2.0 * math.expm1(-2.0 * dt_s / tau_s))
+
+
+class Imu:
+    """Gyroscope and accelerometer (module doc); `sample(truth, t)` -> (omega_m [rad/s], f_m
+    [m/s^2]), body frame. The bias of each is readable as `b_g`, `b_a` (for tests)."""
+
+    def __init__(self, spec: ImuSpec, scale: float, dt_s: float, g: float, rng: np.random.Generator) -> None:
+        self.rng, self.g = rng, g
+        s = spec
+        self.sigma_g = scale * s.gyroscope_noise_density / math.sqrt(dt_s)
+        self.sigma_a = scale * s.accelerometer_noise_density / math.sqrt(dt_s)
+        self.phi_g, self.sigma_bg = _gauss_markov(scale * s.gyroscope_random_walk,
+                                                  s.gyroscope_bias_correlation_time_s, dt_s)
+        self.phi_a, self.sigma_ba = _gauss_markov(scale * s.accelerometer_random_walk,
+                                                  s.accelerometer_bias_correlation_time_s, dt_s)
+        self.turn_on_g = scale * s.gyroscope_turn_on_bias_sigma * rng.standard_normal(3)
+        self.turn_on_a = scale * s.accelerometer_turn_on_bias_sigma * rng.standard_normal(3)
+        self.b_g = np.zeros(3)  # the Gauss-Markov part
+        self.b_a = np.zeros(3)
+
+    def sample(self, truth: BodyTruth, t: float) -> tuple[np.ndarray, np.ndarray]:
+        n = self.rng.standard_normal(12)
+        self.b_g = self.phi_g * self.b_g + self.sigma_bg * n[0:3]
+        self.b_a = self.phi_a * self.b_a + self.sigma_ba * n[3:6]
+        f_B = truth.R_WB.T @ (truth.a_W + np.array([0.0, 0.0, self.g]))
+        omega_m = truth.w_B + self.turn_on_g + self.b_g + self.sigma_g * n[6:9]
+        f_m = f_B + self.turn_on_a + self.b_a + self.sigma_a * n[9:12]
+        return omega_m, f_m
+
+
+class Mocap:
+    """Motion capture (module doc); `sample(truth, t)` once per physics step -> a pose
+    (p_m, q_m (w, x, y, z)) and its age in steps when a frame arrives this step, else None."""
+
+    def __init__(self, spec: MocapSpec, scale: float, dt_s: float, rng: np.random.Generator) -> None:
+        self.rng = rng
+        self.every = max(1, round(1.0 / (spec.rate_hz * dt_s)))
+        self.lag = int(round(spec.latency_s / dt_s))
+        self.sigma_p, self.sigma_R = scale * spec.position_noise_m, scale * spec.attitude_noise_rad
+        self.drop = spec.drop_probability
+        self.bias_p = scale * spec.position_bias_m * rng.standard_normal(3)
+        self.bias_R = scale * spec.attitude_bias_rad * rng.standard_normal(3)
+        self._k = -1
+        self._in_flight: deque[tuple[int, np.ndarray, np.ndarray]] = deque()
+        self.dropped = self.captured = 0
+
+    @property
+    def frame_period_steps(self) -> int:
+        return self.every
+
+    def sample(self, truth: BodyTruth, t: float):
+        self._k = k = self._k + 1
+        if k % self.every == 0:
+            n = self.rng.standard_normal(6)
+            lost = self.drop > 0.0 and self.rng.random() < self.drop
+            self.captured += 1
+            if lost:
+                self.dropped += 1
+            else:
+                p = truth.p_WB + self.bias_p + self.sigma_p * n[0:3]
+                q = quat_mul(truth.quat_WB, quat_exp(self.bias_R + self.sigma_R * n[3:6]))
+                self._in_flight.append((k + self.lag, p, q))
+        if self._in_flight and self._in_flight[0][0] == k:
+            _, p, q = self._in_flight.popleft()
+            return (p, q), self.lag
+        return None
+
+
+class ForceTorque:
+    """Wrist F/T sensor (module doc); `sample(wrench_E, t)` -> the reading [f; m] in E."""
+
+    def __init__(self, spec: ForceTorqueSpec, scale: float, dt_s: float, rng: np.random.Generator) -> None:
+        self.rng, self.spec = rng, spec
+        self.sigma = scale * np.repeat([spec.force_noise_n, spec.torque_noise_nm], 3)
+        self.drift = scale * np.repeat([spec.force_drift_n_per_sqrt_s, spec.torque_drift_nm_per_sqrt_s], 3) \
+            * math.sqrt(dt_s)
+        self.offset = scale * np.repeat([spec.force_offset_n, spec.torque_offset_nm], 3) * rng.standard_normal(6)
+        self.tare = np.zeros(6)
+        self._sum, self._count = np.zeros(6), 0
+        self.tared = spec.tare_at_s < 0.0  # nothing to do: counts as done
+        self._window = (spec.tare_at_s - spec.tare_window_s, spec.tare_at_s)
+
+    def sample(self, wrench_E, t: float) -> np.ndarray:
+        n = self.rng.standard_normal(12)
+        self.offset = self.offset + self.drift * n[0:6]
+        raw = np.asarray(wrench_E, dtype=float) + self.offset + self.sigma * n[6:12]
+        if not self.tared:
+            lo, hi = self._window
+            if lo <= t < hi:
+                self._sum += raw
+                self._count += 1
+            elif t >= hi:
+                self.tare = self._sum / self._count if self._count else raw.copy()
+                self.tared = True
+        return raw - self.tare
+
+
+class Encoders:
+    """Joint encoders (module doc); `sample(q, qdot)` -> the quantized (q, qdot). Exact where
+    a resolution is 0. Rounding to the nearest count, as an absolute magnetic encoder."""
+
+    def __init__(self, spec: EncoderSpec) -> None:
+        self.dq = 2.0 * math.pi / spec.counts_per_rev if spec.counts_per_rev > 0 else 0.0
+        self.dqdot = spec.velocity_quantum_radps
+
+    @staticmethod
+    def _quantize(x: np.ndarray, step: float) -> np.ndarray:
+        return np.round(x / step) * step if step > 0.0 else x
+
+    def sample(self, q, qdot) -> tuple[np.ndarray, np.ndarray]:
+        return self._quantize(np.asarray(q, dtype=float), self.dq), self._quantize(np.asarray(qdot, dtype=float),
+                                                                                  self.dqdot)
+
+
+class DeviceSuite:
+    """One AM's devices and estimator (module doc). Seeded by (scenario seed, sysid); each
+    device draws from its own stream, so changing one device's levels leaves the others'
+    draws alone."""
+
+    def __init__(self, spec: DevicesSpec, n_joints: int, dt_s: float, g: float, seed: int, sysid: int,
+                 initial_values: list[float]) -> None:
+        rng = lambda sub: np.random.default_rng([seed, sysid, _STREAM, sub])  # noqa: E731
+        self.n, self.dt = n_joints, dt_s
+        self.imu = Imu(spec.imu, spec.scale, dt_s, g, rng(IMU))
+        self.mocap = Mocap(spec.mocap, spec.scale, dt_s, rng(MOCAP))
+        self.ft = ForceTorque(spec.ft, spec.scale, dt_s, rng(FT))
+        self.encoders = Encoders(spec.encoders)
+        e = spec.estimator
+        if self.mocap.lag >= e.history_steps:
+            raise ValueError(f"[devices.mocap].latency_s is {self.mocap.lag} steps; [devices.estimator]."
+                             f"history_steps ({e.history_steps}) must be longer")
+        # the estimator is aligned on the ground before take-off, on a motion-capture pose
+        truth = self._truth(initial_values, None)
+        p0 = truth.p_WB + self.mocap.bias_p
+        q0 = quat_mul(truth.quat_WB, quat_exp(self.mocap.bias_R))
+        self.estimator = Estimator(p0, q0, dt_s, self.mocap.every * dt_s, g, e.attitude_bandwidth_radps,
+                                   e.position_bandwidth_radps, e.gyro_cutoff_hz, e.history_steps)
+        self._v_W_prev: np.ndarray | None = None
+        self._k = -1
+
+    def _truth(self, v: list[float], v_W_prev) -> BodyTruth:
+        p = np.array(v[0:3])
+        quat = np.array(v[3:7])
+        R = rotation(quat)
+        v_W = R @ np.array(v[7:10])
+        a_W = np.zeros(3) if v_W_prev is None else (v_W - v_W_prev) / self.dt
+        return BodyTruth(p, quat, R, v_W, np.array(v[10:13]), a_W)
+
+    def step(self, values: list[float], t: float) -> list[float]:
+        """The sensor frame's values (p_WB, quat_WB, v_B, w_B from the estimator; q, qdot from
+        the encoders; wrench_E from the F/T sensor) after this physics step's exact values."""
+        self._k = k = self._k + 1
+        truth = self._truth(values, self._v_W_prev)
+        self._v_W_prev = truth.v_W
+        omega_m, f_m = self.imu.sample(truth, t)
+        arrived = self.mocap.sample(truth, t)
+        pose, lag = arrived if arrived is not None else (None, 0)
+        odo = self.estimator.step(k, omega_m, f_m, pose, lag)
+        n = self.n
+        q, qdot = self.encoders.sample(values[13:13 + n], values[13 + n:13 + 2 * n])
+        wrench = self.ft.sample(values[13 + 2 * n:19 + 2 * n], t)
+        return [*odo.tolist(), *q.tolist(), *qdot.tolist(), *wrench.tolist()]
