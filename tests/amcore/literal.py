@@ -146,3 +146,15 @@ def controller_literal(model, params, st: AmState, ref, F_e: np.ndarray):
     ) + G_r @ rho - G_wr.T @ w
     u = np.concatenate([u1 * R @ E3, u2, u3])
     return T.T @ u
+
+
+def literal_rotor_wrench(rotors, f) -> np.ndarray:
+    """The base wrench (F_B [N], tau_B [N m], about the base origin) of rotor thrusts f, rotor by
+    rotor: force f a at p, moment p x (f a), drag -KM f a (KM > 0 for a ccw rotor)."""
+    F, tau = np.zeros(3), np.zeros(3)
+    for r, fi in zip(rotors.rotor, f):
+        a = np.array(r.axis) / np.linalg.norm(r.axis)
+        km = r.moment_ratio_m if r.spin == "ccw" else -r.moment_ratio_m
+        F += fi * a
+        tau += np.cross(r.position_m, fi * a) - km * fi * a
+    return np.concatenate([F, tau])

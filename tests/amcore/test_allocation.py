@@ -13,6 +13,8 @@ from amcore.allocation import AXES, Allocation, effectiveness
 from amcore.authority import vehicle_authority
 from amcore.config import load_vehicle
 
+from .literal import literal_rotor_wrench
+
 VEHICLES = Path(__file__).resolve().parents[2] / "configs" / "vehicles"
 
 
@@ -26,24 +28,13 @@ def hexa():
     return load_vehicle(VEHICLES / "hex3dof.toml")
 
 
-def literal_wrench(rotors, f) -> np.ndarray:
-    """Rotor by rotor: force f a at p, moment p x (f a), drag -KM f a (KM > 0 for ccw)."""
-    F, tau = np.zeros(3), np.zeros(3)
-    for r, fi in zip(rotors.rotor, f):
-        a = np.array(r.axis) / np.linalg.norm(r.axis)
-        km = r.moment_ratio_m if r.spin == "ccw" else -r.moment_ratio_m
-        F += fi * a
-        tau += np.cross(r.position_m, fi * a) - km * fi * a
-    return np.concatenate([F, tau])
-
-
 def test_effectiveness_is_the_sum_of_each_rotors_wrench(quad, hexa):
     rng = np.random.default_rng(0)
     for v in (quad, hexa):
         B = effectiveness(v.rotors)
         for _ in range(20):
             f = rng.uniform(0.0, v.rotors.thrust_max_n, v.rotors.count)
-            np.testing.assert_allclose(B @ f, literal_wrench(v.rotors, f), atol=1e-12)
+            np.testing.assert_allclose(B @ f, literal_rotor_wrench(v.rotors, f), atol=1e-12)
 
 
 def test_the_quad_table_reproduces_the_paper_x_mixer(quad):
@@ -73,7 +64,7 @@ def test_a_feasible_request_is_made_exactly_with_no_lateral_force(name, request)
         a = alloc.allocate_wrench(T, tau)
         f = np.array(a.rotor_thrusts_n)
         assert np.all(f >= alloc.f_min - 1e-12) and np.all(f <= alloc.f_max + 1e-12)
-        w = literal_wrench(v.rotors, f)
+        w = literal_rotor_wrench(v.rotors, f)
         if a.allocation.unallocated == (0.0, 0.0, 0.0, 0.0):  # inside every rotor's range: made exactly
             made += 1
             np.testing.assert_allclose(w, [0.0, 0.0, T, *tau], atol=1e-9)

@@ -11,20 +11,11 @@ import pytest
 from amcore.config import load_scenario
 from amcore.model import build_model
 
+from tests.amcore.literal import literal_rotor_wrench
+
 from .sim_testing import at_rest
 
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def literal_base_wrench(rotors, f) -> np.ndarray:
-    """Rotor by rotor, in B about the base origin: F = sum f a, tau = sum p x (f a) - KM f a."""
-    F, tau = np.zeros(3), np.zeros(3)
-    for r, fi in zip(rotors.rotor, f):
-        a = np.array(r.axis) / np.linalg.norm(r.axis)
-        km = r.moment_ratio_m if r.spin == "ccw" else -r.moment_ratio_m
-        F += fi * a
-        tau += np.cross(r.position_m, fi * a) - km * fi * a
-    return np.concatenate([F, tau])
 
 
 @pytest.mark.parametrize("scenario", ["two_am_comp", "two_am_comp_hex"])
@@ -43,7 +34,7 @@ def test_rotor_forces_move_the_base_as_a_rotor_by_rotor_sum(scenario, make_world
         w.apply_rotors(s, f, [0.0] * spec.vehicle.n_joints)
         w.step()
         measured = (w.state(s).pin_v() - x0.pin_v()) / w.dt_s
-        tau = np.concatenate([literal_base_wrench(rotors, f), np.zeros(spec.vehicle.n_joints)])
+        tau = np.concatenate([literal_rotor_wrench(rotors, f), np.zeros(spec.vehicle.n_joints)])
         predicted = pin.aba(model.pin_model, model.pin_model.createData(), x0.pin_q(), x0.pin_v(), tau)
         np.testing.assert_allclose(measured, predicted, rtol=1e-3, atol=1e-3)
     truth = w.ground_truth().ams[s]
