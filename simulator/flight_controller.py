@@ -33,7 +33,9 @@ of physical rate damping (docs/flight_controller.md).
 
 Frames: PX4 works in NED/FRD, this module in the simulator's ENU/FLU. The laws are the same
 vectors in other coordinates (the gains are per axis and sign-free), so nothing else changes.
-The emulation reads the simulator's exact attitude and rates (no estimator).
+It flies on the attitude and rates its caller hands it: the simulator's exact ones, or with
+[devices] its estimator's (amcore.estimator, run by simulator.core from the emulated IMU and
+motion capture, as PX4 flies on EKF2's output).
 """
 from __future__ import annotations
 
