@@ -158,6 +158,10 @@ class World:
         self.spec = spec
         self._initial = dict(initial)
         self._alloc = Allocation(spec.vehicle.rotors)
+        # each rotor's least thrust and range [N], for the busiest/idlest rotor's share in the truth
+        self._rotor_ranges = tuple(zip(spec.vehicle.rotors.thrust_min(),
+                                       (hi - lo for lo, hi in zip(spec.vehicle.rotors.thrust_min(),
+                                                                  spec.vehicle.rotors.thrust_max()))))
         self._tau_q_max = np.array(spec.vehicle.joint_torque_max_nm, dtype=float)
         self._client: int | None = None
         self._ams: dict[int, scene.AmBody] = {}
@@ -304,7 +308,7 @@ class World:
             sat[0] += rotors
             sat[1] += joints
             for k, a in enumerate(axes):
-                sat[2 + k] += bool(a)
+                sat[2 + k] += a  # Python bools (amcore.allocation)
 
     def rotor_thrusts(self, sysid: int) -> list[float] | None:
         """The lagging rotors' thrusts [N] after the last step (None: ideal rotors, or no step yet)."""
@@ -444,8 +448,7 @@ class World:
         """The busiest and the idlest rotor's thrust as a fraction of its range (0.0 before any command)."""
         if rotors_n is None:
             return {}
-        a = self._alloc
-        x = [(f - lo) / (hi - lo) for f, lo, hi in zip(rotors_n, a.f_min.tolist(), a.rotor_thrust_max_n)]
+        x = [(f - lo) / span for f, (lo, span) in zip(rotors_n, self._rotor_ranges)]
         return {"rotor_fraction_max": max(x), "rotor_fraction_min": min(x)}
 
     def _names_of(self, body_ids) -> tuple[str, ...]:
