@@ -91,3 +91,66 @@ def turn_frame(frame, s: HeadingState, pivot_W: np.ndarray):
         return frame
     R = Rz(s.dpsi)
     return type(frame)(R_WT=R @ frame.R_WT, p_WT=pivot_W + R @ (frame.p_WT - pivot_W))
+
+
+# --- Lateral admittance -----------------------------------------------------------------
+#
+# Two AMs that hold one object each keep their CoM where their own estimate puts it
+# (eq. Com_controller's K_t). With the motion capture's fixed biases their ideas of where the
+# object is differ by a few millimetres along the face, and the pads, held by friction,
+# turn that disagreement into an internal force: each pushes the object along its face with
+# about K_t times its share of the disagreement. Two such pushes on opposite faces are a
+# couple about the vertical, which on crowned pads rolls the object between them; each roll
+# re-seats the contacts and lets the load creep down the faces (docs/sensing.md).
+# The paper's AMs agree exactly on the object, so its law has no such force.
+#
+# The admittance lets each AM give way to the lateral force its own wrist sensor measures
+# (decentralized): with f_y the force the AM pushes the object with along its task frame's
+# y axis (-f_y of the wrench on the pad, {e}'s y axis being the face's horizontal), the CoM
+# reference moves along that axis by dy,
+#
+#     dy'' = -omega^2 f_y / K - 2 zeta omega dy',
+#
+# K the CoM stiffness along that axis (K_t). While the pad sticks, f_y = K (e + dy) for the
+# AM's share e of the disagreement, and dy settles on -e with natural frequency omega: the
+# internal force goes to zero. Out of contact (normal below min_normal_n) only the damping
+# acts, and |dy| stays within max_shift_m.
+
+
+@dataclass(frozen=True)
+class LateralAdmittance:
+    omega_rad_s: float
+    zeta: float
+    stiffness_n_per_m: float  # K_t along the task frame's y axis
+    min_normal_n: float = 2.0
+    max_shift_m: float = 0.02
+
+
+@dataclass(frozen=True)
+class LateralState:
+    dy: float = 0.0  # CoM reference shift along the task frame's y axis [m]
+    dy_d1: float = 0.0
+    dy_d2: float = 0.0
+    push_n: float = 0.0  # the lateral force last measured [N]
+
+
+def lateral_update(adm: LateralAdmittance, s: LateralState, wrench_E, dt: float) -> LateralState:
+    """One step (semi-implicit Euler) with the filtered wrench on the pad in {e} ([f; m])."""
+    w = adm.omega_rad_s
+    in_contact = -float(wrench_E[0]) >= adm.min_normal_n
+    push = -float(wrench_E[1]) if in_contact else 0.0
+    acc = -w * w * push / adm.stiffness_n_per_m - 2.0 * adm.zeta * w * s.dy_d1
+    rate = s.dy_d1 + dt * acc
+    dy = s.dy + dt * rate
+    if abs(dy) > adm.max_shift_m:  # held at the bound, at rest there
+        dy, rate, acc = math.copysign(adm.max_shift_m, dy), 0.0, 0.0
+    return LateralState(dy, rate, acc, push if in_contact else s.push_n)
+
+
+def shift_reference(ref, s: LateralState, axis_W: np.ndarray):
+    """`ref` with its CoM path moved by dy along axis_W (unit, horizontal), dy's two rates
+    added to the path's; the higher derivatives are left as they are (dy moves slowly)."""
+    if s.dy == 0.0 and s.dy_d1 == 0.0:
+        return ref
+    return ref._replace(r_c=ref.r_c + s.dy * axis_W, r_c_d1=ref.r_c_d1 + s.dy_d1 * axis_W,
+                        r_c_d2=ref.r_c_d2 + s.dy_d2 * axis_W)

@@ -192,6 +192,11 @@ class ControllerOptions:
     # measures on a crowned pad, with this natural frequency [Hz]; 0: off (the paper's fixed heading).
     heading_admittance_hz: float = 0.0
     heading_admittance_zeta: float = 1.0
+    # Beyond the paper (amcore.adapt.LateralAdmittance): in contact, the CoM reference gives
+    # way along the face to the lateral force the wrist sensor measures, with this natural
+    # frequency [Hz]; 0: off (the paper's CoM reference).
+    lateral_admittance_hz: float = 0.0
+    lateral_admittance_zeta: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -813,6 +818,9 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     if v.options.heading_admittance_hz < 0.0 or not v.options.heading_admittance_zeta > 0.0:
         raise ConfigError(f"{where}: [options].heading_admittance_hz must be >= 0 (0: off) and "
                           f"heading_admittance_zeta > 0")
+    if v.options.lateral_admittance_hz < 0.0 or not v.options.lateral_admittance_zeta > 0.0:
+        raise ConfigError(f"{where}: [options].lateral_admittance_hz must be >= 0 (0: off) and "
+                          f"lateral_admittance_zeta > 0")
     if v.options.heading_admittance_hz > 0.0 and v.pad.shape != "crowned":
         raise ConfigError(f"{where}: [options].heading_admittance_hz needs [pad].shape = 'crowned' (it reads the "
                           f"misalignment off the crown)")

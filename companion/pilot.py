@@ -17,9 +17,12 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from amcore import baseline, control
 from amcore.allocation import Allocation
-from amcore.adapt import HeadingAdmittance, HeadingState, heading_update, turn_frame, turn_reference
+from amcore.adapt import (HeadingAdmittance, HeadingState, LateralAdmittance, LateralState, heading_update,
+                          lateral_update, shift_reference, turn_frame, turn_reference)
 from amcore.config import ScenarioSpec
 from amcore.control import StepResult
 from amcore.mission import JoinBlend, am_mission, join_blend
@@ -62,6 +65,11 @@ class Pilot:
         self.heading = (HeadingAdmittance(2.0 * math.pi * o.heading_admittance_hz, o.heading_admittance_zeta,
                                           spec.vehicle.pad.crown_radius_m) if o.heading_admittance_hz > 0.0 else None)
         self.heading_state = HeadingState()
+        K_t = np.asarray(spec.vehicle.gains.K_t, dtype=float)
+        y_W = self.mission.frame.R_WT[:, 1]
+        self.lateral = (LateralAdmittance(2.0 * math.pi * o.lateral_admittance_hz, o.lateral_admittance_zeta,
+                                          float(y_W @ (K_t * y_W))) if o.lateral_admittance_hz > 0.0 else None)
+        self.lateral_state = LateralState()
         self._wrench_E_f = None  # the controller's filtered wrench of the last step (heading admittance)
         self._t_last: float | None = None
         self._started = False
@@ -110,6 +118,16 @@ class Pilot:
             pivot = self.mission.contact_point_W
             ref = turn_reference(ref, self.heading_state, pivot)
             task_frame = turn_frame(self.mission.frame, self.heading_state, pivot)
+        if self.lateral is not None:
+            if self._wrench_E_f is not None:
+                # the CoM gives way along the face to the force the pad pushes with while the
+                # pads squeeze the object on the table; from the lift on it settles (damping
+                # only), as the heading does: the object then hangs between the pads, and the
+                # push measures its swinging and turning, not a disagreement
+                w = self._wrench_E_f if self.mission.phase(t) == "grasp" else _NO_WRENCH
+                self.lateral_state = lateral_update(self.lateral, self.lateral_state, w, t - self._t_last)
+            axis = (task_frame if task_frame is not None else self.mission.frame).R_WT[:, 1]
+            ref = shift_reference(ref, self.lateral_state, axis)
         args = (self.model, self.data, self.params, state, ref, frame.wrench_E, self.memory, t)
         if self.attitude_mode:  # the autopilot flies the attitude; the arm law is amcore.offboard's
             out = offboard_step(*args, task_frame)

@@ -1,4 +1,4 @@
-"""Heading admittance (amcore.adapt) and squeeze sizing (amcore.mission.squeeze_plan)."""
+"""Heading and lateral admittance (amcore.adapt) and squeeze sizing (amcore.mission.squeeze_plan)."""
 from __future__ import annotations
 
 import dataclasses
@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from amcore.adapt import HeadingAdmittance, HeadingState, heading_update, misalignment, turn_frame, turn_reference
+from amcore.adapt import (HeadingAdmittance, HeadingState, LateralAdmittance, LateralState, heading_update,
+                          lateral_update, misalignment, shift_reference, turn_frame, turn_reference)
 from amcore.config import load_scenario
 from amcore.control import Reference
 from amcore.mission import am_mission, squeeze_plan
@@ -69,6 +70,49 @@ def test_turning_keeps_the_contact_point_and_turns_frame_and_heading_together():
     assert r.psi == pytest.approx(0.35) and r.psi_d1 == 0.01 and r.psi_d2 == -0.02
     assert np.linalg.norm(r.r_c - pivot) == pytest.approx(np.linalg.norm(ref.r_c - pivot))
     assert r.r_c_d1 == pytest.approx(Rz(0.05) @ ref.r_c_d1)
+
+
+LAT = LateralAdmittance(omega_rad_s=2.0 * math.pi * 0.3, zeta=1.0, stiffness_n_per_m=80.0)
+
+
+def _pad_wrench(push_y, normal=11.0):
+    """The wrench on a pad that squeezes with `normal` and pushes the object along {e}'s y
+    with push_y (the object pushes back: -push_y on the pad)."""
+    return np.array([-normal, -push_y, 0.0, 0.0, 0.0, 0.0])
+
+
+def test_lateral_admittance_nulls_an_internal_push_without_overshoot():
+    """A pad stuck to the object: the AM pushes along the face with K (e + dy) for its share e
+    of the disagreement; the reference shift settles on -e and the push on zero."""
+    e, dt = 0.004, 0.001
+    s, trace = LateralState(), []
+    for _ in range(int(6.0 / dt)):
+        s = lateral_update(LAT, s, _pad_wrench(LAT.stiffness_n_per_m * (e + s.dy)), dt)
+        trace.append(s.dy)
+    assert s.dy == pytest.approx(-e, rel=1e-3)
+    assert s.push_n == pytest.approx(0.0, abs=1e-3 * LAT.stiffness_n_per_m * e)
+    assert min(trace) >= -e * (1 + 1e-6)  # critically damped: no overshoot
+
+
+def test_lateral_admittance_moves_only_in_contact_and_stays_within_its_bound():
+    s = lateral_update(LAT, LateralState(0.01, 0.002), _pad_wrench(5.0, normal=1.0), 0.001)
+    assert s.dy_d2 == pytest.approx(-2.0 * LAT.omega_rad_s * 0.002)  # out of contact: damping only
+    s = LateralState()
+    for _ in range(20000):  # a push no shift can relieve (the object is held elsewhere)
+        s = lateral_update(LAT, s, _pad_wrench(30.0), 0.001)
+    assert abs(s.dy) == LAT.max_shift_m and s.dy_d1 == 0.0
+
+
+def test_the_shift_moves_the_com_path_along_the_axis_and_nothing_else():
+    axis = np.array([0.0, 1.0, 0.0])
+    ref = Reference(np.array([0.1, 0.2, 0.9]), np.ones(3), np.ones(3), np.ones(3), np.ones(3), 0.3, 0.1, 0.0,
+                    np.zeros(3), np.zeros(3), np.zeros(3))
+    out = shift_reference(ref, LateralState(0.003, 0.001, -0.002), axis)
+    np.testing.assert_allclose(out.r_c - ref.r_c, 0.003 * axis)
+    np.testing.assert_allclose(out.r_c_d1 - ref.r_c_d1, 0.001 * axis)
+    np.testing.assert_allclose(out.r_c_d2 - ref.r_c_d2, -0.002 * axis)
+    assert out.r_c_d3 is ref.r_c_d3 and out.psi == ref.psi and out.y is ref.y
+    assert shift_reference(ref, LateralState(), axis) is ref
 
 
 def test_squeeze_sizing_holds_the_share_with_the_margin_within_the_thrust():

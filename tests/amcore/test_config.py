@@ -59,6 +59,8 @@ BASE = (ROOT / "configs" / "scenarios" / "two_am_comp.toml").read_text()
     ("time_constant_s = 0.0", "time_constant_s = -0.01", "[rotors].time_constant_s: must be in [0, 1] s"),
     ("rate_hz = 1000.0", "rate_hz = 1000.0\ncontrol_rate_hz = 400.0", "control_rate_hz: 400 Hz must divide"),
     ("rate_hz = 1000.0", "rate_hz = 1000.0\ncontrol_rate_hz = 2000.0", "control_rate_hz: 2000 Hz must divide"),
+    ("[object]", "[options]\nlateral_admittance_hz = -0.3\n[object]", "[options].lateral_admittance_hz must be >= 0"),
+    ("[object]", "[options]\nlateral_admittance_zeta = 0.0\n[object]", "lateral_admittance_zeta > 0"),
 ])
 def test_malformed_scenario_names_file_and_key(tmp_path, old, new, key):
     assert old in BASE

@@ -114,3 +114,30 @@ def test_pilot_flies_the_law_its_scenario_names(spec):
     Outcome(4, ("approach",), (0.0, 1.0)).add(0.0, "approach", res_b.diagnostics)
     sample = controller_sample(0.0, "approach", res_b.diagnostics, res_b.command)
     assert sample.keys() == controller_sample(0.0, "approach", res_p.diagnostics, res_p.command).keys()
+
+
+@pytest.mark.parametrize("phase_t, moves", [(7.0, True), (12.0, False)])
+def test_lateral_admittance_gives_way_to_the_pads_push_in_the_grasp_phase_only(phase_t, moves):
+    """[options].lateral_admittance_hz: a pad squeezing with 11 N and pushing the object with
+    1 N along {e}'s y moves the CoM reference back along the task frame's y while the pads
+    squeeze the object on the table; from the lift on the same push moves nothing."""
+    from ..conftest import ROOT
+
+    base = load_scenario(ROOT / "configs" / "scenarios" / "two_am_robust.toml")
+    opts = dataclasses.replace(base.vehicle.options, lateral_admittance_hz=0.3, heading_admittance_hz=0.0)
+    spec = dataclasses.replace(base, vehicle=dataclasses.replace(base.vehicle, options=opts))
+    p = Pilot(spec, 4)
+    x0 = p.mission.initial_state()
+    y_W = p.mission.frame.R_WT[:, 1]
+    dt = spec.control_dt_s
+    shift = []
+    for k in range(1500):
+        t = phase_t + k * dt
+        values = [*x0.p_WB, 1.0, 0.0, 0.0, 0.0, *x0.v_B, *x0.w_B, *x0.q, *x0.qdot, -11.0, -1.0, 0.0, 0.0, 0.0, 0.0]
+        _, _, res = p.command(sensor_frame_from_wire(k, t, values, len(x0.q), 0))
+        shift.append(float(y_W @ (res.diagnostics.r_c_d - p.mission.reference(t).r_c)))
+    if moves:
+        assert shift[-1] < -1e-3  # > 1 mm back, against the push
+        assert all(b <= a + 1e-12 for a, b in zip(shift, shift[1:]))  # monotonic: no overshoot
+    else:
+        assert max(abs(s) for s in shift) < 1e-12
