@@ -28,7 +28,7 @@ import time
 from pathlib import Path
 
 
-from amcore import cliargs
+from amcore import cliargs, preflight
 from amcore.config import DEFAULT_SCENARIO, ConfigError, check_duration, load_scenario, scenario_id
 from amlink import signing
 from amlink.endpoint import DEFAULT_GCS, SIM_BIND, EndpointError, parse_endpoint
@@ -131,6 +131,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         spec = load_scenario(a.config)
+        preflight.check(spec)  # [mission].envelope_check: nothing flies outside the team's envelope
         keys, warning = signing.keys_for_run(spec, a.key_file)
         gcs_key = signing.read_gcs_key_file(a.gcs_key_file) if a.gcs_key_file is not None else None
     except (ConfigError, signing.SigningKeyError) as exc:
