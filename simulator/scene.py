@@ -16,6 +16,7 @@ coefficient too, and the pair has its square).
 """
 from __future__ import annotations
 
+import math
 import tempfile
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
