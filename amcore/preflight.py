@@ -106,12 +106,11 @@ def preflight(spec: ScenarioSpec) -> Preflight:
                  f"share ({mine.limit})")
         if smallest is None:
             use = f"no team of up to {TEAM_MOST} of these AMs holds it"
+            head = f"{head} needs {mine.required_n:.1f} N per pad from {n} AMs"
         else:
             use = f"use {smallest} AMs"
             need = team_check(spec, smallest, env).required_n
             head = f"{head} needs {need:.1f} N per pad from {smallest} AMs and {mine.required_n:.1f} N from {n}"
-        if smallest is None:
-            head = f"{head} needs {mine.required_n:.1f} N per pad from {n} AMs"
         message = f"{head}; {holds}: {use}"
     return Preflight(m, ms.friction_assumed, mine, smallest, message)
 

@@ -1,8 +1,8 @@
 """A short campaign of the deployment randomization on two_am_robust, as a regression check with
 a loose bound: the draws outside the team's envelope are refused before flight, and of the
 flown ones (the object moved and turned, measured by motion capture, every device at its
-default level) at least half succeed. About 25 s on two idle cores (two 20 s missions in parallel),
-77 s measured on two cores shared with other work."""
+default level) at least half succeed. Two 20 s missions on two workers: 77 s measured on two
+cores shared with other work."""
 from __future__ import annotations
 
 import json
