@@ -108,3 +108,27 @@ def test_the_runners_refuse_before_flight_with_exit_2(tmp_path, capsys):
     assert launch.main([str(path), "--run-dir", str(tmp_path / "run"), "--no-telemetry", "--gcs", "none"]) == 2
     assert "outside the team's envelope" in capsys.readouterr().err
     assert time.perf_counter() - t0 < 5.0 and not (tmp_path / "run").exists()  # nothing started
+
+
+@pytest.mark.parametrize("line,words", [
+    ('object_pose = "gps"', "[mission].object_pose: expected one of config, mocap"),
+    ("mass_tolerance = 0.7", "[mission].mass_tolerance: must be in [0, 0.5]"),
+    ("mass_tolerance = -0.1", "[mission].mass_tolerance: must be in [0, 0.5]"),
+    ("planned_mass_kg = -1.0", "[mission].planned_mass_kg: must be in [0.01, 100]"),
+    ("envelope_check = 1", "[mission].envelope_check: expected true or false"),
+])
+def test_the_new_mission_keys_are_checked_naming_file_and_key(tmp_path, line, words):
+    path = _outside_file(tmp_path)
+    path.write_text(path.read_text().replace("[mission]\n", f"[mission]\n{line}\n").replace(
+        "object_pose = \"mocap\"\n", "" if "object_pose" in line else "object_pose = \"mocap\"\n").replace(
+        "envelope_check = true\n", "" if "envelope_check" in line else "envelope_check = true\n"))
+    with pytest.raises(ConfigError) as e:
+        load_scenario(path)
+    assert str(path) in str(e.value) and words in str(e.value)
+
+
+def test_an_object_turned_past_a_full_turn_is_refused(tmp_path):
+    path = _outside_file(tmp_path)
+    path.write_text(path.read_text().replace("[object]\n", "[object]\nyaw_deg = 400.0\n"))
+    with pytest.raises(ConfigError, match=r"\[object\].yaw_deg: must be in \[-360, 360\]"):
+        load_scenario(path)
