@@ -321,6 +321,7 @@ class ObjectSpec:
     # pad_friction / lateral_friction. 0: unset, the pad takes lateral_friction (the pair
     # then has lateral_friction ** 2).
     pad_friction: float = 0.0
+    yaw_deg: float = 0.0  # the object's turn about the world's z axis at rest (a box's faces turn with it)
 
     @property
     def pad_object_friction(self) -> float:
@@ -374,6 +375,22 @@ class MissionSpec:
     # yaw authority (docs/robust_grasp.md).
     touch_force_n: float = 0.0
     touch_hold_s: float = 0.0
+    # What the team knows of the object's mass (beyond the paper): the planned mass (0: the object's
+    # [object].mass_kg, exactly) and how well it is known: the planned mass is within +/-mass_tolerance
+    # of the true one, so the true mass is at most planned_mass_kg / (1 - mass_tolerance), the mass the
+    # squeeze sizing and the envelope check plan for (`design_mass_kg`).
+    planned_mass_kg: float = 0.0
+    mass_tolerance: float = 0.0
+    # Pre-flight envelope check (amcore.preflight): a team asked to hold what it cannot (the squeeze the
+    # design mass needs at friction_assumed with friction_margin, against what each AM pushes with its
+    # margins kept) refuses before anything flies: exit 2, naming the limit and the smallest team.
+    envelope_check: bool = False
+    # Where each AM takes the object's pose from to plan its approach (amcore.mission.am_mission):
+    # "config", [object].position_m and yaw_deg as written; "mocap", the motion capture's measurement of
+    # the object before flight (simulator.object_mocap: [devices.mocap]'s noise and biases when
+    # [devices] is on, exact otherwise), one measurement shared by the team. With "mocap", or a box
+    # turned by a yaw, each AM approaches the face whose normal is nearest its azimuth.
+    object_pose: str = "config"
 
 
 @dataclass(frozen=True)
@@ -755,6 +772,8 @@ OBJECT_SIZE_RANGE_M = (0.05, 3.0)
 OBJECT_XY_MAX_M = 10.0
 OBJECT_BOTTOM_MAX_M = 5.0
 MISSION_DISTANCE_MAX_M = 2.0
+OBJECT_POSE_SOURCES = ("config", "mocap")  # [mission].object_pose
+MASS_TOLERANCE_MAX = 0.5  # a mass known to worse than +/-50 % is not a plan: weigh the object
 ROTOR_COUNT_RANGE = (4, 16)  # PX4's CA_ROTOR_COUNT allows up to 12; 16 leaves room for coaxial octos
 ROTOR_SPACING_MIN_M = 0.01  # two rotors closer than this are one rotor entered twice
 
@@ -1076,6 +1095,7 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     if obj.shape not in ("box", "cylinder"):
         raise ConfigError(f"{where}: [object].shape: expected 'box' or 'cylinder', got '{obj.shape}'")
     _in_range(f"{where}: [object].mass_kg", obj.mass_kg, *OBJECT_MASS_RANGE_KG, " kg")
+    _in_range(f"{where}: [object].yaw_deg", obj.yaw_deg, -360.0, 360.0, " deg")
     _positive(f"{where}: [object].lateral_friction", obj.lateral_friction)
     if obj.pad_friction < 0.0:
         raise ConfigError(f"{where}: [object].pad_friction: must be >= 0 (0: unset), got {obj.pad_friction!r}")
@@ -1107,6 +1127,14 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
         _in_range(f"{where}: [mission].{key}", getattr(mission, key), 0.0, MISSION_DISTANCE_MAX_M, " m")
     if mission.thrust_fraction_max > 1.0:
         raise ConfigError(f"{where}: [mission].thrust_fraction_max: must be <= 1, got {mission.thrust_fraction_max}")
+    if mission.object_pose not in OBJECT_POSE_SOURCES:
+        raise ConfigError(f"{where}: [mission].object_pose: expected one of {', '.join(OBJECT_POSE_SOURCES)}, "
+                          f"got {mission.object_pose!r}")
+    if mission.planned_mass_kg != 0.0:
+        _in_range(f"{where}: [mission].planned_mass_kg", mission.planned_mass_kg, *OBJECT_MASS_RANGE_KG,
+                  " kg (0: the object's mass_kg)")
+    _in_range(f"{where}: [mission].mass_tolerance", mission.mass_tolerance, 0.0, MASS_TOLERANCE_MAX,
+              " (a fraction of the planned mass)")
     if (mission.touch_force_n > 0.0) != (mission.touch_hold_s > 0.0):
         raise ConfigError(f"{where}: [mission]: touch_force_n and touch_hold_s go together (both 0: off)")
     if mission.touch_hold_s > 0.0 and (mission.approach_end_s + 2.0 * mission.grasp_move_s + mission.touch_hold_s
@@ -1218,19 +1246,47 @@ def _check_lift(spec: ScenarioSpec, where: str) -> None:
                           f"{max(0.0, most):.2f} kg)")
 
 
-def surface_distance(obj: ObjectSpec, azimuth_rad: float) -> float:
-    """Distance [m] from the object's vertical axis to its side along the horizontal direction azimuth."""
+def design_mass_kg(spec: ScenarioSpec) -> float:
+    """The heaviest the object can be for the team's plan [kg]: the planned mass ([mission].planned_mass_kg,
+    else [object].mass_kg) over 1 - [mission].mass_tolerance (the planned mass is within that fraction of
+    the true one). With neither set, exactly [object].mass_kg."""
+    m = spec.mission
+    planned = m.planned_mass_kg if m.planned_mass_kg > 0.0 else spec.object.mass_kg
+    return planned if m.mass_tolerance == 0.0 else planned / (1.0 - m.mass_tolerance)
+
+
+def surface_distance(obj: ObjectSpec, azimuth_rad: float, yaw_rad: float | None = None) -> float:
+    """Distance [m] from the object's vertical axis to its side along the horizontal direction
+    azimuth (W), the object turned by yaw_rad about z (None: its [object].yaw_deg)."""
     if obj.shape == "cylinder":
         return obj.radius_m
+    yaw = math.radians(obj.yaw_deg) if yaw_rad is None else yaw_rad
+    a = azimuth_rad - yaw if yaw != 0.0 else azimuth_rad
     hx, hy = 0.5 * obj.size_m[0], 0.5 * obj.size_m[1]
-    c, s = abs(math.cos(azimuth_rad)), abs(math.sin(azimuth_rad))
+    c, s = abs(math.cos(a)), abs(math.sin(a))
     return min(hx / c if c > 1e-12 else math.inf, hy / s if s > 1e-12 else math.inf)
 
 
+def faces_from_pose(spec: ScenarioSpec) -> bool:
+    """Whether the AMs pick a box's face from the object's pose ([mission].object_pose = "mocap", or a
+    box turned by [object].yaw_deg) rather than approach along their azimuths (the paper's)."""
+    return spec.object.shape == "box" and (spec.mission.object_pose == "mocap" or spec.object.yaw_deg != 0.0)
+
+
+def face_azimuth(azimuth_rad: float, yaw_rad: float) -> float:
+    """The normal of a box's face nearest the direction azimuth_rad [rad, W], the box turned by yaw_rad:
+    yaw + k pi/2 with k the nearest whole number to (azimuth - yaw) / (pi/2). Two AMs at opposite
+    azimuths get opposite faces (k and k + 2), ties included."""
+    return yaw_rad + math.floor((azimuth_rad - yaw_rad) / (0.5 * math.pi) + 0.5) * (0.5 * math.pi)
+
+
 def _pad_start_W(spec: ScenarioSpec, am: AmSpec) -> tuple[float, float, float]:
-    """Where AM `am`'s pad starts [m, W]: [mission].standoff_m outside the face on its azimuth,
-    start_height_m above the grasp height, moved by its start_offset_m (amcore.mission)."""
+    """Where AM `am`'s pad starts [m, W]: [mission].standoff_m outside the face on its azimuth (the
+    face nearest it, `faces_from_pose`), start_height_m above the grasp height, moved by its
+    start_offset_m (amcore.mission)."""
     az = math.radians(am.azimuth_deg)
+    if faces_from_pose(spec):
+        az = face_azimuth(az, math.radians(spec.object.yaw_deg))
     r = surface_distance(spec.object, az) + spec.mission.standoff_m
     c = spec.object.position_m
     return (c[0] + r * math.cos(az) + am.start_offset_m[0], c[1] + r * math.sin(az) + am.start_offset_m[1],

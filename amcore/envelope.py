@@ -77,6 +77,24 @@ class Envelope:
                 and min(down, up) >= self.margins.yaw_reserve_nm
                 and max(op.joint_fractions) <= self.margins.joint_fraction_max)
 
+    def broken_margin(self, squeeze_n: float, load_kg: float) -> str | None:
+        """Which margin the loaded hover at (squeeze_n [N], load_kg [kg]) breaks first, in words
+        (rotors, yaw reserve, arm joints); None if it keeps them all."""
+        op = operating_point(self.vehicle, self.model, self.q, squeeze_n, load_kg, self.alloc)
+        mg = self.margins
+        if not op.feasible:
+            return "its rotors cannot make the loaded hover at all"
+        if max(op.rotor_fractions) > mg.thrust_fraction_max:
+            return (f"its busiest rotor at {max(op.rotor_fractions):.0%} of its range, over "
+                    f"{mg.thrust_fraction_max:.0%}")
+        down, up = op.authority_nm["yaw"]
+        if min(down, up) < mg.yaw_reserve_nm:
+            return f"{min(down, up):.2f} N m of yaw left, under the {mg.yaw_reserve_nm:g} N m reserve"
+        if max(op.joint_fractions) > mg.joint_fraction_max:
+            return (f"its busiest arm joint at {max(op.joint_fractions):.0%} of its torque limit, over "
+                    f"{mg.joint_fraction_max:.0%}")
+        return None
+
     def capacity_n(self, load_kg: float, tol_n: float = 0.01) -> float:
         """N_max: the most squeeze [N] with the margins kept, carrying load_kg; 0.0 if even no
         squeeze keeps them."""

@@ -22,7 +22,8 @@ import numpy as np
 import pinocchio as pin
 
 from . import law
-from .config import AmSpec, ScenarioSpec, surface_distance  # noqa: F401 (surface_distance: re-exported)
+from .config import (AmSpec, MissionSpec, ScenarioSpec, VehicleParams, design_mass_kg, face_azimuth,  # noqa: F401
+                     faces_from_pose, surface_distance)  # (surface_distance: re-exported)
 from .control import Reference
 from .model import AmModel, AmState, create_data, decoupled_terms
 from .so3 import Rz
@@ -69,13 +70,19 @@ class SqueezePlan:
 
 
 def squeeze_plan(spec: ScenarioSpec, model: AmModel) -> SqueezePlan:
-    ms, v = spec.mission, spec.vehicle
+    """The squeeze of `spec`'s team for the object it plans for (`design_mass_kg`)."""
+    return squeeze_for(spec.mission, spec.vehicle, model.mass_kg, design_mass_kg(spec), len(spec.ams))
+
+
+def squeeze_for(ms: MissionSpec, v: VehicleParams, am_mass_kg: float, object_mass_kg: float, n: int) -> SqueezePlan:
+    """SqueezePlan of a team of n AMs of mass am_mass_kg [kg] holding object_mass_kg [kg] (the
+    pre-flight check asks it of other team sizes, amcore.preflight)."""
     k_x = v.gains.K_y[v.task.components.index("x")]
     fixed = k_x * ms.squeeze_m
-    g, n = v.gravity_mps2, len(spec.ams)
-    share = spec.object.mass_kg * g / n
+    g = v.gravity_mps2
+    share = object_mass_kg * g / n
     required = ms.friction_margin * share / ms.friction_assumed
-    weight = model.mass_kg * g + share
+    weight = am_mass_kg * g + share
     thrust = ms.thrust_fraction_max * v.rotors.thrust_max_z_n
     feasible = min(math.sqrt(max(thrust * thrust - weight * weight, 0.0)), ms.squeeze_max_n)
     if not ms.squeeze_sizing:
@@ -122,20 +129,41 @@ class AmMission:
                        q=np.array(self.q_nominal), qdot=np.zeros(len(self.q_nominal)))
 
 
-def am_mission(spec: ScenarioSpec, am: AmSpec, model: AmModel) -> AmMission:
-    """Build AM `am`'s references from the scenario. Needs task components (x, z, pitch)."""
+@dataclass(frozen=True)
+class ObjectPose:
+    """The object's pose as the team knows it: its centre p_W_m [m, W] and its yaw about z_W
+    [rad] (the config's, or the motion capture's measurement, simulator.object_mocap)."""
+
+    p_W_m: tuple[float, float, float]
+    yaw_rad: float
+
+
+def config_object_pose(spec: ScenarioSpec) -> ObjectPose:
+    """[object].position_m and yaw_deg, as written."""
+    return ObjectPose(tuple(spec.object.position_m), math.radians(spec.object.yaw_deg))
+
+
+def am_mission(spec: ScenarioSpec, am: AmSpec, model: AmModel, object_pose: ObjectPose | None = None) -> AmMission:
+    """Build AM `am`'s references from the scenario and the object's pose (None: the config's,
+    `config_object_pose`; [mission].object_pose = "mocap": the measurement the simulator's
+    motion capture shares). Each AM uses only the pose and its own [[am]] entry: with
+    `faces_from_pose`, it approaches the box's face whose normal is nearest its azimuth.
+    Needs task components (x, z, pitch)."""
     if tuple(spec.vehicle.task.components) != ("x", "z", "pitch"):
         raise ValueError(f"the grasp mission is defined for task components (x, z, pitch), "
                          f"vehicle has {spec.vehicle.task.components}")
     ms = spec.mission
+    pose = object_pose or config_object_pose(spec)
     az = np.deg2rad(am.azimuth_deg)
+    if faces_from_pose(spec):
+        az = face_azimuth(az, pose.yaw_rad)
     # face the object; a misaligned AM approaches and faces along a direction turned by its
     # misalignment about the object centre, believing the face is where it would be
     psi = az + np.pi + np.deg2rad(am.misalignment_deg)
-    frame = TaskFrame(R_WT=Rz(psi), p_WT=np.array(spec.object.position_m, dtype=float))
+    frame = TaskFrame(R_WT=Rz(psi), p_WT=np.array(pose.p_W_m, dtype=float))
     geo = nominal_geometry(model)
     d = geo.p_BE - geo.r_BC  # end-effector relative to CoM, level, in {b} = {t} orientation
-    half = surface_distance(spec.object, az)
+    half = surface_distance(spec.object, az, pose.yaw_rad)
     pitch = geo.pitch_rad  # hold the nominal pose's pad orientation
     y0 = np.array([-(half + ms.standoff_m), ms.start_height_m, pitch])
     y_app = np.array([-(half + ms.pre_gap_m), 0.0, pitch])

@@ -26,13 +26,14 @@ from amlink.udp import (
 
 _HEARTBEAT = mav.MAVLINK_MSG_ID_HEARTBEAT
 _SCENARIO = mav.MAVLINK_MSG_ID_AM_SCENARIO
+_OBJECT_POSE = mav.MAVLINK_MSG_ID_AM_OBJECT_POSE
 _ACK = mav.MAVLINK_MSG_ID_COMMAND_ACK
 _STATUSTEXT = mav.MAVLINK_MSG_ID_STATUSTEXT
 _SIM_STEP = mav.MAVLINK_MSG_ID_AM_SIM_STEP
 _SENSOR_PART_IDS = frozenset(
     (mav.MAVLINK_MSG_ID_ODOMETRY, mav.MAVLINK_MSG_ID_AM_JOINT_STATE, mav.MAVLINK_MSG_ID_AM_WRENCH)
 )
-_ACCEPT = (_HEARTBEAT, _SCENARIO, _ACK, _STATUSTEXT, _SIM_STEP, *_SENSOR_PART_IDS)
+_ACCEPT = (_HEARTBEAT, _SCENARIO, _OBJECT_POSE, _ACK, _STATUSTEXT, _SIM_STEP, *_SENSOR_PART_IDS)
 _MAX_TEXTS = 256
 _MAX_ACKS = 64
 
@@ -91,6 +92,7 @@ class CompanionClient:
         self.limits = limits
         self.stats = LinkStats()
         self.scenario: ScenarioInfo | None = None
+        self.object_pose: tuple | None = None  # ((x, y, z) [m, W], yaw [rad]) if the simulator sent AM_OBJECT_POSE
         self.status_texts: deque[tuple[int, str]] = deque(maxlen=_MAX_TEXTS)  # (MAV_SEVERITY, text), latest
         # the simulator's last "still gathering companions" notice: (time.monotonic(), text), or None
         self.waiting_notice: tuple[float, str] | None = None
@@ -321,6 +323,11 @@ class CompanionClient:
                     self._reject(exc)
                     return False
                 self._sim_rx_addr = addr
+        elif mid == _OBJECT_POSE:  # comes just before AM_SCENARIO, in the same datagram
+            try:
+                self.object_pose = codec.object_pose_from_message(body)
+            except ValueError as exc:
+                self._reject(exc)
         elif mid == _ACK:
             self._acks.append(body)
         elif mid == _STATUSTEXT:

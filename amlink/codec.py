@@ -197,6 +197,11 @@ def scenario_message(info: ScenarioInfo) -> object:
     )
 
 
+def object_pose_message(position_m, yaw_rad: float) -> object:
+    """AM_OBJECT_POSE: the measured object's centre [m, W] and yaw [rad]."""
+    return mav.MAVLink_am_object_pose_message([float(x) for x in position_m], float(yaw_rad))
+
+
 # -- decoders -------------------------------------------------------------------
 
 
@@ -205,6 +210,14 @@ def scenario_from_message(msg) -> ScenarioInfo:
     if not math.isfinite(msg.rate_hz):
         raise NonFiniteValueError("AM_SCENARIO", "rate_hz")
     return ScenarioInfo(msg.scenario_id, msg.n_am, name.rstrip("\x00"), msg.seed, msg.rate_hz)
+
+
+def object_pose_from_message(msg) -> tuple[tuple[float, float, float], float]:
+    """AM_OBJECT_POSE as ((x, y, z) [m, W], yaw [rad]); NonFiniteValueError on NaN/inf."""
+    values = [*msg.position_m, msg.yaw_rad]
+    if not all(math.isfinite(v) for v in values):
+        raise NonFiniteValueError("AM_OBJECT_POSE", "position_m or yaw_rad")
+    return (tuple(float(x) for x in msg.position_m), float(msg.yaw_rad))
 
 
 def sensor_frame_from_messages(odom, joints, wrench, step_msg) -> SensorFrame:

@@ -65,6 +65,8 @@ class SimServer:
             HEARTBEAT there until a companion answers).
         sysids: companion system ids (2..255; 1 is the simulator).
         scenario: what :meth:`wait_for_peers` announces in AM_SCENARIO.
+        object_pose: ``((x, y, z), yaw)`` of the measured object [m, rad, W], sent in
+            AM_OBJECT_POSE just before every AM_SCENARIO; None: not sent.
         timeout_s: default per-step answer timeout of :meth:`exchange` [s].
         signing_keys: ``None`` -- signing off (the default at this API level; the
             process mains turn it on from the scenario).  Else ``{sysid: 32-byte
@@ -98,7 +100,8 @@ class SimServer:
                  timeout_s: float = 1.0, signing_keys: Mapping[int, bytes] | None = None,
                  limits: SetpointLimits = DEFAULT_SETPOINT_LIMITS, retry_s: float = SENSOR_RETRY_S,
                  shim: Shim | None = None,
-                 on_heartbeat: Callable[[int, int, object], None] | None = None) -> None:  # fmt: skip
+                 on_heartbeat: Callable[[int, int, object], None] | None = None,
+                 object_pose: tuple | None = None) -> None:  # fmt: skip
         binds = [bind] if isinstance(bind, (str, Endpoint)) else list(bind)
         if not binds:
             raise ValueError("bind: at least one endpoint")
@@ -113,6 +116,8 @@ class SimServer:
         if not retry_s > 0.0:
             raise ValueError(f"retry_s must be > 0, got {retry_s}")
         self.scenario = scenario
+        # ((x, y, z) [m, W], yaw [rad]) of the measured object, sent before AM_SCENARIO; None: not sent
+        self._hello_msgs = ([] if object_pose is None else [codec.object_pose_message(*object_pose)])
         self.timeout_s = timeout_s
         self.limits = limits
         self.retry_s = retry_s
@@ -460,7 +465,7 @@ class SimServer:
             if not self._admit(peer, addr, mid, move=mid != _ATTITUDE):
                 continue
             if mid == _HEARTBEAT:
-                self._link.send(addr, peer.encoder.pack([codec.scenario_message(self.scenario)]))
+                self._link.send(addr, peer.encoder.pack([*self._hello_msgs, codec.scenario_message(self.scenario)]))
                 if self.on_heartbeat is not None:
                     self.on_heartbeat(sysid, compid, body)
             elif mid == _COMMAND_LONG:

@@ -24,6 +24,7 @@ from pathlib import Path
 
 from amcore import cliargs
 from amcore.config import DEFAULT_SCENARIO, ConfigError, load_scenario, scenario_id
+from amcore.mission import ObjectPose
 from amlink import signing
 from amlink.endpoint import COMPANION_SIM, COMPANION_SIM_FORMS, EndpointError, as_destination, parse_endpoint
 from amlink.errors import LinkError, SimulatorUnreachableError
@@ -129,6 +130,12 @@ def main(argv: list[str] | None = None) -> int:
                   f"was started with '{spec.name}' (id {my_id}, {a.config}){same}; start both with the same "
                   f"scenario and vehicle files", file=sys.stderr)
             return 3
+        if spec.mission.object_pose == "mocap":  # plan the approach from the simulator's measured object
+            if client.object_pose is None:
+                print(f"{tag}: error: the scenario plans from the measured object ([mission].object_pose = "
+                      f"\"mocap\") and the simulator sent none (AM_OBJECT_POSE)", file=sys.stderr)
+                return 3
+            pilot = Pilot(spec, a.sysid, model=pilot.model, object_pose=ObjectPose(*client.object_pose))
         client.arm(timeout_s=5.0)
         print(f"{tag}: connected to {a.sim}, scenario '{info.name}', armed", file=sys.stderr, flush=True)
         t0 = time.perf_counter()

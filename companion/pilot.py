@@ -25,7 +25,7 @@ from amcore.adapt import (HeadingAdmittance, HeadingState, LateralAdmittance, La
                           lateral_update, shift_reference, turn_frame, turn_reference)
 from amcore.config import ScenarioSpec
 from amcore.control import StepResult
-from amcore.mission import JoinBlend, am_mission, join_blend
+from amcore.mission import JoinBlend, ObjectPose, am_mission, join_blend
 from amcore.model import build_model, create_data
 from amcore.offboard import OffboardMemory, offboard_step
 from amcore.so3 import R_to_quat_wxyz
@@ -38,12 +38,14 @@ _NO_WRENCH = (0.0,) * 6
 
 
 class Pilot:
-    def __init__(self, spec: ScenarioSpec, sysid: int, model=None) -> None:
+    def __init__(self, spec: ScenarioSpec, sysid: int, model=None, object_pose: ObjectPose | None = None) -> None:
+        """object_pose: the object's measured pose ([mission].object_pose = "mocap"); None: the config's."""
         self.spec = spec
         self.am = spec.am(sysid)
         self.model = model if model is not None else build_model(spec.vehicle)
         self.data = create_data(self.model)
-        self.mission = am_mission(spec, self.am, self.model)
+        self.object_pose = object_pose
+        self.mission = am_mission(spec, self.am, self.model, object_pose)
         self.attitude_mode = spec.vehicle.flight_controller.mode == "attitude"
         if spec.vehicle.options.controller == "baseline":
             self.law = baseline.step
@@ -85,7 +87,7 @@ class Pilot:
         """Two steps of a throwaway pilot on frames of the mission's start, built as the wire
         builds them: the first calls into the compiled law (amcore.law), with the argument
         types a run passes (companion.jitcache holds the lock around it). This pilot is untouched."""
-        twin = Pilot(self.spec, self.am.sysid, model=self.model)
+        twin = Pilot(self.spec, self.am.sysid, model=self.model, object_pose=self.object_pose)
         x = self.mission.initial_state()
         values = [*x.p_WB, *R_to_quat_wxyz(x.R_WB), *x.v_B, *x.w_B, *x.q, *x.qdot, *_NO_WRENCH]
         for k in range(2):

@@ -30,14 +30,16 @@ def inside(row: dict, max_mass_kg: float, max_squeeze_n: float, n_ams: int = 2) 
 
 
 def describe(rows: list[dict]) -> str:
+    refused = sum(r["verdict"] == "refused" for r in rows)
+    rows = [r for r in rows if r["verdict"] != "refused"]  # refused before flight: never flown
     if not rows:
-        return "no trials"
+        return f"no trials flown ({refused} refused)" if refused else "no trials"
     ok = sum(r["verdict"] == "success" for r in rows)
     lo, hi = wilson_interval(ok, len(rows))
     classes = collections.Counter(r["failure_class"] for r in rows if r["verdict"] != "success")
     failed = ", ".join(f"{c} {n}" for c, n in classes.most_common())
     return (f"{ok}/{len(rows)} succeeded ({100 * ok / len(rows):.0f} %, Wilson 95 % {100 * lo:.0f}-{100 * hi:.0f} %)"
-            + (f"; {failed}" if failed else ""))
+            + (f"; {failed}" if failed else "") + (f"; {refused} refused before flight" if refused else ""))
 
 
 def main(argv: list[str] | None = None) -> int:

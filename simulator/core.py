@@ -39,7 +39,7 @@ from collections.abc import Callable, Collection, Iterator, Mapping
 import numpy as np
 
 from amcore.config import AmSpec, ScenarioSpec
-from amcore.mission import am_mission
+from amcore.mission import ObjectPose, am_mission
 from amcore.model import AmState, build_model
 from amcore.so3 import Rz
 from amlink.impair import ImpairedLink, LinkImpairment
@@ -48,6 +48,7 @@ from amlink.types import AttitudeSetpoint, SensorFrame, TorqueSetpoint, sensor_f
 from .failsafe import Failsafe, FailsafeGains
 from .fcstate import FcMode, FleetSnapshot, VehicleSnapshot
 from .flight_controller import FlightController
+from .object_mocap import measure_object
 from .outcome import RunOutcome
 from .devices import DeviceSuite
 from .sensors import SensorModel
@@ -61,10 +62,11 @@ LAND_NOW = FailsafeGains(hold_s=0.0)  # a commanded landing: the failsafe's land
 _FAILSAFE_MODE = {"hold": FcMode.HOLD, "land": FcMode.LAND, "landed": FcMode.LANDED}
 
 
-def initial_state(spec: ScenarioSpec, am: AmSpec, model) -> AmState:
-    """Where a vehicle starts: its mission's start (at rest, level, nominal arm pose), moved by
-    its [[am]] start_offset_m and turned by start_heading_deg about z (references unchanged)."""
-    x = am_mission(spec, am, model).initial_state()
+def initial_state(spec: ScenarioSpec, am: AmSpec, model, object_pose: ObjectPose | None = None) -> AmState:
+    """Where a vehicle starts: its mission's start (at rest, level, nominal arm pose; planned from
+    `object_pose`, None: the config's), moved by its [[am]] start_offset_m and turned by
+    start_heading_deg about z (references unchanged)."""
+    x = am_mission(spec, am, model, object_pose).initial_state()
     if am.start_offset_m == (0.0, 0.0, 0.0) and am.start_heading_deg == 0.0:
         return x
     return x._replace(p_WB=x.p_WB + np.array(am.start_offset_m),
@@ -85,7 +87,10 @@ class SitlCore:
         self.failsafe_after_rejected = K
         self.model = build_model(spec.vehicle)
         self.sysids = [am.sysid for am in spec.ams]
-        self.world = World(spec, {am.sysid: initial_state(spec, am, self.model) for am in spec.ams})
+        # [mission].object_pose = "mocap": the team plans from the motion capture's first frame of the
+        # object, and each vehicle starts where its plan starts (it has flown there before the run)
+        self.object_pose = measure_object(spec) if spec.mission.object_pose == "mocap" else None
+        self.world = World(spec, {am.sysid: initial_state(spec, am, self.model, self.object_pose) for am in spec.ams})
         self._phase = am_mission(spec, spec.ams[0], self.model).phase  # the phases are timed alike for every AM
         ms = spec.mission
         self.outcome = RunOutcome(self.sysids, (ms.grasp_end_s + ms.lift_move_s + 1.0, ms.hover_end_s),

@@ -19,7 +19,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from amcore import cliargs
+from amcore import cliargs, preflight
 from amcore.config import ConfigError, ScenarioSpec, check_duration, load_scenario
 from amlink import fastcodec
 from amlink.limits import SetpointLimits
@@ -67,7 +67,7 @@ def run(spec: ScenarioSpec, duration_s: float | None = None,
     step's exact values (`World.sensor_values` per sysid) beside the frames sent (estimator
     accuracy, `experiments/estimator_accuracy.py`)."""
     core = SitlCore(spec, failsafe_after_rejected=failsafe_after_rejected)
-    pilots = {s: Pilot(spec, s, model=core.model) for s in core.sysids}
+    pilots = {s: Pilot(spec, s, model=core.model, object_pose=core.object_pose) for s in core.sysids}
     jitcache.warm(pilots[core.sysids[0]].warm_up)  # compiles the law once per machine, else loads it
     v = spec.vehicle
     limits = SetpointLimits.for_vehicle(v.rotors.thrust_max_total_n, max(v.joint_torque_max_nm), v.n_joints)
@@ -124,6 +124,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     try:
         spec = load_scenario(a.scenario)
+        preflight.check(spec)  # [mission].envelope_check: nothing flies outside the team's envelope
         if a.duration is not None:
             check_duration(spec, a.duration, "--duration")
     except ConfigError as exc:

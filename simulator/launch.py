@@ -26,7 +26,7 @@ import sys
 import time
 from pathlib import Path
 
-from amcore import cliargs
+from amcore import cliargs, preflight
 from amcore.config import DEFAULT_SCENARIO, ConfigError, check_duration, load_scenario
 from amlink.endpoint import DEFAULT_GCS, EndpointError, parse_endpoint
 from amlink.signing import SigningKeyError, read_gcs_key_file
@@ -83,6 +83,7 @@ def main(argv: list[str] | None = None) -> int:
         if a.duration is not None:
             check_duration(spec, a.duration, "--duration")
         check_memory(spec)
+        preflight.check(spec)  # [mission].envelope_check: refuse what the team cannot hold, before anything starts
         if a.gcs_key_file is not None:
             if not spec.link.signing:
                 raise ConfigError(f"--gcs-key-file {a.gcs_key_file}: the scenario turns signing off ([link] signing "

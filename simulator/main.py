@@ -28,7 +28,7 @@ import time
 from pathlib import Path
 
 
-from amcore import cliargs
+from amcore import cliargs, preflight
 from amcore.config import DEFAULT_SCENARIO, ConfigError, check_duration, load_scenario, scenario_id
 from amlink import signing
 from amlink.endpoint import DEFAULT_GCS, SIM_BIND, EndpointError, parse_endpoint
@@ -131,6 +131,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         spec = load_scenario(a.config)
+        preflight.check(spec)  # [mission].envelope_check: nothing flies outside the team's envelope
         keys, warning = signing.keys_for_run(spec, a.key_file)
         gcs_key = signing.read_gcs_key_file(a.gcs_key_file) if a.gcs_key_file is not None else None
     except (ConfigError, signing.SigningKeyError) as exc:
@@ -181,8 +182,10 @@ def main(argv: list[str] | None = None) -> int:
     v = spec.vehicle
     limits = SetpointLimits.for_vehicle(v.rotors.thrust_max_total_n, max(v.joint_torque_max_nm), v.n_joints)
     gcs_link = GcsLink(gcs_endpoint, sysids, key=gcs_key, accept_unsigned=keys is None, tlog=run_dir / "gcs.tlog")
+    pose = core.object_pose  # [mission].object_pose = "mocap": the measured object, sent in the handshake
     server = SimServer(binds, sysids=sysids, scenario=info, timeout_s=a.step_timeout, signing_keys=keys,
-                       limits=limits, on_heartbeat=gcs_link.forward_heartbeat)
+                       limits=limits, on_heartbeat=gcs_link.forward_heartbeat,
+                       object_pose=None if pose is None else (pose.p_W_m, pose.yaw_rad))
     gcs = GcsSession(core, gcs_link, server.armed, snapshot_every(spec.rate_hz))
     status, code, k = "run complete", 0, 0
     completed = False  # the run reached its end (a vehicle in failsafe makes the code 1, not the run an error)

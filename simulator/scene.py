@@ -16,6 +16,7 @@ coefficient too, and the pair has its square).
 """
 from __future__ import annotations
 
+import math
 import tempfile
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -111,10 +112,18 @@ def _shapes(client: int, shape: str, half_extents, radius: float, height: float,
     return col, vis
 
 
+def _yawed(obj: ObjectSpec) -> dict:
+    """createMultiBody's orientation for an object (and its table) turned by [object].yaw_deg about z;
+    none when it is not turned (Bullet's default, as before the key existed)."""
+    if obj.yaw_deg == 0.0:
+        return {}
+    return {"baseOrientation": pb.getQuaternionFromEuler([0.0, 0.0, math.radians(obj.yaw_deg)])}
+
+
 def add_table(client: int, obj: ObjectSpec) -> int:
     t = table_geometry(obj)
     col, vis = _shapes(client, t.shape, t.half_extents_m, t.radius_m, t.height_m, [0.45, 0.3, 0.2, 1])
-    body = pb.createMultiBody(0.0, col, vis, list(t.p_W_centre_m), physicsClientId=client)
+    body = pb.createMultiBody(0.0, col, vis, list(t.p_W_centre_m), **_yawed(obj), physicsClientId=client)
     pb.changeDynamics(body, -1, lateralFriction=TABLE_LATERAL_FRICTION, physicsClientId=client)
     _set_env_filter(client, body)
     return body
@@ -124,7 +133,7 @@ def add_object(client: int, obj: ObjectSpec) -> int:
     """The grasped object at rest at `obj.position_m`, uniform density (inertia from the shape)."""
     half = tuple(0.5 * s for s in obj.size_m)
     col, vis = _shapes(client, obj.shape, half, obj.radius_m, obj.height_m, [0.2, 0.4, 0.8, 1])
-    body = pb.createMultiBody(obj.mass_kg, col, vis, list(obj.position_m), physicsClientId=client)
+    body = pb.createMultiBody(obj.mass_kg, col, vis, list(obj.position_m), **_yawed(obj), physicsClientId=client)
     # frictionAnchor keeps the contact points of a resting contact fixed; without it Bullet
     # lets a box resting on the table creep at ~1e-5 m/s (and likewise a held object slip).
     pb.changeDynamics(body, -1, lateralFriction=obj.lateral_friction, rollingFriction=OBJECT_ROLLING_FRICTION,

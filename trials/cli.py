@@ -250,14 +250,12 @@ def _campaign(a, tasks: list[TrialTask], out: Path, controller: str | None, work
                                controller=rows[0]["controller"], seed=a.seed, randomize=rand_source,
                                executor=where, wall_s=wall, trials_per_minute=60.0 * len(rows) / wall)
     report.write_summary(summary, out / "summary.json")
-    if not a.no_plots:
-        report.plot_parameters(rows, params, out / "plots", f"{a.scenario.stem}, {summary['controller']}, "
-                                                             f"seed {a.seed}, {len(rows)} trials")
-    lo, hi = summary["wilson95"]
-    failed = ", ".join(f"{c} {n}" for c, n in summary["failure_classes"].items() if n)
-    print(f"am-trials: {summary['successes']}/{summary['trials']} succeeded ({100 * summary['success_rate']:.0f} %, "
-          f"Wilson 95 % {100 * lo:.0f}-{100 * hi:.0f} %)" + (f"; failures: {failed}" if failed else "")
-          + f"; {summary['trials_per_minute']:.1f} trials/min; in {out}", file=sys.stderr)
+    if not a.no_plots:  # success against the draws of the trials that flew (refused ones did not)
+        flown = [r for r in rows if r["verdict"] != "refused"]
+        report.plot_parameters(flown, params, out / "plots", f"{a.scenario.stem}, {summary['controller']}, "
+                                                              f"seed {a.seed}, {len(flown)} trials flown of {len(rows)}")
+    print(f"am-trials: {report.summary_line(summary)}; {summary['trials_per_minute']:.1f} trials/min; in {out}",
+          file=sys.stderr)
     return summary
 
 

@@ -14,6 +14,13 @@ it replays with `am-run`. Ranges are uniform:
     misalignment_deg = a          per AM, uniform in [-a, a] ([[am]].misalignment_deg)
     start_offset_m = d            per AM, each world axis uniform in [-d, d] ([[am]].start_offset_m)
     start_heading_deg = h         per AM, uniform in [-h, h] ([[am]].start_heading_deg)
+    planned_mass_tolerance = t    the team is told a planned mass within +/-t of the drawn one:
+                                  [mission].planned_mass_kg = m (1 + u), u uniform in [-t, t], and
+                                  [mission].mass_tolerance = t (what the plan allows for)
+    object_position_m = d         the object (and its table) moved on each horizontal axis, uniform
+                                  in [-d, d] ([object].position_m)
+    object_yaw_deg = a            the object (and its table) turned about z, uniform in [-a, a]
+                                  ([object].yaw_deg)
     [randomize.sensors]           the [sensors] levels every trial gets (noise and bias standard
                                   deviations; each trial's noise and biases follow its own seed)
     [randomize.devices]           the [devices] every trial gets (sensor devices and the flight
@@ -34,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from amcore.config import ConfigError, SensorSpec, _build, _read_toml, devices_from_table
+from amcore.config import MASS_TOLERANCE_MAX, ConfigError, SensorSpec, _build, _read_toml, devices_from_table
 
 Range = tuple[float, ...]
 
@@ -49,6 +56,9 @@ class RandomizeSpec:
     misalignment_deg: float = 0.0
     start_offset_m: float = 0.0
     start_heading_deg: float = 0.0
+    planned_mass_tolerance: float = 0.0
+    object_position_m: float = 0.0
+    object_yaw_deg: float = 0.0
     sensors: dict = dataclasses.field(default_factory=dict)  # a [sensors] table
     devices: dict = dataclasses.field(default_factory=dict)  # a [devices] table
 
@@ -56,6 +66,8 @@ class RandomizeSpec:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
                 if typing.get_type_hints(RandomizeSpec)[f.name] == Range and getattr(self, f.name)}
 
+
+OBJECT_SHIFT_MAX_M = 1.0  # [randomize].object_position_m: the most the object moves on its bench
 
 # per range: (lowest allowed low, low must be > it rather than >=, highest allowed high)
 _LIMITS = {"object_mass_kg": (0.0, True, None), "object_size_scale": (0.0, True, None),
@@ -93,6 +105,12 @@ def randomize_from_table(table: dict, where: str) -> RandomizeSpec:
             raise ConfigError(f"{where}: [randomize].{name}: must be >= 0 (a half-width)")
     if spec.misalignment_deg >= 45.0:
         raise ConfigError(f"{where}: [randomize].misalignment_deg: must be < 45")
+    for name, most, why in (("planned_mass_tolerance", MASS_TOLERANCE_MAX, "a fraction of the mass"),
+                            ("object_position_m", OBJECT_SHIFT_MAX_M, "m: the object stays over its bench"),
+                            ("object_yaw_deg", 180.0, "deg: a half-turn either way covers every yaw")):
+        if not 0.0 <= getattr(spec, name) <= most:
+            raise ConfigError(f"{where}: [randomize].{name}: must be in [0, {most:g}] ({why}), "
+                              f"got {getattr(spec, name)!r}")
     return spec
 
 
@@ -149,6 +167,21 @@ def draw_trial(base: dict, rand: RandomizeSpec, campaign_seed: int, index: int) 
         if rand.start_heading_deg:
             h = rand.start_heading_deg
             am["start_heading_deg"] = p[f"am{s}_start_heading_deg"] = _uniform(rng, (-h, h))
+    # drawn after everything above, so that a [randomize] table without these keys draws as before
+    if rand.planned_mass_tolerance:
+        t = rand.planned_mass_tolerance
+        mission = data.setdefault("mission", {})
+        mission["planned_mass_kg"] = p["planned_mass_kg"] = obj.get("mass_kg", 1.0) * (1.0 + _uniform(rng, (-t, t)))
+        mission["mass_tolerance"] = t
+    if rand.object_position_m:
+        d = rand.object_position_m
+        dx, dy = (float(x) for x in rng.uniform(-d, d, 2))
+        x, y, z = obj.get("position_m", [0.0, 0.0, 0.6])
+        obj["position_m"] = [x + dx, y + dy, z]
+        p["object_dx_m"], p["object_dy_m"] = dx, dy
+    if rand.object_yaw_deg:
+        a = rand.object_yaw_deg
+        obj["yaw_deg"] = p["object_yaw_deg"] = float(obj.get("yaw_deg", 0.0)) + _uniform(rng, (-a, a))
     sc = data.setdefault("scenario", {})
     sc["seed"] = p["seed"] = int(rng.integers(0, 2**31 - 1))
     sc["name"] = f"{str(sc.get('name', 'trial'))[:26]}-{index:04d}"

@@ -42,13 +42,35 @@ def add_derived(rows: list[dict]) -> None:
 
 
 def summarize(rows: list[dict], **context) -> dict:
+    """Success over all trials and over the flown ones: a trial the pre-flight check refused
+    (verdict "refused", outside the team's envelope) never flew, so it is neither a success nor
+    a failure of flight; it counts in `refused` and in the rate over all trials."""
     n = len(rows)
     ok = sum(r["verdict"] == "success" for r in rows)
+    refused = sum(r["verdict"] == "refused" for r in rows)
+    flown = n - refused
     lo, hi = wilson_interval(ok, n)
     classes = {c: sum(r["failure_class"] == c for r in rows) for c in FAILURE_CLASSES}
     return {**context, "trials": n, "successes": ok, "success_rate": ok / n if n else None,
             "wilson95": [lo, hi], "failure_classes": classes,
-            "incomplete": sum(r["verdict"] == "incomplete" for r in rows)}
+            "incomplete": sum(r["verdict"] == "incomplete" for r in rows),
+            "refused": refused, "flown": flown, "success_rate_flown": ok / flown if flown else None,
+            "wilson95_flown": list(wilson_interval(ok, flown))}
+
+
+def summary_line(s: dict) -> str:
+    """The campaign's result in one sentence (am-trials prints it)."""
+    def rate(k: int, n: int, bounds) -> str:
+        return (f"{k}/{n} succeeded ({100 * k / n:.0f} %, Wilson 95 % {100 * bounds[0]:.0f}-{100 * bounds[1]:.0f} %)"
+                if n else "none flown")
+
+    failed = ", ".join(f"{c} {n}" for c, n in s["failure_classes"].items() if n)
+    if not s.get("refused"):
+        return rate(s["successes"], s["trials"], s["wilson95"]) + (f"; failures: {failed}" if failed else "")
+    return (f"{s['refused']} of {s['trials']} refused before flight (outside the team's envelope); of the "
+            f"{s['flown']} flown, " + rate(s["successes"], s["flown"], s["wilson95_flown"])
+            + (f"; failures: {failed}" if failed else "") + "; over all trials "
+            + rate(s["successes"], s["trials"], s["wilson95"]))
 
 
 def write_csv(rows: list[dict], path: Path) -> None:
@@ -96,6 +118,8 @@ def plot_parameters(rows: list[dict], params: list[str], out_dir: Path, title: s
 
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = []
+    if not rows:
+        return paths
     ok = np.array([r["verdict"] == "success" for r in rows], dtype=float)
     for name in params:
         x = np.array([float(r[name]) for r in rows])
@@ -126,12 +150,12 @@ def plot_parameters(rows: list[dict], params: list[str], out_dir: Path, title: s
 
 def comparison_table(summaries: list[dict]) -> str:
     """A Markdown table of several campaigns' summaries (one row per controller)."""
-    head = "| controller | trials | success | Wilson 95 % | " + " | ".join(FAILURE_CLASSES) + " |"
-    rule = "|---" * (4 + len(FAILURE_CLASSES)) + "|"
+    head = "| controller | trials | success | Wilson 95 % | refused | " + " | ".join(FAILURE_CLASSES) + " |"
+    rule = "|---" * (5 + len(FAILURE_CLASSES)) + "|"
     lines = [head, rule]
     for s in summaries:
         lo, hi = s["wilson95"]
         lines.append(f"| {s.get('controller', '?')} | {s['trials']} | {100 * s['success_rate']:.0f} % | "
-                     f"{100 * lo:.0f}-{100 * hi:.0f} % | "
+                     f"{100 * lo:.0f}-{100 * hi:.0f} % | {s.get('refused', 0)} | "
                      + " | ".join(str(s["failure_classes"][c]) for c in FAILURE_CLASSES) + " |")
     return "\n".join(lines) + "\n"

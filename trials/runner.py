@@ -28,14 +28,22 @@ class TrialTask:
 
 def run_trial(task: TrialTask) -> dict:
     """Run one trial in-process; its table row: the drawn values, the verdict and the key
-    figures. Runs in a worker process (imports inside: a Dask worker or a spawned pool
-    process starts with none of this loaded)."""
+    figures. A trial outside the team's envelope ([mission].envelope_check, amcore.preflight)
+    does not fly: its verdict is "refused", with the check's sentence as the reason, as
+    `am-run` of its file refuses it. Runs in a worker process (imports inside: a Dask worker
+    or a spawned pool process starts with none of this loaded)."""
     from amcore.config import scenario_from_dict
+    from amcore.preflight import refusal
     from simulator.inprocess import run
     from simulator.verdict import summary_figures
 
     spec = scenario_from_dict(task.data, Path(task.path))
     t0 = time.perf_counter()
+    why = refusal(spec)
+    if why is not None:
+        return {"trial": task.index, "scenario_file": task.path,
+                "controller": getattr(spec.vehicle.options, "controller", "passivity"), **task.params,
+                "verdict": "refused", "failure_class": "", "reason": why, "wall_s": time.perf_counter() - t0}
     result = run(spec)
     wall = time.perf_counter() - t0
     v = result["verdict"]

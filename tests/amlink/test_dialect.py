@@ -18,7 +18,7 @@ from amlink.types import SetpointFlag, StepFlag
 
 SHIPPED_XML = sorted(dialect.PYMAVLINK_V20_DIR.glob("*.xml"))
 OUR_MESSAGES = ("AM_SIM_STEP", "AM_JOINT_STATE", "AM_WRENCH", "AM_TORQUE_SETPOINT", "AM_SCENARIO",
-                "AM_JOINT_TORQUE_SETPOINT")
+                "AM_JOINT_TORQUE_SETPOINT", "AM_OBJECT_POSE")
 REPO = Path(__file__).resolve().parents[2]
 
 

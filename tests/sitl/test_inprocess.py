@@ -125,3 +125,28 @@ def test_rejected_setpoints_are_answered_at_once_and_the_run_stays_deterministic
         assert o["state_digest"] == ours["state_digest"]
         assert o["verdict"] == ours["verdict"] and o["events"] == ours["events"]
         assert o["rejected_setpoints"] == ours["rejected_setpoints"] and o["distrusted"] == ours["distrusted"] == [4, 5]
+
+
+def test_a_deployment_trial_plans_from_the_same_measured_object_in_process_and_through_the_processes(tmp_path):
+    """A trial of the deployment randomization on two_am_robust (the object moved and turned on its
+    table, measured by motion capture, [mission].object_pose = "mocap"): the simulator sends its
+    measurement in the handshake (AM_OBJECT_POSE), each companion plans from it, and `am-run`
+    agrees with the in-process runner bit for bit."""
+    from amcore.config import _read_toml
+    from amcore.mission import config_object_pose
+    from amcore.preflight import preflight
+    from simulator.object_mocap import measure_object
+    from trials.cli import build_tasks
+    from trials.randomize import load_randomize
+
+    base = SCENARIOS / "two_am_robust.toml"
+    rand = load_randomize(SCENARIOS.parent / "randomize" / "deployment.toml")
+    tasks = build_tasks(_read_toml(base), base, rand, 23, 6, tmp_path, None)
+    task = next(t for t in tasks if preflight(load_scenario(t.path)).inside)  # a draw the team flies
+    spec = load_scenario(task.path)
+    measured, truth = measure_object(spec), config_object_pose(spec)
+    assert spec.object.yaw_deg != 0.0 and measured != truth  # turned, and measured with an error
+    ours = run(spec, duration_s=0.4)
+    sitl = am_run(task.path, tmp_path / "r", "--duration", "0.4", "--no-telemetry", timeout_s=300)
+    assert sitl.code == (4 if ours["verdict"]["status"] == "failed" else 0), sitl.stderr
+    assert ours["state_digest"] == sitl.outcome["state_digest"]

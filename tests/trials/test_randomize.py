@@ -84,6 +84,11 @@ def test_toml_writer_round_trips_values(value):
     ({"sensors": {"gps_noise_m": 1.0}}, "[randomize.sensors]: unknown key 'gps_noise_m'"),
     ({"sensors": {"force_noise_n": -1.0}}, "force_noise_n: must be >= 0"),
     ({"pad_friction": "high"}, "pad_friction: expected a list"),
+    ({"planned_mass_tolerance": 0.6}, "planned_mass_tolerance: must be in [0, 0.5]"),
+    ({"planned_mass_tolerance": -0.1}, "planned_mass_tolerance: must be in [0, 0.5]"),
+    ({"object_yaw_deg": 200.0}, "object_yaw_deg: must be in [0, 180]"),
+    ({"object_position_m": -0.1}, "object_position_m: must be in [0, 1]"),
+    ({"object_position_m": "far"}, "object_position_m: expected a number"),
 ])
 def test_a_bad_randomize_table_names_the_key(table, words):
     with pytest.raises(ConfigError) as e:
@@ -113,3 +118,45 @@ def test_a_scenarios_own_device_keys_win_over_the_randomized_ones():
     assert spec.devices.scale == 3.0 and spec.devices.estimator.gyro_cutoff_hz == 0.0
     assert spec.devices.estimator.history_steps == DEFAULT.devices["estimator"]["history_steps"]
     assert spec.devices.imu.gyroscope_noise_density == DEFAULT.devices["imu"]["gyroscope_noise_density"]
+
+
+ROBUST = ROOT / "configs" / "scenarios" / "two_am_robust.toml"
+DEPLOYMENT = load_randomize(ROOT / "configs" / "randomize" / "deployment.toml")
+STRESS = load_randomize(ROOT / "configs" / "randomize" / "stress.toml")
+
+
+def test_the_deployment_draws_stay_in_its_ranges_and_make_valid_scenarios():
+    base = _read_toml(ROBUST)
+    yaws = []
+    for i in range(40):
+        data, p = draw_trial(base, DEPLOYMENT, 11, i)
+        spec = scenario_from_dict(data, ROBUST)
+        m, plan = spec.object.mass_kg, spec.mission.planned_mass_kg
+        assert 0.5 <= m <= 1.5 and abs(plan / m - 1.0) <= 0.1 and spec.mission.mass_tolerance == 0.1
+        assert plan / (1.0 - 0.1) >= m  # the plan's worst case covers the true mass
+        x, y, z = spec.object.position_m
+        assert max(abs(x), abs(y)) <= 0.1 and z == 0.6 and (x, y) == (p["object_dx_m"], p["object_dy_m"])
+        assert abs(spec.object.yaw_deg) <= 180.0
+        yaws.append(spec.object.yaw_deg)
+        assert 0.0 <= spec.link.loss <= 0.05 and spec.devices.enabled and spec.sensors.exact
+        assert spec.mission.object_pose == "mocap" and spec.mission.envelope_check
+        for am in spec.ams:
+            assert am.misalignment_deg == 0.0 and max(map(abs, am.start_offset_m)) <= 0.05
+    assert max(yaws) - min(yaws) > 180.0  # the draws reach across the whole turn
+
+
+def test_the_deployment_stress_and_ten_am_files_keep_the_default_device_levels():
+    ten = load_randomize(ROOT / "configs" / "scenarios" / "ten_am_robust.toml")
+    assert DEPLOYMENT.devices == DEFAULT.devices and ten.devices == DEFAULT.devices
+    assert {k: v for k, v in STRESS.devices.items() if k != "scale"} == DEFAULT.devices
+    assert STRESS.devices["scale"] == 2.0 and STRESS.misalignment_deg == 5.0 and STRESS.setpoint_loss == (0.1, 0.1)
+    for name in ("object_mass_kg", "object_size_scale", "pad_friction"):  # the same ranges otherwise
+        assert getattr(STRESS, name) == getattr(DEPLOYMENT, name) == getattr(ten, name) or name == "object_mass_kg"
+    assert ten.object_mass_kg == tuple(10 / 2 * m for m in DEPLOYMENT.object_mass_kg)  # the mass scales with the team
+    for name in ("planned_mass_tolerance", "object_position_m", "object_yaw_deg", "start_offset_m"):
+        assert getattr(STRESS, name) == getattr(DEPLOYMENT, name) == getattr(ten, name) > 0.0
+
+
+def test_a_table_without_the_new_keys_draws_none_of_them():
+    _, p = draw_trial(_read_toml(SCENARIO), DEFAULT, 5, 0)
+    assert not {"planned_mass_kg", "object_dx_m", "object_yaw_deg"} & set(p)
