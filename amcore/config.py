@@ -188,6 +188,11 @@ class ControllerOptions:
     # closes a one-step loop sensor -> Omega_d -> body torque -> tool acceleration -> sensor
     # that PyBullet shows diverging at 2 steps per period. Off treats F_e as slowly varying.
     force_rate_feedforward: bool = False
+    # Beyond the paper: false leaves the measured force's component along the face (the task
+    # frame's y axis) out of F_rc in eq. Com_controller. Compensated, a sideways push between
+    # two AMs that disagree on the object is cancelled by each, so nothing limits it but the
+    # pads' grip; uncompensated it is met by K_t alone (docs/sensing.md). True: the paper's.
+    compensate_along_face: bool = True
     # Beyond the paper (amcore.adapt): the heading follows the misalignment the wrist sensor
     # measures on a crowned pad, with this natural frequency [Hz]; 0: off (the paper's fixed heading).
     heading_admittance_hz: float = 0.0

@@ -86,6 +86,7 @@ class ControllerParams:
     force_compensation: bool
     compensate_Lambda_y_dot: bool
     force_rate_feedforward: bool
+    compensate_along_face: bool
     wrench_filter: LowPass2
     task_frame: TaskFrame
     components: tuple[str, ...]
@@ -102,7 +103,7 @@ class ControllerParams:
             y_err_max=np.array(s.y_err_max) if s.y_err_max else np.full(n, np.inf),
             sigma_damping=s.sigma_damping, damping_max=s.damping_max,
             force_compensation=o.force_compensation, compensate_Lambda_y_dot=o.compensate_Lambda_y_dot,
-            force_rate_feedforward=o.force_rate_feedforward,
+            force_rate_feedforward=o.force_rate_feedforward, compensate_along_face=o.compensate_along_face,
             wrench_filter=LowPass2(o.force_filter_hz, o.force_filter_zeta),
             task_frame=task_frame, components=v.task.components,
         )
@@ -291,6 +292,7 @@ def _readers(n: int) -> dict:
 
 
 _NO_FILTER_STATE = np.zeros(0)
+_ZERO3 = np.zeros(3)  # no axis: F_rc is the whole measured force (the paper's)
 
 
 def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmState,
@@ -331,7 +333,8 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
             ref.psi, ref.psi_d1, ref.psi_d2, ref.y, ref.y_d1, ref.y_d2,
             wrench_E, x0, xdot0, wf.transition(max(dt, 0.0)), wf.omega, wf.zeta,
             p.gains_K_t, p.gains_D_t, p.k_R, p.k_w, p.Lambda_wb_d_inv, p.K_y, p.D_y, p.com_err_max, p.y_err_max,
-            p.sigma_damping, p.damping_max, p.force_compensation, p.force_rate_feedforward, r_extra)
+            p.sigma_damping, p.damping_max, p.force_compensation, p.force_rate_feedforward, r_extra,
+            _ZERO3 if p.compensate_along_face else frame.R_WT[:, 1])
     except ZeroDivisionError as e:
         raise np.linalg.LinAlgError(f"eq. u3: {e}") from None
     n = model.n

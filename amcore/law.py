@@ -585,10 +585,12 @@ def control_law(m, g, R, p_WB, w_B, V, Jcom, M_inv, C, H_WE, J_e, Jdot_e,
                 H_TW, axes, r_c_d, r_c_d1, r_c_d2, r_c_d3, r_c_d4, psi, psi_d1, psi_d2, y_d, y_d1, y_d2,
                 wrench_E, filter_x, filter_xdot, Phi, filter_omega, filter_zeta,
                 K_t, D_t, k_R, k_w, Lambda_wb_d_inv, K_y, D_y, com_err_max, y_err_max, sigma_damping, damping_max,
-                compensated, force_rate_feedforward, r_extra):
+                compensated, force_rate_feedforward, r_extra, uncompensated_axis):
     """eqs. new_coord .. u3 in order, at one measured state. filter_x, filter_xdot: the wrench
     filter's state (world-aligned [f; m] at {e}), or empty arrays on the first step; Phi: its
-    transition over this step's dt. Returns one array: tau = T^T u first, then everything
+    transition over this step's dt. uncompensated_axis: a unit vector in {w} along which the
+    measured force is left out of F_rc in eq. Com_controller (beyond the paper: the task
+    frame's y, along the face; amcore.control), or zero (the paper's: all of it). Returns one array: tau = T^T u first, then everything
     `amcore.control.Diagnostics` reads, in the order of `amcore.control.PACKED`."""
     T, T_inv, Tdot_V, Lambda_w, G, r_c, rdot_c, _, _, _ = decoupled(m, R, p_WB, w_B, V, Jcom, M_inv, C)
     y, J_y, ydot, _, Jdot_xi, J_e_xi, _, _ = task(H_TW, H_WE, J_e, Jdot_e, V, T_inv, Tdot_V, axes)
@@ -612,6 +614,11 @@ def control_law(m, g, R, p_WB, w_B, V, Jcom, M_inv, C, H_WE, J_e, Jdot_e,
     else:  # F_e treated as slowly varying in f_d's derivatives
         F_d = np.zeros(3)
         F_dd = np.zeros(3)
+    if dot(uncompensated_axis, uncompensated_axis) > 0.0:
+        a = uncompensated_axis
+        F = F - dot(a, F) * a
+        F_d = F_d - dot(a, F_d) * a
+        F_dd = F_dd - dot(a, F_dd) * a
 
     e = r_c - r_c_d
     f_d, f_d_d, f_d_dd, u1, com_saturated = com_law(m, g, K_t, D_t, e, rdot_c - r_c_d1, r_c_d2, r_c_d3, r_c_d4,

@@ -87,7 +87,7 @@ def main() -> None:
                            ref.r_c_d1, ref.r_c_d2, ref.r_c_d3, ref.r_c_d4, ref.psi, ref.psi_d1, ref.psi_d2, ref.y,
                            ref.y_d1, ref.y_d2, F, x0, xd0, Phi, wf.omega, wf.zeta, p.gains_K_t, p.gains_D_t, p.k_R,
                            p.k_w, p.Lambda_wb_d_inv, p.K_y, p.D_y, p.com_err_max, p.y_err_max, p.sigma_damping,
-                           p.damping_max, p.force_compensation, p.force_rate_feedforward, p.zero_task))
+                           p.damping_max, p.force_compensation, p.force_rate_feedforward, p.zero_task, np.zeros(3)))
 
     def run_step(i):
         mem[0] = step(model, data, params, sts[i % 64], refs[i % 64], F, mem[0], 1e-3 * i).memory

@@ -152,6 +152,39 @@ def test_without_compensation_the_wrench_does_not_reach_the_command(model, missi
     assert not np.allclose(c.diagnostics.Omega_d, d.diagnostics.Omega_d)
 
 
+def test_along_face_uncompensated_leaves_only_that_component_out_of_f_d(model, mission, params):
+    """[options].compensate_along_face = false: f_d moves by -F_rc less its component along
+    the task frame's y axis (the face's horizontal); a reading with no such component gives
+    the paper's step exactly; the arm's and the attitude's use of the wrench are unchanged."""
+    p_face = dataclasses.replace(params, compensate_along_face=False)
+    y_W = params.task_frame.R_WT[:, 1]
+    rng = np.random.default_rng(7)
+    st = near_reference(mission, model, 6.0, rng)
+    ref = mission.reference(6.0)
+    zero = np.zeros(6)
+    F_e = np.array([-12.0, 1.5, -4.9, 0.1, -0.2, 0.05])
+    mem = steady_memory(model, st, F_e, 6.0)
+    paper = step(model, create_data(model), params, st, ref, F_e, mem, 6.0)
+    face = step(model, create_data(model), p_face, st, ref, F_e, mem, 6.0)
+    free = step(model, create_data(model), p_face, st, ref, zero, steady_memory(model, st, zero, 6.0), 6.0)
+    F_rc = paper.diagnostics.F_rc
+    assert abs(F_rc @ y_W) > 1.0  # the reading pushes along the face
+    expected = F_rc - (F_rc @ y_W) * y_W
+    assert np.abs((face.diagnostics.f_d - free.diagnostics.f_d) + expected).max() < 1e-12
+    assert np.abs(face.diagnostics.f_d - paper.diagnostics.f_d - (F_rc @ y_W) * y_W).max() < 1e-12
+    np.testing.assert_array_equal(face.diagnostics.F_y, paper.diagnostics.F_y)
+    # a reading without a push along the face: the same step as the paper's, bit for bit
+    n_W = F_rc - (F_rc @ y_W) * y_W
+    d = create_data(model)
+    pin.framesForwardKinematics(model.pin_model, d, st.pin_q())
+    R_e = d.oMf[model.ee_frame_id].rotation
+    F_n = np.concatenate([R_e.T @ n_W, F_e[3:6]])
+    mem_n = steady_memory(model, st, F_n, 6.0)
+    a = step(model, create_data(model), params, st, ref, F_n, mem_n, 6.0)
+    b = step(model, create_data(model), p_face, st, ref, F_n, mem_n, 6.0)
+    np.testing.assert_allclose(a.diagnostics.tau, b.diagnostics.tau, rtol=0, atol=1e-9)
+
+
 def test_singularity_guard_bounds_torques_near_a_straight_elbow(model, mission, params):
     """Reference far beyond reach, elbow straightening (q2 -> 0): Jbar_3 loses rank. With the
     damped inverse the joint torques stay bounded; the undamped law (sigma_damping = 0)
