@@ -199,9 +199,8 @@ class ControllerOptions:
     # was lost on the link.
     offboard_inputs: str = "sent"
     # Attitude mode only: bandwidth [Hz] of the body-torque estimate. 0: the gyro's backward
-    # difference over one control period (as first written); > 0: the estimate through a
-    # 2nd-order Butterworth low-pass at this cutoff, its angular acceleration the filter's
-    # exact derivative (amcore.offboard).
+    # difference over one control period (as first written); > 0: that estimate through a
+    # 2nd-order Butterworth low-pass at this cutoff (amcore.offboard).
     offboard_torque_cutoff_hz: float = 0.0
     # Beyond the paper (amcore.law.discrete_damping): eq. u3's task damping D_y as the damping
     # that, held over one control period, does what the continuous damper does in that time.
