@@ -113,3 +113,11 @@ def test_a_scenarios_own_device_keys_win_over_the_randomized_ones():
     assert spec.devices.scale == 3.0 and spec.devices.estimator.gyro_cutoff_hz == 0.0
     assert spec.devices.estimator.history_steps == DEFAULT.devices["estimator"]["history_steps"]
     assert spec.devices.imu.gyroscope_noise_density == DEFAULT.devices["imu"]["gyroscope_noise_density"]
+
+
+def test_the_setpoint_loss_campaigns_lose_ten_percent_on_every_trial_and_nothing_else_varies():
+    loss = load_randomize(ROOT / "configs" / "randomize" / "setpoint_loss.toml")
+    assert loss.ranges() == {"setpoint_loss": (0.1, 0.1)} and not loss.devices and not loss.sensors
+    assert (loss.misalignment_deg, loss.start_offset_m, loss.start_heading_deg) == (0.0, 0.0, 0.0)
+    sensors = load_randomize(ROOT / "configs" / "randomize" / "setpoint_loss_sensors.toml")
+    assert sensors.ranges() == loss.ranges() and sensors.devices == DEFAULT.devices and not sensors.sensors
