@@ -202,6 +202,22 @@ class ControllerOptions:
     # frequency [Hz]; 0: off (the paper's CoM reference).
     lateral_admittance_hz: float = 0.0
     lateral_admittance_zeta: float = 1.0
+    # Attitude mode only (amcore.offboard): where the arm law's body-torque estimate takes the
+    # last period's thrust and joint torques from. "sent": what the companion sent (the law
+    # as first written); "reported": what the autopilot reports it flies (ATTITUDE_TARGET's
+    # thrust) and what the servos measured (AM_JOINT_STATE's effort), right when a setpoint
+    # was lost on the link.
+    offboard_inputs: str = "sent"
+    # Attitude mode only: bandwidth [Hz] of the body-torque estimate. 0: the gyro's backward
+    # difference over one control period (as first written); > 0: that estimate through a
+    # 2nd-order Butterworth low-pass at this cutoff (amcore.offboard).
+    offboard_torque_cutoff_hz: float = 0.0
+    # Beyond the paper (amcore.law.discrete_damping): eq. u3's task damping D_y as the damping
+    # that, held over one control period, does what the continuous damper does in that time.
+    # A mode with little task inertia (the pad's pitch, Lambda_y ~2.4e-4) and Lambda_y^-1 D_y dt
+    # near 2 rings at half the control rate; a setpoint lost on the link (held two periods)
+    # then makes it grow. false: D_y as the paper writes it.
+    discrete_damping: bool = False
 
 
 @dataclass(frozen=True)
@@ -281,9 +297,13 @@ class FlightControllerParams:
     MC_YR_INT_LIM: float = 0.30
     IMU_GYRO_CUTOFF: float = 40.0  # low-pass on the gyro the rate loop uses [Hz]; 0: none
     IMU_DGYRO_CUTOFF: float = 20.0  # low-pass on the angular acceleration of the D term [Hz]; 0: none
+    # offboard loss: no setpoint for this long [s] and the autopilot leaves offboard for its
+    # failsafe (hold, then land; PX4 v1.14 COM_OF_LOSS_T, default 1.0 s, action COM_OBL_RC_ACT)
+    COM_OF_LOSS_T: float = 1.0
 
 
 FC_MODES = ("torque", "attitude")
+OFFBOARD_INPUTS = ("sent", "reported")  # [options].offboard_inputs
 
 
 @dataclass(frozen=True)
@@ -545,6 +565,18 @@ class EncoderSpec:
 
 
 @dataclass(frozen=True)
+class JointEffortSpec:
+    """[devices.effort]: the joint torques the arm's servos report (AM_JOINT_STATE.effort_nm),
+    as a Dynamixel-class servo reports its present current times its torque constant: a
+    first-order lag of lag_s [s] behind the applied torque, white noise of noise_nm [N m] per
+    sample and quantization to resolution_nm [N m] (one current unit; 0: exact)."""
+
+    lag_s: float = 0.0
+    noise_nm: float = 0.0
+    resolution_nm: float = 0.0
+
+
+@dataclass(frozen=True)
 class EstimatorSpec:
     """[devices.estimator]: the flight controller's state estimator (amcore.estimator):
     bandwidths [rad/s] of its attitude and position loops, the gyro low-pass cutoff of its
@@ -571,12 +603,13 @@ class DevicesSpec:
     ft: ForceTorqueSpec = ForceTorqueSpec()
     encoders: EncoderSpec = EncoderSpec()
     estimator: EstimatorSpec = EstimatorSpec()
+    effort: JointEffortSpec = JointEffortSpec()
 
 
 def devices_from_table(table: dict, where: str) -> DevicesSpec:
     """A [devices] table as a DevicesSpec; errors name `where` and the key."""
     parts = {"imu": ImuSpec, "mocap": MocapSpec, "ft": ForceTorqueSpec, "encoders": EncoderSpec,
-             "estimator": EstimatorSpec}
+             "estimator": EstimatorSpec, "effort": JointEffortSpec}
     kw = _build(DevicesSpec, {k: v for k, v in table.items() if k not in parts}, f"{where}: [devices]",
                 skip=tuple(parts))
     for name, cls in parts.items():
@@ -585,7 +618,7 @@ def devices_from_table(table: dict, where: str) -> DevicesSpec:
             raise ConfigError(f"{where}: [devices.{name}] must be a table")
         kw[name] = cls(**_build(cls, sub, f"{where}: [devices.{name}]"))
     spec = DevicesSpec(**kw)
-    for part in ("imu", "mocap", "ft", "encoders", "estimator"):
+    for part in parts:
         sub = getattr(spec, part)
         for f in dataclasses.fields(sub):
             v = getattr(sub, f.name)
@@ -857,6 +890,12 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     if (v.pad.contact_stiffness_n_per_m > 0.0) != (v.pad.contact_damping_n_s_per_m > 0.0):
         raise ConfigError(f"{where}: [pad]: contact_stiffness_n_per_m and contact_damping_n_s_per_m go together "
                           f"(both 0: rigid)")
+    if v.options.offboard_inputs not in OFFBOARD_INPUTS:
+        raise ConfigError(f"{where}: [options].offboard_inputs: expected one of {', '.join(OFFBOARD_INPUTS)}, "
+                          f"got '{v.options.offboard_inputs}'")
+    if not v.options.offboard_torque_cutoff_hz >= 0.0:
+        raise ConfigError(f"{where}: [options].offboard_torque_cutoff_hz: must be >= 0 (0: backward difference), "
+                          f"got {v.options.offboard_torque_cutoff_hz!r}")
     if v.options.controller not in CONTROLLERS:
         raise ConfigError(f"{where}: [options].controller: unknown controller '{v.options.controller}' "
                           f"(known: {', '.join(CONTROLLERS)})")
@@ -1037,6 +1076,7 @@ def _check_flight_controller(fc: FlightControllerParams, where: str) -> None:
             raise ConfigError(f"{where}.{f.name}: must be >= 0, got {getattr(fc, f.name)!r}")
     for key in ("MC_ROLL_P", "MC_PITCH_P", "MC_YAW_P", "MC_ROLLRATE_MAX", "MC_PITCHRATE_MAX", "MC_YAWRATE_MAX"):
         _positive(f"{where}.{key}", getattr(fc, key))
+    _positive(f"{where}.COM_OF_LOSS_T", fc.COM_OF_LOSS_T)
     if not fc.MC_YAW_WEIGHT <= 1.0:
         raise ConfigError(f"{where}.MC_YAW_WEIGHT: must be in [0, 1], got {fc.MC_YAW_WEIGHT!r}")
 

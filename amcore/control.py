@@ -90,6 +90,7 @@ class ControllerParams:
     wrench_filter: LowPass2
     task_frame: TaskFrame
     components: tuple[str, ...]
+    damping_dt: float = 0.0  # [options].discrete_damping: the control period [s] (law.discrete_damping); 0: D_y
 
     @staticmethod
     def from_vehicle(v: VehicleParams, task_frame: TaskFrame) -> "ControllerParams":
@@ -334,7 +335,7 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
             wrench_E, x0, xdot0, wf.transition(max(dt, 0.0)), wf.omega, wf.zeta,
             p.gains_K_t, p.gains_D_t, p.k_R, p.k_w, p.Lambda_wb_d_inv, p.K_y, p.D_y, p.com_err_max, p.y_err_max,
             p.sigma_damping, p.damping_max, p.force_compensation, p.force_rate_feedforward, r_extra,
-            _ZERO3 if p.compensate_along_face else frame.R_WT[:, 1])
+            _ZERO3 if p.compensate_along_face else frame.R_WT[:, 1], p.damping_dt)
     except ZeroDivisionError as e:
         raise np.linalg.LinAlgError(f"eq. u3: {e}") from None
     n = model.n

@@ -542,8 +542,46 @@ def orientation_law(R, w, R_d, Omega_d, Omegadot_d, k_R, k_w, Lambda_wb_d_inv, L
 
 # ----------------------------------------------------------------------------- eq. u3
 @kernel
+def expm_small(A):
+    """exp(A) of a small square matrix: scaling and squaring with a 12-term Taylor series
+    (relative error ~1e-15 once ||A / 2^s||_1 <= 0.5)."""
+    n = A.shape[0]
+    norm = 0.0
+    for j in range(n):
+        col = 0.0
+        for i in range(n):
+            col += abs(A[i, j])
+        norm = max(norm, col)
+    s = 0
+    while norm > 0.5:
+        norm *= 0.5
+        s += 1
+    X = A / 2.0**s
+    E = np.eye(n)
+    term = np.eye(n)
+    for k in range(1, 13):
+        term = mm(term, X) / k
+        E = E + term
+    for _ in range(s):
+        E = mm(E, E)
+    return E
+
+
+@kernel
+def discrete_damping(Lambda_y, D_y, dt):
+    """D_y,dt = Lambda_y (I - exp(-Lambda_y^-1 D_y dt)) / dt (beyond the paper): the damping
+    that, held over one control period dt, takes the task velocity of the mode Lambda_y y'' =
+    -D_y y' where the continuous damper takes it in that time (exp(-Lambda_y^-1 D_y dt)),
+    instead of overshooting it when Lambda_y^-1 D_y dt nears 2. Equals D_y as dt -> 0;
+    symmetric as D_y is (Lambda_y f(Lambda_y^-1 D_y) is)."""
+    n = D_y.shape[0]
+    E = expm_small(-mm(inv(Lambda_y), D_y) * dt)
+    return mm(Lambda_y, np.eye(n) - E) / dt
+
+
+@kernel
 def impedance_law(J_y, M_inv, T, Jdot_xi, y, ydot, y_d, y_d1, y_d2, y_err_max, K_y, D_y, u1_b3, mg_e3,
-                  u2, G, sigma_damping, damping_max, r_extra):
+                  u2, G, sigma_damping, damping_max, r_extra, damping_dt=0.0):
     """eq. u3: the joint-space input that makes the task error obey eq. desired_task_behavior,
         Lambda_y y~'' + D_y y~' + K_y y~ = F_y.
 
@@ -556,6 +594,8 @@ def impedance_law(J_y, M_inv, T, Jdot_xi, y, ydot, y_d, y_d1, y_d2, y_err_max, K
     Singularity guard (beyond the paper): sat(y~) clips each error at y_err_max, and once
     sigma_min(Jbar_3) < sigma_damping, Jbar_3 is inverted by damped least squares.
     r_extra: an added term of r (the optional 1/2 Lambda_y' y~', amcore.control).
+    damping_dt > 0 (beyond the paper, [options].discrete_damping): D_y replaced by
+    `discrete_damping(Lambda_y, D_y, damping_dt)`, damping_dt the control period [s].
     Returns (u_3, Lambda_y, Jbar, y_err, sigma_min, damping, y_err_saturated).
     """
     n = y.shape[0]
@@ -565,8 +605,9 @@ def impedance_law(J_y, M_inv, T, Jdot_xi, y, ydot, y_d, y_d1, y_d2, y_err_max, K
     y_err = y - y_d
     y_err_sat = np.minimum(np.maximum(y_err, -y_err_max), y_err_max)
     yd_err = ydot - y_d1
+    D = discrete_damping(Lambda_y, D_y, damping_dt) if damping_dt > 0.0 else D_y
     r = (mv(Lambda_y, Jdot_xi - y_d2) + mv(Jbar[:, 0:3], u1_b3 - mg_e3)
-         + mv(Jbar[:, 3:6], u2 - G[3:6]) + mv(D_y, yd_err) + mv(K_y, y_err_sat) + r_extra)
+         + mv(Jbar[:, 3:6], u2 - G[3:6]) + mv(D, yd_err) + mv(K_y, y_err_sat) + r_extra)
     J3 = Jbar[:, 6:]
     sigma = sigma_min(J3)
     damping = 0.0
@@ -585,7 +626,7 @@ def control_law(m, g, R, p_WB, w_B, V, Jcom, M_inv, C, H_WE, J_e, Jdot_e,
                 H_TW, axes, r_c_d, r_c_d1, r_c_d2, r_c_d3, r_c_d4, psi, psi_d1, psi_d2, y_d, y_d1, y_d2,
                 wrench_E, filter_x, filter_xdot, Phi, filter_omega, filter_zeta,
                 K_t, D_t, k_R, k_w, Lambda_wb_d_inv, K_y, D_y, com_err_max, y_err_max, sigma_damping, damping_max,
-                compensated, force_rate_feedforward, r_extra, uncompensated_axis):
+                compensated, force_rate_feedforward, r_extra, uncompensated_axis, damping_dt=0.0):
     """eqs. new_coord .. u3 in order, at one measured state. filter_x, filter_xdot: the wrench
     filter's state (world-aligned [f; m] at {e}), or empty arrays on the first step; Phi: its
     transition over this step's dt. uncompensated_axis: a unit vector in {w} along which the
@@ -633,7 +674,7 @@ def control_law(m, g, R, p_WB, w_B, V, Jcom, M_inv, C, H_WE, J_e, Jdot_e,
     u1_b3 = u1 * R[:, 2]
     u3, Lambda_y, Jbar, y_err, sigma, damping, y_saturated = impedance_law(
         J_y, M_inv, T, Jdot_xi, y, ydot, y_d, y_d1, y_d2, y_err_max, K_y, D_y, u1_b3, m * g * E3, u2, G,
-        sigma_damping, damping_max, r_extra)
+        sigma_damping, damping_max, r_extra, damping_dt)
     u = np.concatenate((u1_b3, u2, u3))
     tau = mtv(T, u)  # T^T u
     F_y = mv(Jbar, F_xi)

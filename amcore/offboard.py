@@ -35,6 +35,25 @@ vehicle actually receives is unknown to the companion. Two things change.
    torque; with tau_b^ held, the reaction of this period's torque is in the equation.
    First step (nothing measured yet): tau_b^ = tau_b^p, the torque-mode answer.
 
+   Two options ([options], `OffboardParams`) go beyond the law as first written:
+
+   - offboard_inputs = "reported": f^- and tau_q^- are what the vehicle applied over the
+     last period, not what the companion sent: the thrust of the attitude target the
+     autopilot reports flying (ATTITUDE_TARGET, thrust x thrust_max_n) and the joint torques
+     the servos measured (AM_JOINT_STATE.effort_nm). A setpoint lost on the link leaves the
+     vehicle flying the previous one; with "sent" the equation then subtracts a thrust and
+     joint torques nobody applied, and the error feeds back through tau_q (the arm's
+     reaction is in K_q tau_q^-). Where a report is missing, the sent value stands in.
+   - offboard_torque_cutoff_hz = f_c > 0: tau_b^ through a 2nd-order Butterworth low-pass
+     at f_c (`amcore.filters`, zeta = 1/sqrt(2)). The filter runs on w_b, and the backward
+     difference of the filtered rate is the angular acceleration; the same filter runs on the
+     rest of the equation, r = Gamma_wb w_b + Gamma_wb,rho rho - s F_wb^ - K_f f^- - K_q tau_q^-,
+     so that tau_b^ = Lambda_wb (LP(w_b)_k - LP(w_b)_k-1) / dt + LP(r) is the backward
+     difference's estimate through LP (the filter is linear; Lambda_wb changes slowly): an
+     estimate of the body torque with a stated bandwidth, its noise and its lag the filter's.
+     (The filter's own derivative, sampled at the control steps, would read a ramp ~8 % low
+     at 40 Hz and 250 Hz: its input is held over each period.)
+
 2. The wrench bookkeeping. Eq. ori_controller's -F_wb is applied by no one now (the
    autopilot's integrator takes up a steady external moment); the measured wrench enters
    the base's rotation only through tau_b^ above, and F_y, F_rc as before. The step's
@@ -43,15 +62,47 @@ vehicle actually receives is unknown to the companion. Two things change.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
 
 from . import linalg3
+from .config import VehicleParams
 from .control import Command, ControllerMemory, ControllerParams, Reference, StepResult, step
+from .filters import FilterState, LowPass2, lowpass_update
 from .model import AmModel, AmState
 from .task import TaskFrame
+
+BUTTERWORTH_ZETA = 1.0 / math.sqrt(2.0)
+
+
+@dataclass(frozen=True)
+class OffboardParams:
+    """The attitude-mode options (module doc): inputs "sent" or "reported"; torque_cutoff_hz
+    0 (backward difference) or the estimate's bandwidth [Hz]."""
+
+    inputs: str = "sent"
+    torque_cutoff_hz: float = 0.0
+
+    @staticmethod
+    def from_vehicle(v: VehicleParams) -> "OffboardParams":
+        return OffboardParams(v.options.offboard_inputs, v.options.offboard_torque_cutoff_hz)
+
+    @property
+    def torque_filter(self) -> LowPass2 | None:
+        return LowPass2(self.torque_cutoff_hz, BUTTERWORTH_ZETA) if self.torque_cutoff_hz > 0.0 else None
+
+
+class Applied(NamedTuple):
+    """What the vehicle reports it applied over the last control period: the thrust of the
+    target the autopilot flies [N] (None: not reported) and the measured joint torques [N m]
+    (None: not reported)."""
+
+    thrust_n: float | None = None
+    tau_q_nm: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -63,6 +114,8 @@ class OffboardMemory:
     w_B: tuple[float, float, float] | None = None  # measured body rate [rad/s]
     thrust_n: float = 0.0  # the thrust sent [N]
     tau_q_nm: np.ndarray | None = None  # the joint torques sent [N m]
+    w_filter: FilterState | None = None  # offboard_torque_cutoff_hz > 0: LP(w_b)
+    r_filter: FilterState | None = None  # ... and LP(r) (module doc)
 
 
 @dataclass
@@ -74,10 +127,22 @@ class OffboardResult:
     tau_b_hat: np.ndarray | None
 
 
+def _last_inputs(memory: OffboardMemory, applied: Applied | None) -> tuple[float, np.ndarray]:
+    """(f^-, tau_q^-): the reported ones where given, else what the companion sent."""
+    thrust, tau_q = memory.thrust_n, memory.tau_q_nm
+    if applied is not None:
+        if applied.thrust_n is not None:
+            thrust = applied.thrust_n
+        if applied.tau_q_nm is not None:
+            tau_q = np.asarray(applied.tau_q_nm)
+    return thrust, tau_q
+
+
 def body_torque_estimate(params: ControllerParams, res: StepResult, memory: OffboardMemory, state: AmState,
-                         t_s: float) -> np.ndarray | None:
+                         t_s: float, applied: Applied | None = None) -> np.ndarray | None:
     """tau_b^ [N m]: the body torque of the last control period, from row 2 of eq. new_dynamics
-    with the measured angular acceleration (module doc). None if nothing was measured yet."""
+    with the measured angular acceleration (module doc). None if nothing was measured yet.
+    `applied`: the reported thrust and joint torques (offboard_inputs = "reported")."""
     if memory.t_s is None or memory.w_B is None or memory.tau_q_nm is None or not t_s > memory.t_s:
         return None
     d = res.diagnostics
@@ -87,7 +152,37 @@ def body_torque_estimate(params: ControllerParams, res: StepResult, memory: Offb
     if params.force_compensation:  # F_wb from the filtered F/T reading (F_xi = (J_e T^-1)^T F_e)
         u2 = u2 - d.wrench_E_filtered.dot(tm.J_e_xi[:, 3:6])
     K = tm.T_inv[:, 3:6].T  # T^-T's middle block row: u_2 = K tau
-    return u2 - K[:, 2] * memory.thrust_n - K[:, 6:].dot(memory.tau_q_nm)
+    thrust, tau_q = _last_inputs(memory, applied)
+    return u2 - K[:, 2] * thrust - K[:, 6:].dot(tau_q)
+
+
+def _rest(params: ControllerParams, res: StepResult, memory: OffboardMemory, applied: Applied | None) -> np.ndarray:
+    """r = Gamma_wb w_b + Gamma_wb,rho rho - s F_wb^ - K_f f^- - K_q tau_q^- (module doc)."""
+    d = res.diagnostics
+    tm = d.terms
+    r = tm.Gamma_xi_xi[3:6]
+    if params.force_compensation:  # F_wb from the filtered F/T reading (F_xi = (J_e T^-1)^T F_e)
+        r = r - d.wrench_E_filtered.dot(tm.J_e_xi[:, 3:6])
+    K = tm.T_inv[:, 3:6].T  # T^-T's middle block row: u_2 = K tau
+    thrust, tau_q = _last_inputs(memory, applied)
+    return r - K[:, 2] * thrust - K[:, 6:].dot(tau_q)
+
+
+def filtered_body_torque_estimate(params: ControllerParams, oparams: OffboardParams, res: StepResult,
+                                  memory: OffboardMemory, state: AmState, t_s: float,
+                                  applied: Applied | None = None
+                                  ) -> tuple[np.ndarray | None, FilterState, FilterState | None]:
+    """tau_b^ = Lambda_wb (LP(w_b)_k - LP(w_b)_k-1) / dt + LP(r) [N m], LP the Butterworth of
+    `oparams` (module doc),
+    and the filters' new states. None (and the filters started) while nothing was measured."""
+    f = oparams.torque_filter
+    if memory.t_s is None or memory.w_filter is None or memory.tau_q_nm is None or not t_s > memory.t_s:
+        return None, lowpass_update(f, None, state.w_B, 0.0), None
+    dt = t_s - memory.t_s
+    w_f = lowpass_update(f, memory.w_filter, state.w_B, dt)
+    r_f = lowpass_update(f, memory.r_filter, _rest(params, res, memory, applied), dt)
+    wdot = (w_f.x - memory.w_filter.x) / dt
+    return res.diagnostics.terms.Lambda_w.dot(wdot) + r_f.x, w_f, r_f
 
 
 def joint_torques_for_body_torque(res: StepResult, tau_b: np.ndarray) -> np.ndarray:
@@ -106,13 +201,20 @@ def joint_torques_for_body_torque(res: StepResult, tau_b: np.ndarray) -> np.ndar
 
 def offboard_step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmState, ref: Reference,
                   wrench_E: np.ndarray, memory: OffboardMemory, t_s: float,
-                  task_frame: TaskFrame | None = None) -> OffboardResult:
+                  task_frame: TaskFrame | None = None, oparams: OffboardParams = OffboardParams(),
+                  applied: Applied | None = None) -> OffboardResult:
     """One attitude-mode control step: torque mode's step (with `task_frame` as there), then
     the joint torques for the estimated body torque (module doc). The command's thrust, R_d and w_b,d (diagnostics)
-    go to the autopilot, its joint torques to the arm."""
+    go to the autopilot, its joint torques to the arm. `oparams` and `applied`: the options
+    and, with offboard_inputs = "reported", what the vehicle reports it applied."""
     res = step(model, data, params, state, ref, wrench_E, memory.controller, t_s, task_frame)
     c, d = res.command, res.diagnostics
-    tau_b = body_torque_estimate(params, res, memory, state, t_s)
+    reported = applied if oparams.inputs == "reported" else None
+    w_f = r_f = None
+    if oparams.torque_cutoff_hz > 0.0:
+        tau_b, w_f, r_f = filtered_body_torque_estimate(params, oparams, res, memory, state, t_s, reported)
+    else:
+        tau_b = body_torque_estimate(params, res, memory, state, t_s, reported)
     if tau_b is None:
         tau_b, tau_q = c.tau_B_nm, c.tau_q_nm
     else:
@@ -120,5 +222,5 @@ def offboard_step(model: AmModel, data: pin.Data, params: ControllerParams, stat
     tau = np.concatenate(([0.0, 0.0, c.thrust_n], tau_b, tau_q))
     d.tau, d.u = tau, d.terms.T_inv.T.dot(tau)  # the bookkeeping: what the vehicle received
     cmd = Command(c.thrust_n, tau[3:6], tau[6:])
-    mem = OffboardMemory(res.memory, t_s, tuple(state.w_B.tolist()), c.thrust_n, cmd.tau_q_nm)
+    mem = OffboardMemory(res.memory, t_s, tuple(state.w_B.tolist()), c.thrust_n, cmd.tau_q_nm, w_f, r_f)
     return OffboardResult(StepResult(cmd, d, res.memory), mem, None if tau_b is c.tau_B_nm else tau_b)

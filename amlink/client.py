@@ -31,7 +31,8 @@ _ACK = mav.MAVLINK_MSG_ID_COMMAND_ACK
 _STATUSTEXT = mav.MAVLINK_MSG_ID_STATUSTEXT
 _SIM_STEP = mav.MAVLINK_MSG_ID_AM_SIM_STEP
 _SENSOR_PART_IDS = frozenset(
-    (mav.MAVLINK_MSG_ID_ODOMETRY, mav.MAVLINK_MSG_ID_AM_JOINT_STATE, mav.MAVLINK_MSG_ID_AM_WRENCH)
+    (mav.MAVLINK_MSG_ID_ODOMETRY, mav.MAVLINK_MSG_ID_AM_JOINT_STATE, mav.MAVLINK_MSG_ID_AM_WRENCH,
+     mav.MAVLINK_MSG_ID_ATTITUDE_TARGET)  # ATTITUDE_TARGET: attitude mode's report of the flown target
 )
 _ACCEPT = (_HEARTBEAT, _SCENARIO, _OBJECT_POSE, _ACK, _STATUSTEXT, _SIM_STEP, *_SENSOR_PART_IDS)
 _MAX_TEXTS = 256
@@ -161,8 +162,19 @@ class CompanionClient:
 
         Raises CommandRejectedError if not accepted, SimulatorTimeoutError on timeout.
         """
+        self._command(mav.MAV_CMD_COMPONENT_ARM_DISARM, (1.0 if arm else 0.0,), timeout_s, "ARM_DISARM")
+
+    def set_message_interval(self, msgid: int, interval_us: float, timeout_s: float = 1.0) -> None:
+        """COMMAND_LONG(MAV_CMD_SET_MESSAGE_INTERVAL): stream message `msgid` every `interval_us`
+        [us], as a companion asks PX4 for ODOMETRY or ATTITUDE_TARGET faster than its defaults.
+        Raises CommandRejectedError if not accepted, SimulatorTimeoutError on timeout."""
+        self._command(mav.MAV_CMD_SET_MESSAGE_INTERVAL, (float(msgid), float(interval_us)), timeout_s,
+                      "SET_MESSAGE_INTERVAL")
+
+    def _command(self, cmd: int, params: tuple[float, ...], timeout_s: float, what: str) -> None:
+        """COMMAND_LONG `cmd` with `params` (the rest 0) until its COMMAND_ACK, retried every 0.25 s."""
         self._require_connected()
-        cmd = mav.MAV_CMD_COMPONENT_ARM_DISARM
+        p = (*params, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)[:7]
         deadline = time.monotonic() + timeout_s
         next_try, confirmation = 0.0, 0
         while True:
@@ -174,10 +186,9 @@ class CompanionClient:
                     return
             now = time.monotonic()
             if now >= deadline:
-                raise SimulatorTimeoutError("COMMAND_ACK for ARM_DISARM", timeout_s)
+                raise SimulatorTimeoutError(f"COMMAND_ACK for {what}", timeout_s)
             if now >= next_try:
-                self._send([mav.MAVLink_command_long_message(
-                    SIM_SYSID, SIM_COMPID, cmd, confirmation, 1.0 if arm else 0.0, 0, 0, 0, 0, 0, 0)])  # fmt: skip
+                self._send([mav.MAVLink_command_long_message(SIM_SYSID, SIM_COMPID, cmd, confirmation, *p)])
                 next_try, confirmation = now + COMMAND_RETRY_S, min(confirmation + 1, 255)
             self._pump(min(deadline, next_try) - now)
 

@@ -3,7 +3,10 @@
 Batches (each one UDP datagram, frames concatenated, the marker frame LAST):
 
 * sensor batch, simulator -> companion:
-  ``ODOMETRY, AM_JOINT_STATE, AM_WRENCH, AM_SIM_STEP``
+  ``ODOMETRY, AM_JOINT_STATE, AM_WRENCH, [ATTITUDE_TARGET,] AM_SIM_STEP``; in attitude mode
+  AM_JOINT_STATE carries the servos' measured joint torques (extension fields ``effort_nm``,
+  ``effort_valid``) and ATTITUDE_TARGET the target the autopilot flies (as PX4 reports it;
+  NED/FRD, float32, for the batch's step: the message carries no step)
 * setpoint batch, companion -> simulator:
   ``[SET_ATTITUDE_TARGET,] AM_TORQUE_SETPOINT`` (torque mode), or
   ``SET_ATTITUDE_TARGET, AM_JOINT_TORQUE_SETPOINT`` (attitude mode: :class:`AttitudeSetpoint`)
@@ -128,10 +131,28 @@ def sensor_frame_messages(frame: SensorFrame, scenario_id: int = 0) -> list:
         v[0], v[1], v[2], w[0], w[1], w[2],
         _UNKNOWN_COV, _UNKNOWN_COV, 0, mav.MAV_ESTIMATOR_TYPE_NAIVE, 100,
     )  # fmt: skip
-    joints = mav.MAVLink_am_joint_state_message(frame.step, len(q), _pad(q), _pad(qdot))
+    effort = frame.joint_effort_nm
+    if effort is None:
+        joints = mav.MAVLink_am_joint_state_message(frame.step, len(q), _pad(q), _pad(qdot))
+    else:
+        e = effort.tolist()
+        if not all_finite(e):
+            raise EncodeError(f"non-finite value in SensorFrame step {frame.step}")
+        joints = mav.MAVLink_am_joint_state_message(frame.step, len(q), _pad(q), _pad(qdot), _pad(e), 1)
     wrench = mav.MAVLink_am_wrench_message(frame.step, wr[:3], wr[3:])
     step = mav.MAVLink_am_sim_step_message(frame.step, t_us, scenario_id, int(frame.flags))
-    return [odom, joints, wrench, step]
+    if frame.attitude_target is None:
+        return [odom, joints, wrench, step]
+    return [odom, joints, wrench, attitude_report_message(frame.attitude_target, t_us // 1000), step]
+
+
+def attitude_report_message(att: AttitudeTarget, time_boot_ms: int = 0) -> object:
+    """ATTITUDE_TARGET: the target the autopilot flies (as PX4 reports it), NED/FRD, type_mask 0."""
+    quat, r = att.quat_wxyz.tolist(), att.rates_rad_s.tolist()
+    if not all_finite([*quat, *r, att.thrust_normalized]):
+        raise EncodeError(f"non-finite value in AttitudeTarget step {att.step}")
+    return mav.MAVLink_attitude_target_message(time_boot_ms & 0xFFFFFFFF, 0, list(enu_flu_to_ned_frd(quat)),
+                                               r[0], -r[1], -r[2], att.thrust_normalized)  # FLU -> FRD rates
 
 
 def shutdown_message(step: int, time_s: float, scenario_id: int = 0) -> object:
@@ -220,8 +241,9 @@ def object_pose_from_message(msg) -> tuple[tuple[float, float, float], float]:
     return (tuple(float(x) for x in msg.position_m), float(msg.yaw_rad))
 
 
-def sensor_frame_from_messages(odom, joints, wrench, step_msg) -> SensorFrame:
-    """Assemble a :class:`SensorFrame` from the four messages of one batch.
+def sensor_frame_from_messages(odom, joints, wrench, step_msg, target=None) -> SensorFrame:
+    """Assemble a :class:`SensorFrame` from the four messages of one batch (and its
+    ATTITUDE_TARGET in attitude mode, `target`).
 
     Raises BatchMismatchError if the steps (or ODOMETRY/AM_SIM_STEP times)
     disagree, FrameConventionError on unexpected ODOMETRY frames, and
@@ -252,11 +274,23 @@ def sensor_frame_from_messages(odom, joints, wrench, step_msg) -> SensorFrame:
     _check_finite("AM_JOINT_STATE", "velocity_rad_s", qdot)
     wr = (*wrench.force_n, *wrench.torque_nm)
     _check_finite("AM_WRENCH", "force_n/torque_nm", wr)
+    effort = None
+    if getattr(joints, "effort_valid", 0):
+        effort = joints.effort_nm[:n]
+        _check_finite("AM_JOINT_STATE", "effort_nm", effort)
     return SensorFrame(
         step=step, time_s=step_msg.time_usec / 1e6,
         p_WB=base[0:3], quat_WB_wxyz=base[3:7], v_B=base[7:10], w_B=base[10:13],
-        q=q, qdot=qdot, wrench_E=wr, flags=step_msg.flags,
+        q=q, qdot=qdot, wrench_E=wr, flags=step_msg.flags, joint_effort_nm=effort,
+        attitude_target=None if target is None else attitude_report_from_message(target, step),
     )  # fmt: skip
+
+
+def attitude_report_from_message(msg, step: int) -> AttitudeTarget:
+    """The ATTITUDE_TARGET of a sensor batch, for the batch's step (the message carries none)."""
+    vals = (*msg.q, msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate, msg.thrust)
+    _check_finite("ATTITUDE_TARGET", "q/rates/thrust", vals)
+    return AttitudeTarget(step, ned_frd_to_enu_flu(vals[0:4]), (vals[4], -vals[5], -vals[6]), vals[7])
 
 
 def setpoint_from_message(msg) -> TorqueSetpoint:
@@ -308,30 +342,32 @@ class SensorFrameAssembler:
     """
 
     def __init__(self) -> None:
-        self._odom = self._joints = self._wrench = None
+        self._odom = self._joints = self._wrench = self._target = None
 
     def reset(self) -> None:
         """Forget parts received so far (a new datagram starts a new batch)."""
-        self._odom = self._joints = self._wrench = None
+        self._odom = self._joints = self._wrench = self._target = None
 
     def push(self, msg) -> SensorFrame | Shutdown | None:
         mid = msg.get_msgId()  # not msg.id: STATUSTEXT has a field named "id"
         if mid == mav.MAVLINK_MSG_ID_ODOMETRY:
             self._odom = msg
+        elif mid == mav.MAVLINK_MSG_ID_ATTITUDE_TARGET:
+            self._target = msg
         elif mid == mav.MAVLINK_MSG_ID_AM_JOINT_STATE:
             self._joints = msg
         elif mid == mav.MAVLINK_MSG_ID_AM_WRENCH:
             self._wrench = msg
         elif mid == mav.MAVLINK_MSG_ID_AM_SIM_STEP:
-            odom, joints, wrench = self._odom, self._joints, self._wrench
-            self._odom = self._joints = self._wrench = None
+            odom, joints, wrench, target = self._odom, self._joints, self._wrench, self._target
+            self._odom = self._joints = self._wrench = self._target = None
             if msg.flags & StepFlag.SHUTDOWN:
                 return Shutdown(msg.step, msg.time_usec / 1e6, StepFlag(msg.flags))
             if odom is None or joints is None or wrench is None:
                 missing = [n for n, m in (("ODOMETRY", odom), ("AM_JOINT_STATE", joints), ("AM_WRENCH", wrench))
                            if m is None]  # fmt: skip
                 raise BatchMismatchError(f"step {msg.step}: batch incomplete, missing {', '.join(missing)}")
-            return sensor_frame_from_messages(odom, joints, wrench, msg)
+            return sensor_frame_from_messages(odom, joints, wrench, msg, target)
         return None
 
 

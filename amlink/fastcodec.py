@@ -56,6 +56,7 @@ from amlink.types import (
     attitude_target_from_wire,
     sensor_frame_from_wire,
     torque_setpoint_from_wire,
+    with_autopilot_reports,
 )
 
 ODOMETRY = MessageLayout.of(mav.MAVLink_odometry_message)
@@ -64,10 +65,12 @@ WRENCH = MessageLayout.of(mav.MAVLink_am_wrench_message)
 SIM_STEP = MessageLayout.of(mav.MAVLink_am_sim_step_message)
 TORQUE_SETPOINT = MessageLayout.of(mav.MAVLink_am_torque_setpoint_message)
 ATTITUDE_TARGET = MessageLayout.of(mav.MAVLink_set_attitude_target_message)
+ATTITUDE_REPORT = MessageLayout.of(mav.MAVLink_attitude_target_message)  # ATTITUDE_TARGET: what the autopilot flies
 JOINT_TORQUE_SETPOINT = MessageLayout.of(mav.MAVLink_am_joint_torque_setpoint_message)
 _ODOMETRY_ID, _JOINT_STATE_ID, _WRENCH_ID = ODOMETRY.msgid, JOINT_STATE.msgid, WRENCH.msgid
 _SIM_STEP_ID, _TORQUE_SETPOINT_ID, _ATTITUDE_TARGET_ID = SIM_STEP.msgid, TORQUE_SETPOINT.msgid, ATTITUDE_TARGET.msgid
 _JOINT_TORQUE_SETPOINT_ID = JOINT_TORQUE_SETPOINT.msgid
+_ATTITUDE_REPORT_ID = ATTITUDE_REPORT.msgid
 
 _BASE = ("x", "y", "z", "q", "vx", "vy", "vz", "rollspeed", "pitchspeed", "yawspeed")  # 13 floats
 _UNKNOWN_COV = [float("nan")] + [0.0] * 20  # as codec: NaN first element = unknown
@@ -79,6 +82,10 @@ _pack_odometry = ODOMETRY.packer(
     estimator_type=mav.MAV_ESTIMATOR_TYPE_NAIVE, quality=100,
 ).pack  # fmt: skip
 _pack_joints = JOINT_STATE.packer("step", "position_rad", "velocity_rad_s", "n_joints").pack
+_pack_joints_effort = JOINT_STATE.packer("step", "position_rad", "velocity_rad_s", "n_joints", "effort_nm",
+                                         "effort_valid").pack
+_pack_report = ATTITUDE_REPORT.packer("time_boot_ms", "q", "body_roll_rate", "body_pitch_rate", "body_yaw_rate",
+                                      "thrust", "type_mask").pack
 _pack_wrench = WRENCH.packer("step", "force_n", "torque_nm").pack
 _pack_step = SIM_STEP.packer("step", "time_usec", "scenario_id", "flags").pack
 _pack_setpoint = TORQUE_SETPOINT.packer("step", "thrust_n", "body_torque_nm", "joint_torque_nm", "n_joints",
@@ -90,7 +97,10 @@ _pack_attitude = ATTITUDE_TARGET.packer("time_boot_ms", "q", "body_roll_rate", "
 # -- readers: the fields we use, in wire order; values flattened -----------------------
 READERS = {
     ODOMETRY.msgid: ODOMETRY.reader("time_usec", *_BASE, "frame_id", "child_frame_id").read,
-    JOINT_STATE.msgid: JOINT_STATE.reader("step", "position_rad", "velocity_rad_s", "n_joints").read,
+    JOINT_STATE.msgid: JOINT_STATE.reader("step", "position_rad", "velocity_rad_s", "n_joints", "effort_nm",
+                                          "effort_valid").read,
+    ATTITUDE_REPORT.msgid: ATTITUDE_REPORT.reader("q", "body_roll_rate", "body_pitch_rate", "body_yaw_rate",
+                                                  "thrust").read,
     WRENCH.msgid: WRENCH.reader("step", "force_n", "torque_nm").read,
     SIM_STEP.msgid: SIM_STEP.reader("step", "time_usec", "scenario_id", "flags").read,
     TORQUE_SETPOINT.msgid: TORQUE_SETPOINT.reader(
@@ -127,12 +137,47 @@ def sensor_frame_payloads(frame: SensorFrame, scenario_id: int = 0) -> tuple[tup
         sim_step = _pack_step(step, t_us, scenario_id, int(frame.flags))
     except (struct.error, OverflowError) as exc:  # worded as amlink.wire.Encoder.pack does
         raise EncodeError(f"cannot pack {name}: {exc}") from exc
+    if frame.joint_effort_nm is None:
+        joints = _pack_joints(step, *q, *pad, *qdot, *pad, n)
+    else:
+        e = frame.joint_effort_nm.tolist()
+        if not all_finite(e):
+            raise EncodeError(f"non-finite value in SensorFrame step {frame.step}")
+        joints = _pack_joints_effort(step, *q, *pad, *qdot, *pad, n, *e, *pad, 1)
+    if frame.attitude_target is None:
+        return (
+            (_ODOMETRY_ID, odom),
+            (_JOINT_STATE_ID, joints),
+            (_WRENCH_ID, _pack_wrench(step, *wr)),
+            (_SIM_STEP_ID, sim_step),
+        )
     return (
         (_ODOMETRY_ID, odom),
-        (_JOINT_STATE_ID, _pack_joints(step, *q, *pad, *qdot, *pad, n)),
+        (_JOINT_STATE_ID, joints),
         (_WRENCH_ID, _pack_wrench(step, *wr)),
+        attitude_report_payload(frame.attitude_target, t_us // 1000),
         (_SIM_STEP_ID, sim_step),
     )
+
+
+def attitude_report_payload(att: AttitudeTarget, time_boot_ms: int = 0) -> tuple[int, bytes]:
+    """``(msgid, payload)`` of ATTITUDE_TARGET (as :func:`amlink.codec.attitude_report_message`)."""
+    quat, r = att.quat_wxyz.tolist(), att.rates_rad_s.tolist()
+    if not all_finite([*quat, *r, att.thrust_normalized]):
+        raise EncodeError(f"non-finite value in AttitudeTarget step {att.step}")
+    try:  # FLU -> FRD body rates: (p, q, r) -> (p, -q, -r)
+        return _ATTITUDE_REPORT_ID, _pack_report(time_boot_ms & 0xFFFFFFFF, *enu_flu_to_ned_frd(quat), r[0], -r[1],
+                                                 -r[2], att.thrust_normalized, 0)  # fmt: skip
+    except (struct.error, OverflowError) as exc:
+        raise EncodeError(f"cannot pack ATTITUDE_TARGET: {exc}") from exc
+
+
+def attitude_report_from_fields(fields: tuple, step: int) -> AttitudeTarget:
+    """As :func:`amlink.codec.attitude_report_from_message`; ``fields`` = (q[4], roll, pitch, yaw rates, thrust)."""
+    if not all_finite(fields):
+        raise NonFiniteValueError("ATTITUDE_TARGET", "q/rates/thrust")
+    return attitude_target_from_wire(step, (*ned_frd_to_enu_flu(fields[0:4]), fields[4], -fields[5], -fields[6],
+                                            fields[7]))  # fmt: skip
 
 
 def setpoint_payloads(
@@ -179,11 +224,13 @@ def attitude_setpoint_payloads(
 # -- decoders (bodies are READERS tuples) --------------------------------------------------
 
 
-def sensor_frame_from_fields(odom: tuple, joints: tuple, wrench: tuple, step_fields: tuple) -> SensorFrame:
+def sensor_frame_from_fields(odom: tuple, joints: tuple, wrench: tuple, step_fields: tuple,
+                             target: tuple | None = None) -> SensorFrame:
     """As :func:`amlink.codec.sensor_frame_from_messages`, from reader tuples.
 
     ``odom`` = (time_usec, x, y, z, q[4], vx, vy, vz, rollspeed, pitchspeed, yawspeed,
-    frame_id, child_frame_id); ``joints`` = (step, position[8], velocity[8], n_joints);
+    frame_id, child_frame_id); ``joints`` = (step, position[8], velocity[8], n_joints, effort[8],
+    effort_valid); ``target``: an ATTITUDE_TARGET's reader tuple, or None;
     ``wrench`` = (step, force[3], torque[3]); ``step_fields`` = (step, time_usec, scenario_id, flags).
     """
     step, time_usec, _, flags = step_fields
@@ -213,7 +260,15 @@ def sensor_frame_from_fields(odom: tuple, joints: tuple, wrench: tuple, step_fie
     wr = wrench[1:7]
     if not all_finite(wr):
         raise NonFiniteValueError("AM_WRENCH", "force_n/torque_nm")
-    return sensor_frame_from_wire(step, time_usec / 1e6, base + q + qdot + wr, n, flags)
+    frame = sensor_frame_from_wire(step, time_usec / 1e6, base + q + qdot + wr, n, flags)
+    if not joints[26] and target is None:
+        return frame
+    effort = None
+    if joints[26]:
+        effort = joints[18 : 18 + n]
+        if not all_finite(effort):
+            raise NonFiniteValueError("AM_JOINT_STATE", "effort_nm")
+    return with_autopilot_reports(frame, effort, None if target is None else attitude_report_from_fields(target, step))
 
 
 def setpoint_from_fields(fields: tuple) -> TorqueSetpoint:
@@ -256,22 +311,24 @@ class SensorFrameAssembler:
     """As :class:`amlink.codec.SensorFrameAssembler`, fed ``(msgid, body)`` of reader records."""
 
     def __init__(self) -> None:
-        self._odom = self._joints = self._wrench = None
+        self._odom = self._joints = self._wrench = self._target = None
 
     def reset(self) -> None:
         """Forget parts received so far (a new datagram starts a new batch)."""
-        self._odom = self._joints = self._wrench = None
+        self._odom = self._joints = self._wrench = self._target = None
 
     def push(self, msgid: int, body) -> SensorFrame | Shutdown | None:
         if msgid == _ODOMETRY_ID:
             self._odom = body
+        elif msgid == _ATTITUDE_REPORT_ID:
+            self._target = body
         elif msgid == _JOINT_STATE_ID:
             self._joints = body
         elif msgid == _WRENCH_ID:
             self._wrench = body
         elif msgid == _SIM_STEP_ID:
-            odom, joints, wrench = self._odom, self._joints, self._wrench
-            self._odom = self._joints = self._wrench = None
+            odom, joints, wrench, target = self._odom, self._joints, self._wrench, self._target
+            self._odom = self._joints = self._wrench = self._target = None
             step, time_usec, _, flags = body
             if flags & _SHUTDOWN:
                 return Shutdown(step, time_usec / 1e6, StepFlag(flags))
@@ -279,7 +336,7 @@ class SensorFrameAssembler:
                 missing = [n for n, m in (("ODOMETRY", odom), ("AM_JOINT_STATE", joints), ("AM_WRENCH", wrench))
                            if m is None]  # fmt: skip
                 raise BatchMismatchError(f"step {step}: batch incomplete, missing {', '.join(missing)}")
-            return sensor_frame_from_fields(odom, joints, wrench, body)
+            return sensor_frame_from_fields(odom, joints, wrench, body, target)
         return None
 
 

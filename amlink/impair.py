@@ -193,8 +193,17 @@ class ImpairedLink(Generic[T]):
         self.channel = ImpairedChannel(self.impairment, self.impairment.rng(self.stream))
         self.hold = ZeroOrderHold()
 
+    last_arrival: int = field(init=False, default=-1)  # step of the last arrival (-1: none yet)
+
     def step(self, step: int, setpoint: T | None) -> T | None:
         """Send ``setpoint`` (None: nothing computed this step) and return the command held at ``step``."""
         if setpoint is not None:
             self.channel.send(step, setpoint)
-        return self.hold.update(self.channel.deliver(step))
+        arrivals = self.channel.deliver(step)
+        if arrivals:
+            self.last_arrival = step
+        return self.hold.update(arrivals)
+
+    def silent_for(self, step: int) -> int:
+        """Steps since the last arrival at ``step`` (0 before the first: nothing to miss yet)."""
+        return 0 if self.last_arrival < 0 else step - self.last_arrival

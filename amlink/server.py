@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from amlink import codec, fastcodec
 from amlink.codec import mav
@@ -34,6 +34,8 @@ _COMMAND_LONG = mav.MAVLINK_MSG_ID_COMMAND_LONG
 _ATTITUDE = mav.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET
 _SETPOINT = mav.MAVLINK_MSG_ID_AM_TORQUE_SETPOINT
 _JOINT_SETPOINT = mav.MAVLINK_MSG_ID_AM_JOINT_TORQUE_SETPOINT  # attitude mode: with SET_ATTITUDE_TARGET
+STREAMED = frozenset((mav.MAVLINK_MSG_ID_ODOMETRY, mav.MAVLINK_MSG_ID_AM_JOINT_STATE, mav.MAVLINK_MSG_ID_AM_WRENCH,
+                      mav.MAVLINK_MSG_ID_ATTITUDE_TARGET))  # the sensor batch's messages (SET_MESSAGE_INTERVAL)
 _ACCEPT = (_HEARTBEAT, _COMMAND_LONG, _ATTITUDE, _SETPOINT, _JOINT_SETPOINT)  # all else: counted as ignored
 _MAX_BACKOFF = 4  # retry interval grows 1, 2, 4, 4, ... x retry_s
 
@@ -50,6 +52,7 @@ class _Peer:
     last_time_s: float = 0.0
     batch: tuple | None = None  # (msgid, payload)s of the sensor batch awaiting an answer (re-framed on re-send)
     attitude: tuple | None = None  # stream links: SET_ATTITUDE_TARGET awaiting its AM_TORQUE_SETPOINT
+    intervals: dict = field(default_factory=dict)  # msgid -> interval [us] the companion asked for
 
 
 class SimServer:
@@ -535,6 +538,15 @@ class SimServer:
             peer.armed = msg.param1 >= 0.5
             peer.lost = peer.lost and not peer.armed  # a (re)armed companion is alive
             result = mav.MAV_RESULT_ACCEPTED
+        elif msg.command == mav.MAV_CMD_SET_MESSAGE_INTERVAL:
+            # a message of the sensor batch: recorded and accepted; the lockstep sends the batch
+            # every control step whatever the interval (docs/flight_controller.md, "Rates")
+            msgid = int(msg.param1)
+            if msgid in STREAMED and msg.param2 > 0:
+                peer.intervals[msgid] = float(msg.param2)
+                result = mav.MAV_RESULT_ACCEPTED
+            else:
+                result = mav.MAV_RESULT_DENIED
         else:
             result = mav.MAV_RESULT_UNSUPPORTED
         ack = mav.MAVLink_command_ack_message(msg.command, result, 0, 0, peer.sysid, msg.get_srcComponent())

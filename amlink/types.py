@@ -89,6 +89,11 @@ class SensorFrame:
         wrench_E: (6,) [force [N]; torque [N m]] the environment applies on the
             end-effector, expressed in E.
         flags: :class:`StepFlag` bits.
+        joint_effort_nm: (n,) the joint torques the arm's servos measure [N m]
+            (AM_JOINT_STATE.effort_nm, as Dynamixel-class servos report present current),
+            or None where the flight controller does not report them (torque mode).
+        attitude_target: the target the autopilot is flying (its ATTITUDE_TARGET report,
+            step = that of the setpoint it came with), or None (torque mode, none flown yet).
     """
 
     step: int
@@ -101,6 +106,8 @@ class SensorFrame:
     qdot: np.ndarray
     wrench_E: np.ndarray
     flags: StepFlag = StepFlag.NONE
+    joint_effort_nm: np.ndarray | None = None
+    attitude_target: AttitudeTarget | None = None
 
     def __post_init__(self) -> None:
         s = object.__setattr__
@@ -114,6 +121,10 @@ class SensorFrame:
         s(self, "qdot", _vec("qdot", self.qdot, self.q.shape[0]))
         s(self, "wrench_E", _vec("wrench_E", self.wrench_E, 6))
         s(self, "flags", _STEP_FLAGS[_uint("flags", self.flags, 8)])
+        if self.joint_effort_nm is not None:
+            s(self, "joint_effort_nm", _vec("joint_effort_nm", self.joint_effort_nm, self.q.shape[0]))
+        if self.attitude_target is not None and not isinstance(self.attitude_target, AttitudeTarget):
+            raise TypeError(f"attitude_target must be an AttitudeTarget, got {type(self.attitude_target).__name__}")
 
     @property
     def n_joints(self) -> int:
@@ -244,7 +255,14 @@ def sensor_frame_from_wire(step: int, time_s: float, values, n: int, flags: int)
     j = 13 + n
     return _assemble(SensorFrame, step=step, time_s=float(time_s), p_WB=a[0:3], quat_WB_wxyz=a[3:7],
                      v_B=a[7:10], w_B=a[10:13], q=a[13:j], qdot=a[j : j + n], wrench_E=a[j + n : j + n + 6],
-                     flags=_STEP_FLAGS[flags])  # fmt: skip
+                     flags=_STEP_FLAGS[flags], joint_effort_nm=None, attitude_target=None)  # fmt: skip
+
+
+def with_autopilot_reports(frame: SensorFrame, joint_effort_nm, attitude_target: AttitudeTarget | None) -> SensorFrame:
+    """`frame` with the flight controller's reports of what it applies (attitude mode): the
+    servos' measured joint torques (None: not reported) and the attitude target it flies."""
+    effort = None if joint_effort_nm is None else _frozen_f64(joint_effort_nm)
+    return _assemble(SensorFrame, **{**frame.__dict__, "joint_effort_nm": effort, "attitude_target": attitude_target})
 
 
 def torque_setpoint_from_wire(step: int, thrust_n: float, values, n: int, flags: int) -> TorqueSetpoint:

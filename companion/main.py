@@ -26,6 +26,7 @@ from amcore import cliargs
 from amcore.config import DEFAULT_SCENARIO, ConfigError, load_scenario, scenario_id
 from amcore.mission import ObjectPose
 from amlink import signing
+from amlink.codec import mav
 from amlink.endpoint import COMPANION_SIM, COMPANION_SIM_FORMS, EndpointError, as_destination, parse_endpoint
 from amlink.errors import LinkError, SimulatorUnreachableError
 from amlink.lockstep import CompanionClient
@@ -37,6 +38,11 @@ from telemetry.wiring import CompanionTelemetry
 
 from . import jitcache, procstats
 from .pilot import Pilot
+
+# attitude mode: what the arm law reads every control step, requested at the control rate
+# (SET_MESSAGE_INTERVAL) as PX4 streams them slower by default (docs/flight_controller.md, "Rates")
+STREAMS_AT_CONTROL_RATE = (mav.MAVLINK_MSG_ID_ODOMETRY, mav.MAVLINK_MSG_ID_ATTITUDE_TARGET,
+                           mav.MAVLINK_MSG_ID_AM_JOINT_STATE)
 
 
 
@@ -137,6 +143,9 @@ def main(argv: list[str] | None = None) -> int:
                 return 3
             pilot = Pilot(spec, a.sysid, model=pilot.model, object_pose=ObjectPose(*client.object_pose))
         client.arm(timeout_s=5.0)
+        if spec.vehicle.flight_controller.mode == "attitude":  # PX4's onboard defaults are slower (10-30 Hz)
+            for msgid in STREAMS_AT_CONTROL_RATE:
+                client.set_message_interval(msgid, 1e6 / spec.control_rate_hz, timeout_s=5.0)
         print(f"{tag}: connected to {a.sim}, scenario '{info.name}', armed", file=sys.stderr, flush=True)
         t0 = time.perf_counter()
         cpu.start()

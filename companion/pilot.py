@@ -15,6 +15,7 @@ it directly.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -27,7 +28,7 @@ from amcore.config import ScenarioSpec
 from amcore.control import StepResult
 from amcore.mission import JoinBlend, ObjectPose, am_mission, join_blend
 from amcore.model import build_model, create_data
-from amcore.offboard import OffboardMemory, offboard_step
+from amcore.offboard import Applied, OffboardMemory, OffboardParams, offboard_step
 from amcore.so3 import R_to_quat_wxyz
 from amlink.types import AttitudeSetpoint, AttitudeTarget, SensorFrame, TorqueSetpoint, sensor_frame_from_wire
 
@@ -54,8 +55,11 @@ class Pilot:
         else:
             self.law = control.step
             self.params = control.ControllerParams.from_vehicle(spec.vehicle, self.mission.frame)
+            if spec.vehicle.options.discrete_damping:  # the damping held over this companion's period
+                self.params = dataclasses.replace(self.params, damping_dt=spec.control_dt_s)
             self.memory = OffboardMemory() if self.attitude_mode else control.ControllerMemory()
         self.thrust_max_n = Allocation(spec.vehicle.rotors).thrust_scale_n  # thrust 1 of SET_ATTITUDE_TARGET [N]
+        self.offboard = OffboardParams.from_vehicle(spec.vehicle)
         ms = spec.mission
         self.outcome = Outcome(sysid, ("approach", "grasp", "hover"), (ms.grasp_end_s + ms.lift_move_s + 1.0,
                                                                       ms.hover_end_s))
@@ -132,7 +136,7 @@ class Pilot:
             ref = shift_reference(ref, self.lateral_state, axis)
         args = (self.model, self.data, self.params, state, ref, frame.wrench_E, self.memory, t)
         if self.attitude_mode:  # the autopilot flies the attitude; the arm law is amcore.offboard's
-            out = offboard_step(*args, task_frame)
+            out = offboard_step(*args, task_frame, self.offboard, self.applied(frame))
             self.memory, res = out.memory, out.result
         else:
             res = self.law(*args) if task_frame is None else self.law(*args, task_frame)
@@ -142,6 +146,12 @@ class Pilot:
             return attitude_setpoint_from_result(frame.step, res, self.thrust_max_n), None, res
         sp, att = setpoint_from_result(frame.step, res, self.thrust_max_n)
         return sp, att, res
+
+    def applied(self, frame: SensorFrame) -> Applied:
+        """What the vehicle reports it applied over the last period (attitude mode): the thrust
+        of the target its autopilot flies [N] and the servos' measured joint torques [N m]."""
+        att = frame.attitude_target
+        return Applied(None if att is None else att.thrust_normalized * self.thrust_max_n, frame.joint_effort_nm)
 
     def record(self, t: float, res: StepResult) -> None:
         """Adds the step answered at time t [s] to the per-phase error summary."""

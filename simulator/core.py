@@ -38,12 +38,12 @@ from collections.abc import Callable, Collection, Iterator, Mapping
 
 import numpy as np
 
-from amcore.config import AmSpec, ScenarioSpec
+from amcore.config import AmSpec, JointEffortSpec, ScenarioSpec
 from amcore.mission import ObjectPose, am_mission
 from amcore.model import AmState, build_model
 from amcore.so3 import Rz
 from amlink.impair import ImpairedLink, LinkImpairment
-from amlink.types import AttitudeSetpoint, SensorFrame, TorqueSetpoint, sensor_frame_from_wire
+from amlink.types import AttitudeSetpoint, SensorFrame, TorqueSetpoint, sensor_frame_from_wire, with_autopilot_reports
 
 from .failsafe import Failsafe, FailsafeGains
 from .fcstate import FcMode, FleetSnapshot, VehicleSnapshot
@@ -51,6 +51,7 @@ from .flight_controller import FlightController
 from .object_mocap import measure_object
 from .outcome import RunOutcome
 from .devices import DeviceSuite
+from .effort import JointEffortSensor
 from .sensors import SensorModel
 from .verdict import judge
 from .world import World
@@ -113,8 +114,16 @@ class SitlCore:
         self.mode = v.flight_controller.mode
         self._kind = AttitudeSetpoint if self.mode == "attitude" else TorqueSetpoint  # what the autopilot takes
         self.fcs: dict[int, FlightController] = {}  # attitude mode: each AM's emulated autopilot
+        self.efforts: dict[int, JointEffortSensor] = {}  # attitude mode: the servos' measured joint torques
         if self.mode == "attitude":
             self.fcs = {s: FlightController(v.flight_controller, v.rotors, spec.dt_s) for s in self.sysids}
+            dv = spec.devices  # without [devices] the servos report the applied torques exactly
+            effort, scale = (dv.effort, dv.scale) if dv.enabled else (JointEffortSpec(), 0.0)
+            self.efforts = {s: JointEffortSensor(effort, scale, self.model.n, spec.dt_s, spec.seed, s)
+                            for s in self.sysids}
+        # offboard loss (PX4's COM_OF_LOSS_T): no setpoint for more than this many physics steps
+        self.offboard_loss_steps = round(v.flight_controller.COM_OF_LOSS_T * spec.rate_hz)
+        self.offboard_lost: set[int] = set()  # in failsafe after the setpoint stream stopped, for good
         self.control_every = spec.control_every
         self.wrong_kind: dict[int, int] = {s: 0 for s in self.sysids}  # setpoints of the other mode, ignored
         self.events: list[dict] = []
@@ -162,7 +171,10 @@ class SitlCore:
             else:
                 sensor = self.sensors.get(s)  # none: exact frames
                 reported = v if sensor is None else sensor(v)
-            out[s] = f = sensor_frame_from_wire(k, t, reported, n, 0)
+            f = sensor_frame_from_wire(k, t, reported, n, 0)
+            if self.efforts:  # attitude mode: what the autopilot flies and the servos measure
+                f = with_autopilot_reports(f, self.efforts[s].last, self.flown_target(s))
+            out[s] = f
             self._reported[s] = reported
             yield s, f
         self._unobserved = (k, values, out)
@@ -182,6 +194,14 @@ class SitlCore:
                                                 sp.seed, s, values)
         self._odometry[s] = out = dev.step(values, t)
         return out
+
+    def flown_target(self, s: int):
+        """The attitude target AM s's autopilot is flying (its ATTITUDE_TARGET report), or None:
+        none yet, or its failsafe (or a GCS command) flies the vehicle."""
+        if s in self.failsafes or s in self._overridden or s in self.distrusted or s in self.offboard_lost:
+            return None
+        sp = self.fc_links[s].hold.command
+        return None if sp is None else sp.attitude
 
     def observe(self) -> None:
         """Bookkeeping of the last `frames` call (once): every frame into the state digest, and
@@ -244,7 +264,7 @@ class SitlCore:
                     c = self.landing[s].command(t, w.state(s))
                     w.apply(s, c.thrust_n, c.tau_B_nm, c.tau_q_nm)
                 continue
-            if s in lost or s in self.distrusted or (s in self.failsafes and s not in setpoints):
+            if s in lost or s in self.distrusted or s in self.offboard_lost or (s in self.failsafes and s not in setpoints):
                 if s not in self.failsafes:
                     self.failsafes[s] = Failsafe(self.model, w.state(s), t)
                     if s not in self.distrusted:  # distrusted: said by note_rejected
@@ -274,8 +294,12 @@ class SitlCore:
             setpoint = None
         if setpoint is not None:
             self.rejected_in_a_row[s] = 0
-        sp = self.fc_links[s].step(k, setpoint)
+        link = self.fc_links[s]
+        sp = link.step(k, setpoint)
         if sp is None:  # nothing has reached this flight controller yet: keep the last command
+            return
+        if link.silent_for(k) > self.offboard_loss_steps:
+            self._offboard_lost(s, link.silent_for(k))
             return
         if self.fcs:
             odo = self._odometry.get(s)  # [devices]: the autopilot flies on its estimator
@@ -316,11 +340,26 @@ class SitlCore:
         self.log(f"t={t:.3f} s sysid {sysid}: {K} setpoints in a row rejected as implausible (last: {why}); "
                  f"flight controller failsafe: hold, then land, for the rest of the run")
 
+    def _offboard_lost(self, s: int, steps: int) -> None:
+        """No setpoint reached AM s's flight controller for more than COM_OF_LOSS_T: it leaves
+        offboard for its failsafe (hold, then land), as PX4 does, for the rest of the run."""
+        t = self.world.time_s
+        self.offboard_lost.add(s)
+        self.failsafes[s] = Failsafe(self.model, self.world.state(s), t)
+        c = self.failsafes[s].command(t, self.world.state(s))
+        self.world.apply(s, c.thrust_n, c.tau_B_nm, c.tau_q_nm)
+        self.events.append({"t": t, "sysid": s, "event": "offboard lost", "silent_s": steps * self.spec.dt_s,
+                            "failsafe": "hold, then land"})
+        self.log(f"t={t:.3f} s sysid {s}: no setpoint for {steps * self.spec.dt_s:.3f} s (COM_OF_LOSS_T); "
+                 f"flight controller failsafe: hold, then land, for the rest of the run")
+
     def note_controller_error(self, sysid: int, what: str) -> None:
         """The controller of `sysid` raised instead of answering (in-process runs)."""
         self.controller_errors.append((self.time_s, sysid, what))
 
     def step(self) -> None:
+        for s, sensor in self.efforts.items():  # the torque acting over this step, as the servo reads it
+            sensor.sample(self.world.joint_torques(s))
         self.world.step()
 
     # -- flight-controller commands (from the GCS) and state ---------------------------
@@ -393,7 +432,7 @@ class SitlCore:
         return {"state_digest": self.digest.hexdigest(), "verdict": v.to_dict(), "events": self.events,
                 "rejected_setpoints": len(self.rejected), "failsafe_after_rejected": self.failsafe_after_rejected,
                 "ignored_setpoints": {str(s): n for s, n in self.ignored_setpoints.items()},
-                "distrusted": sorted(self.distrusted),
+                "distrusted": sorted(self.distrusted), "offboard_lost": sorted(self.offboard_lost),
                 "flight_controller": self.mode, "control_every": self.control_every,
                 "failsafe_at_end": sorted(self.failsafes),
                 "fc_link": {str(s): {**vars(link.channel.stats), "stale": link.hold.stale,

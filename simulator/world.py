@@ -310,6 +310,14 @@ class World:
             for k, a in enumerate(axes):
                 sat[2 + k] += a  # Python bools (amcore.allocation)
 
+    def joint_torques(self, sysid: int) -> list[float]:
+        """The joint torques acting on the arm now [N m] (the last command, within the limits;
+        zeros before the first)."""
+        if self._lags:
+            return self._joint_commands[sysid]
+        c = self._commands.get(sysid)
+        return [0.0] * len(self._tau_q_max) if c is None else c[2]
+
     def rotor_thrusts(self, sysid: int) -> list[float] | None:
         """The lagging rotors' thrusts [N] after the last step (None: ideal rotors, or no step yet)."""
         lag = self._lags.get(sysid)

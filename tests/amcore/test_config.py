@@ -251,3 +251,27 @@ def test_am_vehicle_prints_a_teams_payload_and_the_team_an_object_needs(capsys):
     with pytest.raises(SystemExit) as e:
         main([hexa, "--mass", "2.0"])
     assert e.value.code == 2
+
+
+@pytest.mark.parametrize("old,new,words", [
+    ("\n[options]\n", '\n[options]\noffboard_inputs = "measured"\n', "offboard_inputs: expected one of sent, reported"),
+    ("\n[options]\n", "\n[options]\noffboard_torque_cutoff_hz = -1.0\n", "offboard_torque_cutoff_hz: must be >= 0"),
+    ("[flight_controller]", "[flight_controller]\nCOM_OF_LOSS_T = 0.0", "COM_OF_LOSS_T: must be > 0"),
+    ("\n[options]\n", '\n[options]\noffboard_inputs = "reported"\noffboard_torque_cutoff_hz = 40.0\n'
+                       "discrete_damping = true\n", None),
+])
+def test_attitude_mode_options_are_checked(tmp_path, old, new, words):
+    assert QUAD_ROWS.count(old) == 1
+    v = _vehicle_with(tmp_path, QUAD_ROWS.replace(old, new))
+    if words is None:
+        o = load_vehicle(v).options
+        assert (o.offboard_inputs, o.offboard_torque_cutoff_hz, o.discrete_damping) == ("reported", 40.0, True)
+        return
+    with pytest.raises(ConfigError) as e:
+        load_vehicle(v)
+    assert words in str(e.value) and "v.toml" in str(e.value)
+
+
+def test_the_paper_s_law_is_the_default_in_attitude_mode():
+    o = load_vehicle(VEHICLE).options
+    assert (o.offboard_inputs, o.offboard_torque_cutoff_hz, o.discrete_damping) == ("sent", 0.0, False)

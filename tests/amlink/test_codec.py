@@ -24,13 +24,20 @@ def vec(n, elements=F64):
 
 @st.composite
 def sensor_frames(draw):
+    """Frames of either mode: attitude mode's carry the measured joint torques and the flown
+    target (ATTITUDE_TARGET has no step: the batch's), or one of them."""
     n = draw(st.integers(0, 8))
+    step = draw(st.integers(0, 2**64 - 1))
+    effort = draw(st.none() | vec(n))
+    target = draw(st.none() | st.builds(AttitudeTarget, st.just(step), vec(4, st.floats(-1, 1)),
+                                        vec(3, st.floats(-50, 50)), st.floats(0, 1)))
     return SensorFrame(
-        step=draw(st.integers(0, 2**64 - 1)),
+        step=step,
         time_s=draw(st.integers(0, 2**50)) / 1e6,  # whole microseconds, as the sim steps
         p_WB=draw(vec(3, F32)), quat_WB_wxyz=draw(vec(4, F32)), v_B=draw(vec(3, F32)), w_B=draw(vec(3, F32)),
         q=draw(vec(n)), qdot=draw(vec(n)), wrench_E=draw(vec(6)),
         flags=draw(st.sampled_from(list(StepFlag))) & ~StepFlag.SHUTDOWN,
+        joint_effort_nm=effort, attitude_target=target,
     )  # fmt: skip
 
 
@@ -80,6 +87,17 @@ def test_sensor_frame_round_trip(frame, scenario_id):
     np.testing.assert_array_equal(got.q, frame.q)
     np.testing.assert_array_equal(got.qdot, frame.qdot)
     np.testing.assert_array_equal(got.wrench_E, frame.wrench_E)
+    if frame.joint_effort_nm is None:  # attitude mode's reports: effort float64, exact; the target float32
+        assert got.joint_effort_nm is None
+    else:
+        np.testing.assert_array_equal(got.joint_effort_nm, frame.joint_effort_nm)
+    if frame.attitude_target is None:
+        assert got.attitude_target is None
+    else:
+        a, b = got.attitude_target, frame.attitude_target
+        assert a.step == frame.step and a.thrust_normalized == f32(np.array([b.thrust_normalized]))[0]
+        np.testing.assert_allclose(a.quat_wxyz, b.quat_wxyz, atol=1e-6)
+        np.testing.assert_array_equal(a.rates_rad_s, f32(b.rates_rad_s))
 
 
 @settings(max_examples=150, deadline=None, database=None)

@@ -431,3 +431,42 @@ def test_a_simulator_that_goes_silent_after_its_notices_times_the_companion_out(
     finally:
         server.close()
         client.close()
+
+
+def test_set_message_interval_is_recorded_for_the_sensor_batch_and_denied_for_the_rest():
+    """A companion asks for the batch's messages at its control rate (as one asks PX4 for
+    ODOMETRY and ATTITUDE_TARGET above their onboard defaults): accepted and recorded; a
+    message the simulator does not stream is denied."""
+    from amlink.codec import mav
+    from amlink.errors import CommandRejectedError
+
+    server = server_for([2], timeout_s=2.0)
+    server.open()
+    outcome = {}
+
+    def companion():
+        try:
+            with CompanionClient(2, sim=url(server)) as c:
+                c.connect(5.0)
+                for msgid in (mav.MAVLINK_MSG_ID_ODOMETRY, mav.MAVLINK_MSG_ID_ATTITUDE_TARGET):
+                    c.set_message_interval(msgid, 4000.0, timeout_s=2.0)
+                try:
+                    c.set_message_interval(mav.MAVLINK_MSG_ID_HIGHRES_IMU, 4000.0, timeout_s=2.0)
+                except CommandRejectedError as e:
+                    outcome["denied"] = e.result
+                c.arm(2.0)  # the server answers the commands while it waits for this
+        except BaseException as exc:  # reported by the main thread
+            outcome["error"] = exc
+
+    t = threading.Thread(target=companion)
+    t.start()
+    try:
+        server.wait_for_peers(5.0)
+        server.wait_for_armed(5.0)
+    finally:
+        server.close("done")
+        t.join(5.0)
+    assert "error" not in outcome, outcome
+    assert outcome["denied"] == mav.MAV_RESULT_DENIED
+    assert server._peers[2].intervals == {mav.MAVLINK_MSG_ID_ODOMETRY: 4000.0,
+                                          mav.MAVLINK_MSG_ID_ATTITUDE_TARGET: 4000.0}

@@ -175,3 +175,120 @@ def test_failsafe_after_rejected_is_taken_from_the_scenario_and_checked():
     for bad in (0, -1, 2.5):
         with pytest.raises(ValueError, match="failsafe_after_rejected"):
             SitlCore(spec, failsafe_after_rejected=bad)
+
+
+def _attitude_hover_setpoints(core, k, q0, hover):
+    from amcore.model import generalized_gravity
+    from amlink.types import AttitudeSetpoint, AttitudeTarget
+
+    m = core.model
+    out = {}
+    for s in core.sysids:
+        g = generalized_gravity(m, m.pin_model.createData(), core.world.state(s))
+        out[s] = AttitudeSetpoint(k, AttitudeTarget(k, q0[s], [0.0, 0.0, 0.0], hover + 1e-4 * k), g[6:])
+    return out
+
+
+def _attitude_core(COM_OF_LOSS_T=1.0):
+    import dataclasses
+
+    from simulator.core import SitlCore
+
+    spec = _attitude_spec(load_scenario(SCENARIO))
+    v = spec.vehicle
+    spec = dataclasses.replace(spec, vehicle=dataclasses.replace(v, flight_controller=dataclasses.replace(
+        v.flight_controller, COM_OF_LOSS_T=COM_OF_LOSS_T)))
+    core = SitlCore(spec)
+    core.connect()
+    m = core.model
+    hover = m.mass_kg * m.gravity_mps2 / (spec.vehicle.rotors.count * spec.vehicle.rotors.thrust_max_n)
+    return core, {s: core.world.attitude_and_rate(s)[0] for s in core.sysids}, hover
+
+
+def test_offboard_loss_fails_over_exactly_after_com_of_loss_t():
+    """PX4's offboard loss: AM 5's setpoints stop reaching its flight controller after the
+    control step at k = 40; the vehicle holds the last one while the silence lasts
+    COM_OF_LOSS_T = 0.1 s (100 physics steps) and fails over at the first step beyond it
+    (k = 141), for the rest of the run, while AM 4 keeps flying offboard."""
+    core, q0, hover = _attitude_core(COM_OF_LOSS_T=0.1)
+    lost_at = None
+    try:
+        for k in range(200):
+            if core.is_control_step(k):
+                core.frames(k)
+                sps = _attitude_hover_setpoints(core, k, q0, hover)
+                if k > 40:
+                    del sps[5]
+                core.actuate(k, sps)
+            else:
+                core.hold(k)
+            if lost_at is None and 5 in core.failsafes:
+                lost_at = k
+            core.step()
+        assert core.offboard_lost == {5} and 4 not in core.failsafes
+        out = core.finish()
+    finally:
+        core.close()
+    assert lost_at == 141
+    ev = [e for e in out["events"] if e["event"] == "offboard lost"]
+    assert len(ev) == 1 and ev[0]["sysid"] == 5 and abs(ev[0]["silent_s"] - 0.101) < 1e-9
+    assert out["offboard_lost"] == [5]
+
+
+def test_a_lossy_link_below_com_of_loss_t_never_fails_over():
+    """Setpoints lost one period in two for 0.4 s: held, never failed over (COM_OF_LOSS_T = 1 s)."""
+    core, q0, hover = _attitude_core()
+    try:
+        for k in range(400):
+            if core.is_control_step(k):
+                core.frames(k)
+                sps = _attitude_hover_setpoints(core, k, q0, hover)
+                if (k // 4) % 2:
+                    del sps[5]
+                core.actuate(k, sps)
+            else:
+                core.hold(k)
+            core.step()
+        assert not core.failsafes and not core.offboard_lost
+    finally:
+        core.close()
+
+
+def test_attitude_frames_report_the_flown_target_and_the_measured_joint_torques():
+    """In attitude mode every frame carries what the flight controller flies: after a setpoint
+    lost on the link, the target of the one before (not the companion's latest), and the joint
+    torques acting (exact without [devices]); torque-mode frames carry neither."""
+    import numpy as np
+
+    core, q0, hover = _attitude_core()
+    try:
+        sent = {}
+        for k in range(0, 60, 4):
+            frames = core.frames(k)
+            if k >= 8:
+                f = frames[5]
+                flown = sent[k - 4] if k - 4 != 24 else sent[k - 8]  # the setpoint of k = 24 never arrived
+                assert f.attitude_target.step == flown.step
+                assert f.attitude_target.thrust_normalized == flown.attitude.thrust_normalized
+                np.testing.assert_array_equal(f.joint_effort_nm, core.world.joint_torques(5))
+                np.testing.assert_allclose(f.joint_effort_nm, flown.tau_q_nm, atol=1e-12)
+            sps = _attitude_hover_setpoints(core, k, q0, hover)
+            sent[k] = sps[5]
+            if k == 24:  # computed, lost on the link: the flight controller keeps flying the last one
+                del sps[5]
+            core.actuate(k, sps)
+            for j in range(4):
+                if j:
+                    core.hold(k + j)
+                core.step()
+    finally:
+        core.close()
+    from simulator.core import SitlCore
+
+    torque = SitlCore(load_scenario(SCENARIO))
+    torque.connect()
+    try:
+        f = torque.frames(0)[4]
+        assert f.attitude_target is None and f.joint_effort_nm is None
+    finally:
+        torque.close()

@@ -38,16 +38,25 @@ def test_impaired_link_is_deterministic_across_runs_and_transports(tmp_path):
     assert digests[0] == digests[1] == ours["state_digest"]
 
 
-def test_a_drawn_trial_is_bit_identical_in_process_and_through_the_processes(tmp_path):
+@pytest.mark.parametrize("scenario,options", [
+    ("two_am_comp.toml", {}),
+    ("two_am_comp_attitude.toml", {"offboard_inputs": "reported", "offboard_torque_cutoff_hz": 40.0,
+                                   "discrete_damping": True}),
+], ids=["torque", "attitude"])
+def test_a_drawn_trial_is_bit_identical_in_process_and_through_the_processes(tmp_path, scenario, options):
     """A trial of the default randomization (sensor devices and the estimator, setpoint loss,
     misalignment, start offsets, another object) written as a scenario file: `am-run` and the
-    in-process runner agree bit for bit, so a campaign's rows replay through the processes."""
+    in-process runner agree bit for bit, so a campaign's rows replay through the processes.
+    In attitude mode with the arm law on the autopilot's reports, those reports (ATTITUDE_TARGET,
+    AM_JOINT_STATE's measured effort) travel the wire to each companion process."""
     from amcore.config import _read_toml
     from trials.cli import DEFAULT_RANDOMIZE, build_tasks
     from trials.randomize import load_randomize
 
-    base = SCENARIOS / "two_am_comp.toml"
-    task = build_tasks(_read_toml(base), base, load_randomize(DEFAULT_RANDOMIZE), 11, 1, tmp_path, None)[0]
+    base = SCENARIOS / scenario
+    data = _read_toml(base)
+    data.setdefault("options", {}).update(options)
+    task = build_tasks(data, base, load_randomize(DEFAULT_RANDOMIZE), 11, 1, tmp_path, None)[0]
     spec = load_scenario(task.path)
     assert spec.devices.enabled and spec.devices.ft.force_noise_n > 0  # sensor devices and the estimator
     assert spec.link.loss > 0 and spec.am(4).misalignment_deg != 0

@@ -160,3 +160,11 @@ def test_the_deployment_stress_and_ten_am_files_keep_the_default_device_levels()
 def test_a_table_without_the_new_keys_draws_none_of_them():
     _, p = draw_trial(_read_toml(SCENARIO), DEFAULT, 5, 0)
     assert not {"planned_mass_kg", "object_dx_m", "object_yaw_deg"} & set(p)
+
+
+def test_the_setpoint_loss_campaigns_lose_ten_percent_on_every_trial_and_nothing_else_varies():
+    loss = load_randomize(ROOT / "configs" / "randomize" / "setpoint_loss.toml")
+    assert loss.ranges() == {"setpoint_loss": (0.1, 0.1)} and not loss.devices and not loss.sensors
+    assert (loss.misalignment_deg, loss.start_offset_m, loss.start_heading_deg) == (0.0, 0.0, 0.0)
+    sensors = load_randomize(ROOT / "configs" / "randomize" / "setpoint_loss_sensors.toml")
+    assert sensors.ranges() == loss.ranges() and sensors.devices == DEFAULT.devices and not sensors.sensors
