@@ -26,7 +26,6 @@ from amcore.config import ConfigError, _read_toml, scenario_from_dict  # noqa: E
 from amcore.so3 import quat_wxyz_to_R  # noqa: E402
 from companion.pilot import Pilot  # noqa: E402
 from simulator import inprocess  # noqa: E402
-from simulator.core import SitlCore  # noqa: E402
 from trials.cli import apply_overrides  # noqa: E402
 
 PER_AM = ("pad_O_x", "pad_O_y", "pad_O_z", "contact_E_x", "contact_E_y", "contact_E_z", "normal_n",
@@ -62,12 +61,6 @@ def main() -> int:
                     *am.p_WB, *est]
         truth.append(row)
 
-    core_init = SitlCore.__init__
-
-    def init(self, *args, **kw):
-        core_init(self, *args, **kw)
-        self.on_truth = on_truth
-
     pilot_step = Pilot.step
 
     def step(self, frame):
@@ -79,8 +72,8 @@ def main() -> int:
                          self.heading_state.dpsi])
         return out
 
-    SitlCore.__init__, Pilot.step = init, step
-    result = inprocess.run(spec)
+    Pilot.step = step  # the companions' diagnostics, as they are computed
+    result = inprocess.run(spec, on_truth=on_truth)
     sysids = sorted(result["ams"], key=int)
     cols = ["t", "object_x", "object_y", "object_z"] + [f"am{s}.{c}" for s in sysids for c in PER_AM]
     tr = np.array(truth)

@@ -63,7 +63,8 @@ def run(spec: ScenarioSpec, duration_s: float | None = None,
         lost: Callable[[float], set[int]] = lambda _t: set(),
         progress: Callable[[float], None] | None = None,
         failsafe_after_rejected: int | None = None,
-        on_frames: Callable[[float, dict, dict], None] | None = None) -> dict:  # fmt: skip
+        on_frames: Callable[[float, dict, dict], None] | None = None,
+        on_truth: Callable[[object], None] | None = None) -> dict:  # fmt: skip
     """Run a scenario in-process; `lost(t)` -> sysids whose companion is silent at t (tests).
 
     As the UDP simulator does, a setpoint outside the plausibility bounds (`amlink.limits`)
@@ -74,8 +75,9 @@ def run(spec: ScenarioSpec, duration_s: float | None = None,
     "verdict" judges the mission (`simulator.verdict`). `progress(t)`, if given, is called
     about every simulated second. `on_frames(t, exact, frames)`, if given, sees every control
     step's exact values (`World.sensor_values` per sysid) beside the frames sent (estimator
-    accuracy, `experiments/estimator_accuracy.py`)."""
-    core = SitlCore(spec, failsafe_after_rejected=failsafe_after_rejected)
+    accuracy, `experiments/estimator_accuracy.py`). `on_truth(gt)`, if given, sees every
+    ground-truth sample (`simulator.world.GroundTruth`, every 10 ms; `experiments/grasp_trace.py`)."""
+    core = SitlCore(spec, failsafe_after_rejected=failsafe_after_rejected, on_truth=on_truth)
     pilots = {s: Pilot(spec, s, model=core.model, object_pose=core.object_pose) for s in core.sysids}
     jitcache.warm(pilots[core.sysids[0]].warm_up)  # compiles the law once per machine, else loads it
     v = spec.vehicle
