@@ -3,7 +3,8 @@
 For each scenario and control mode, one `am-trials` campaign per scale of
 `configs/randomize/sensors_only.toml` (the nominal scenario, only the sensors varied; each
 trial draws its own noise and biases) with `[devices].scale` set to that scale. The same
-campaign seed is used in every cell, so each column flies the same per-trial seeds.
+campaign seed is used in every cell, so each column flies the same per-trial seeds. In
+attitude mode a scenario's `<name>_attitude.toml` sibling flies, where there is one.
 
     python experiments/noise_scale.py --out runs/noise --trials 10 --seed 2400 \\
         [--scenario configs/scenarios/two_am_robust.toml ...] [--scales 0 0.5 1 2 3 5] \\
@@ -27,9 +28,18 @@ RANDOMIZE = ROOT / "configs" / "randomize" / "sensors_only.toml"
 TRIALS = Path(sys.executable).with_name("am-trials")
 
 
+def flown(scenario: Path, mode: str) -> Path:
+    """The scenario a mode flies: in attitude mode its `<name>_attitude.toml` sibling if there is
+    one (250 Hz setpoints, the rotors' lag and attitude mode's options), else the scenario itself
+    with only [flight_controller].mode changed."""
+    sibling = scenario.with_name(f"{scenario.stem}_attitude.toml")
+    return sibling if mode == "attitude" and sibling.exists() else scenario
+
+
 def cell(out: Path, scenario: Path, mode: str, scale: float, a) -> tuple[int, int, float]:
     """(successes, trials, median saturated share) of one campaign, run unless already done."""
     folder = out / f"{scenario.stem}-{mode}-x{scale:g}"
+    scenario = flown(scenario, mode)
     if not (folder / "summary.json").exists():
         if folder.exists():
             raise SystemExit(f"{folder}: an unfinished campaign; remove it to rerun")
@@ -69,7 +79,7 @@ def main() -> int:
             for scale in a.scales:
                 ok, n, sat = cell(a.out, scenario, mode, scale, a)
                 cells.append(f"{ok}/{n} ({100 * sat:.2g} %)")
-            lines.append(f"| {scenario.stem}, {mode} | " + " | ".join(cells) + " |")
+            lines.append(f"| {flown(scenario, mode).stem}, {mode} | " + " | ".join(cells) + " |")
             print(lines[-1], flush=True)
     table = "\n".join(lines) + "\n\nCells: successes/trials (median share of AM steps with the rotors saturated).\n"
     (a.out / "table.md").write_text(table)

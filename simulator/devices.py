@@ -30,7 +30,7 @@ from typing import NamedTuple
 import numpy as np
 
 from amcore.config import DevicesSpec, EncoderSpec, ForceTorqueSpec, ImuSpec, MocapSpec
-from amcore.estimator import Estimator, quat_exp, quat_mul, rotation
+from amcore.estimator import BG, Estimator, quat_exp, quat_mul, rotation
 
 _STREAM = 0xDE71  # distinguishes the devices' streams from the other seeded streams of an AM
 IMU, MOCAP, FT = 1, 2, 3  # each device's sub-stream
@@ -213,6 +213,10 @@ class DeviceSuite:
         arrived = self.mocap.sample(truth, t)
         pose, lag = arrived if arrived is not None else (None, 0)
         odo = self.estimator.step(k, omega_m, f_m, pose, lag)
+        # The autopilot's rate loop takes the gyro with the estimator's bias removed and filters it
+        # once itself (IMU_GYRO_CUTOFF), as PX4's VehicleAngularVelocity takes EKF2's bias; the
+        # odometry's rate, already low-passed for the law, would be filtered twice.
+        self.autopilot_rate = omega_m - self.estimator.x[BG:BG + 3]
         n = self.n
         q, qdot = self.encoders.sample(values[13:13 + n], values[13 + n:13 + 2 * n])
         wrench = self.ft.sample(values[13 + 2 * n:19 + 2 * n], t)
