@@ -154,3 +154,43 @@ def shift_reference(ref, s: LateralState, axis_W: np.ndarray):
         return ref
     return ref._replace(r_c=ref.r_c + s.dy * axis_W, r_c_d1=ref.r_c_d1 + s.dy_d1 * axis_W,
                         r_c_d2=ref.r_c_d2 + s.dy_d2 * axis_W)
+
+
+# ----------------------------------------------------------------------------- hover trim
+# Beyond the paper (option [options].trim_hz): the motion capture's fixed attitude bias tilts
+# the thrust the AM believes level, so in free flight a steady horizontal force of about
+# T * (roll, pitch bias) pushes its CoM off the reference, by that force over K_t. Two AMs facing
+# each other whose biases tilt them to opposite sides of the formation make a couple about the
+# vertical, which in the lift turns the formation and the object between the pads
+# (docs/sensing.md). A pilot trims that out in hover; the trim does it from the CoM error: while
+# the AM hovers in the approach (its CoM reference still), the CoM reference moves by dr,
+#
+#     dr' = -omega P_h (r~_c + dr),
+#
+# r~_c = r_c - r_c,d the law's CoM error against the moved reference, so r~_c + dr is the error
+# against the planned one, and P_h keeps the horizontal components. dr settles on -F / K_t
+# for a steady force F, which K_t dr then cancels; from the grasp on dr is held.
+
+
+@dataclass(frozen=True)
+class Trim:
+    omega_rad_s: float
+    max_speed_mps: float = 0.01  # the CoM reference counts as still below this speed
+    max_shift_m: float = 0.03
+
+
+def trim_update(trim: Trim, dr: np.ndarray, r_c_err_W: np.ndarray, ref_speed_mps: float, dt: float) -> np.ndarray:
+    """The trim's shift after one step of dt [s] (explicit Euler) in the approach phase; it
+    integrates only while the reference moves slower than max_speed_mps."""
+    if ref_speed_mps >= trim.max_speed_mps:
+        return dr
+    e = np.asarray(r_c_err_W, dtype=float) + dr
+    e[2] = 0.0
+    new = dr - trim.omega_rad_s * dt * e
+    n = float(np.hypot(new[0], new[1]))
+    return new * (trim.max_shift_m / n) if n > trim.max_shift_m else new
+
+
+def trim_reference(ref, dr: np.ndarray):
+    """`ref` with its CoM path moved by the (constant) trim dr."""
+    return ref if not dr.any() else ref._replace(r_c=ref.r_c + dr)

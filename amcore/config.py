@@ -20,8 +20,10 @@ class ConfigError(ValueError):
     """A configuration file is malformed; the message names the file and the key."""
 
 
-# the scenario every process main runs when none is given: the paper's two-AM grasp
-DEFAULT_SCENARIO = Path(__file__).resolve().parents[1] / "configs" / "scenarios" / "two_am_comp.toml"
+# the scenario every process main runs when none is given: the paper's two-AM grasp through the
+# design card's interface (attitude-thrust setpoints at 250 Hz to an emulated PX4); the paper's
+# idealized torque interface is configs/scenarios/two_am_comp.toml
+DEFAULT_SCENARIO = Path(__file__).resolve().parents[1] / "configs" / "scenarios" / "two_am_comp_attitude.toml"
 
 
 # ----------------------------------------------------------------------------- vehicle
@@ -202,6 +204,9 @@ class ControllerOptions:
     # frequency [Hz]; 0: off (the paper's CoM reference).
     lateral_admittance_hz: float = 0.0
     lateral_admittance_zeta: float = 1.0
+    # Beyond the paper (amcore.adapt.Trim): in the approach's hover the CoM reference moves to
+    # cancel a steady horizontal force (a tilted thrust), at this bandwidth [Hz]; held from the grasp on. 0: off.
+    trim_hz: float = 0.0
     # Attitude mode only (amcore.offboard): where the arm law's body-torque estimate takes the
     # last period's thrust and joint torques from. "sent": what the companion sent (the law
     # as first written); "reported": what the autopilot reports it flies (ATTITUDE_TARGET's
@@ -875,6 +880,8 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     if v.options.heading_admittance_hz < 0.0 or not v.options.heading_admittance_zeta > 0.0:
         raise ConfigError(f"{where}: [options].heading_admittance_hz must be >= 0 (0: off) and "
                           f"heading_admittance_zeta > 0")
+    if not v.options.trim_hz >= 0.0:
+        raise ConfigError(f"{where}: [options].trim_hz: must be >= 0 (0: off), got {v.options.trim_hz!r}")
     if v.options.lateral_admittance_hz < 0.0 or not v.options.lateral_admittance_zeta > 0.0:
         raise ConfigError(f"{where}: [options].lateral_admittance_hz must be >= 0 (0: off) and "
                           f"lateral_admittance_zeta > 0")

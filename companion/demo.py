@@ -1,6 +1,6 @@
 """Free-flight demo: one AM under the paper's controller in the ideal model (no contact).
 
-    am-demo [--config configs/scenarios/two_am_comp.toml] [--sysid 4] [--duration 5]
+    am-demo [--config configs/scenarios/two_am_comp_attitude.toml] [--sysid 4] [--duration 5]
 
 Starts the AM off its reference (5 cm, 0.13 rad, 0.15 rad joint error), flies the approach
 phase against pinocchio's forward dynamics and prints the errors of Theorem 1 over time.

@@ -1,7 +1,7 @@
 """Companion process of one AM: runs the paper's controller against a flight controller
 (here the SITL simulator) over MAVLink, in lockstep.
 
-    companion --sysid 4 [--sim udpout:127.0.0.1:14550] [--config configs/scenarios/two_am_comp.toml]
+    companion --sysid 4 [--sim udpout:127.0.0.1:14550] [--config configs/scenarios/two_am_comp_attitude.toml]
 
 --sim takes mavutil's endpoint forms: udpout:HOST:PORT, udpin:HOST:PORT, tcp:HOST:PORT,
 tcpin:HOST:PORT or a serial device DEVICE[:BAUD] (a flight controller on /dev/ttyUSB0).

@@ -23,7 +23,8 @@ import numpy as np
 from amcore import baseline, control
 from amcore.allocation import Allocation
 from amcore.adapt import (HeadingAdmittance, HeadingState, LateralAdmittance, LateralState, heading_update,
-                          lateral_update, shift_reference, turn_frame, turn_reference)
+                          lateral_update, shift_reference, trim_reference, trim_update, turn_frame,
+                          turn_reference, Trim)
 from amcore.config import ScenarioSpec
 from amcore.control import StepResult
 from amcore.mission import JoinBlend, ObjectPose, am_mission, join_blend
@@ -76,6 +77,9 @@ class Pilot:
         self.lateral = (LateralAdmittance(2.0 * math.pi * o.lateral_admittance_hz, o.lateral_admittance_zeta,
                                           float(y_W @ (K_t * y_W))) if o.lateral_admittance_hz > 0.0 else None)
         self.lateral_state = LateralState()
+        self.trim = Trim(2.0 * math.pi * o.trim_hz) if o.trim_hz > 0.0 else None
+        self.trim_dr = np.zeros(3)
+        self._r_c_err: np.ndarray | None = None  # the law's CoM error of the last step (trim)
         self._wrench_E_f = None  # the controller's filtered wrench of the last step (heading admittance)
         self._t_last: float | None = None
         self._started = False
@@ -113,6 +117,11 @@ class Pilot:
         ref = self.mission.reference(t)
         if self._blend is not None:
             ref = self._blend.apply(ref, t)
+        if self.trim is not None:
+            if self._r_c_err is not None and self.mission.phase(t) == "approach":
+                self.trim_dr = trim_update(self.trim, self.trim_dr, self._r_c_err,
+                                           float(np.linalg.norm(ref.r_c_d1)), t - self._t_last)
+            ref = trim_reference(ref, self.trim_dr)
         task_frame = None
         if self.heading is not None:
             if self._wrench_E_f is not None:
@@ -142,6 +151,8 @@ class Pilot:
             res = self.law(*args) if task_frame is None else self.law(*args, task_frame)
             self.memory = res.memory
         self._wrench_E_f, self._t_last = res.diagnostics.wrench_E_filtered, t
+        if self.trim is not None:
+            self._r_c_err = np.array(res.diagnostics.r_c_err)
         if self.attitude_mode:
             return attitude_setpoint_from_result(frame.step, res, self.thrust_max_n), None, res
         sp, att = setpoint_from_result(frame.step, res, self.thrust_max_n)

@@ -1,7 +1,7 @@
 """Run a whole scenario: the simulator and one companion process per AM, wired over
 MAVLink/UDP on loopback, with a progress bar and a run folder holding the outcome.
 
-    am-run [configs/scenarios/two_am_comp.toml] [--run-dir runs/NAME] [--duration S]
+    am-run [configs/scenarios/two_am_comp_attitude.toml] [--run-dir runs/NAME] [--duration S]
            [--gcs udpout:127.0.0.1:14551] [--gcs-key-file FILE] [--tlog-companions]
 
 The run folder gets outcome.json (simulator ground truth), am<sysid>.json (each

@@ -1,7 +1,7 @@
 """SITL simulator process: the PyBullet world of a scenario and every AM's flight-controller
 emulation, stepped in lockstep with one companion process per AM over MAVLink (UDP, TCP or serial).
 
-    simulator [--config configs/scenarios/two_am_comp.toml] [--bind udpin:127.0.0.1:14550]
+    simulator [--config configs/scenarios/two_am_comp_attitude.toml] [--bind udpin:127.0.0.1:14550]
               [--gcs udpout:127.0.0.1:14551]
 
 Start-up waits for every [[am]] sysid's HEARTBEAT and ARM; then each control step k it sends

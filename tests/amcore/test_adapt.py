@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from amcore.adapt import (HeadingAdmittance, HeadingState, LateralAdmittance, LateralState, heading_update,
+from amcore.adapt import (Trim, trim_reference, trim_update, HeadingAdmittance, HeadingState, LateralAdmittance, LateralState, heading_update,
                           lateral_update, misalignment, shift_reference, turn_frame, turn_reference)
 from amcore.config import load_scenario
 from amcore.control import Reference
@@ -180,3 +180,46 @@ def test_touch_options_are_checked_naming_the_key(tmp_path, mission, words):
     data["mission"].update(mission)
     with pytest.raises(ConfigError, match=words):
         scenario_from_dict(data, SCENARIO)
+
+
+def _hover_with_trim(F, trim, K=60.0, D=25.0, m=2.5, dt=0.004, T=6.0, speed=0.0):
+    """A CoM held by the law's PD (stiffness K, damping D) against a steady force F, the trim
+    moving its reference: (shift, error against the planned reference) over time."""
+    x, v, dr = np.zeros(3), np.zeros(3), np.zeros(3)
+    out = []
+    for _ in range(int(T / dt)):
+        err = x - dr  # the law's error against the moved reference (planned reference: 0)
+        v = v + dt * (-K * err - D * v + F) / m
+        x = x + dt * v
+        dr = trim_update(trim, dr, x - dr, speed, dt)
+        out.append((dr.copy(), x.copy()))
+    return out
+
+
+def test_the_trim_cancels_a_steady_horizontal_force_and_leaves_the_vertical_alone():
+    """A tilted thrust's 0.27 N sideways (a 9 mrad roll bias at 30 N) and 0.5 N up: the trim
+    settles on -F / K horizontally, so the CoM comes back onto the planned reference there;
+    the vertical is not its business."""
+    F, K = np.array([0.0, 0.27, 0.5]), 60.0
+    run = _hover_with_trim(F, Trim(2.0 * math.pi * 0.3), K=K)
+    dr, x = run[-1]
+    np.testing.assert_allclose(dr[:2], -F[:2] / K, atol=2e-5)
+    assert abs(x[1]) < 2e-5  # horizontally on the planned reference (4.5 mm off without the trim)
+    assert dr[2] == 0.0 and x[2] == pytest.approx(F[2] / K, rel=1e-3)
+
+
+def test_the_trim_holds_while_the_reference_moves_and_stays_within_its_bound():
+    F = np.array([3.0, 0.0, 0.0])
+    moving = _hover_with_trim(F, Trim(2.0 * math.pi * 0.3), speed=0.05, T=1.0)
+    assert not any(dr.any() for dr, _ in moving)
+    bounded = _hover_with_trim(F, Trim(2.0 * math.pi * 0.3, max_shift_m=0.01))
+    assert max(np.linalg.norm(dr) for dr, _ in bounded) <= 0.01 + 1e-12
+
+
+def test_the_trim_moves_the_com_path_and_nothing_else():
+    ref = Reference(*(np.full(3, float(k)) for k in range(len(Reference._fields))))
+    moved = trim_reference(ref, np.array([0.001, -0.002, 0.0]))
+    np.testing.assert_allclose(moved.r_c, ref.r_c + [0.001, -0.002, 0.0])
+    for name in Reference._fields[1:]:
+        assert np.array_equal(getattr(moved, name), getattr(ref, name))
+    assert trim_reference(ref, np.zeros(3)) is ref

@@ -145,13 +145,14 @@ def test_am_run_refuses_a_run_that_does_not_fit_in_memory(monkeypatch, capsys, t
 
 @pytest.mark.parametrize("module,defaults", [
     ("companion.main", ["--connect-timeout CONNECT_TIMEOUT seconds to wait for the simulator (default: 30.0)",
-                        "(default: 10.0)", "two_am_comp.toml)"]),
-    ("simulator.main", ["(default: 60.0)", "(default: 5.0)", "two_am_comp.toml)"]),
-    ("simulator.launch", ["(default: 120.0)", "two_am_comp.toml)"]),
+                        "(default: 10.0)", "two_am_comp_attitude.toml)"]),
+    ("simulator.main", ["(default: 60.0)", "(default: 5.0)", "two_am_comp_attitude.toml)"]),
+    ("simulator.launch", ["(default: 120.0)", "two_am_comp_attitude.toml)"]),
 ])
-def test_help_gives_every_default(module, defaults, capsys):
+def test_help_gives_every_default(module, defaults, capsys, monkeypatch):
     """The timeouts and the scenario, as --help shows them: every option with a value says its
     default."""
+    monkeypatch.setenv("COLUMNS", "400")  # argparse breaks a path longer than the line inside a word
     main = importlib.import_module(module).main
     with pytest.raises(SystemExit) as ex:
         main(["--help"])

@@ -61,6 +61,8 @@ BASE = (ROOT / "configs" / "scenarios" / "two_am_comp.toml").read_text()
     ("rate_hz = 1000.0", "rate_hz = 1000.0\ncontrol_rate_hz = 2000.0", "control_rate_hz: 2000 Hz must divide"),
     ("[object]", "[options]\nlateral_admittance_hz = -0.3\n[object]", "[options].lateral_admittance_hz must be >= 0"),
     ("[object]", "[options]\nlateral_admittance_zeta = 0.0\n[object]", "lateral_admittance_zeta > 0"),
+    ("[object]", "[options]\ntrim_hz = -0.1\n[object]", "[options].trim_hz: must be >= 0"),
+    ("[object]", "[options]\ntrim_hz = nan\n[object]", "[options].trim_hz: must be finite"),
 ])
 def test_malformed_scenario_names_file_and_key(tmp_path, old, new, key):
     assert old in BASE

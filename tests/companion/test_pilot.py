@@ -141,3 +141,33 @@ def test_lateral_admittance_gives_way_to_the_pads_push_in_the_grasp_phase_only(p
         assert all(b <= a + 1e-12 for a, b in zip(shift, shift[1:]))  # monotonic: no overshoot
     else:
         assert max(abs(s) for s in shift) < 1e-12
+
+
+@pytest.mark.parametrize("phase_t, moves", [(4.0, True), (7.0, False)])
+def test_trim_moves_the_com_reference_against_a_steady_offset_in_the_approachs_hover_only(phase_t, moves):
+    """[options].trim_hz: a vehicle held 5 mm off its CoM reference (along world y) in the
+    approach's hover moves the reference the other way; in the grasp phase the same offset
+    moves nothing (the trim is held)."""
+    from ..conftest import ROOT
+
+    base = load_scenario(ROOT / "configs" / "scenarios" / "two_am_robust.toml")
+    opts = dataclasses.replace(base.vehicle.options, trim_hz=0.3, heading_admittance_hz=0.0,
+                               lateral_admittance_hz=0.0)
+    spec = dataclasses.replace(base, vehicle=dataclasses.replace(base.vehicle, options=opts))
+    p = Pilot(spec, 4)
+    x0 = p.mission.initial_state()
+    dt = spec.control_dt_s
+    p.command(_frame(0, 0.0, x0, p.mission.psi))  # started with the run: no join blend
+    shift = []
+    for k in range(1, 500):
+        t = phase_t + k * dt
+        r = p.mission.reference(t).r_c - p.mission.reference(0.0).r_c  # where the mission has moved the CoM
+        values = [*(x0.p_WB + r + [0.0, 0.005, 0.0]), 1.0, 0.0, 0.0, 0.0, *x0.v_B, *x0.w_B, *x0.q, *x0.qdot,
+                  0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+        _, _, res = p.command(sensor_frame_from_wire(k, t, values, len(x0.q), 0))
+        shift.append(res.diagnostics.r_c_d - p.mission.reference(t).r_c)
+    if moves:
+        assert shift[-1][1] < -1e-3  # > 1 mm the other way
+        assert shift[-1][2] == 0.0
+    else:
+        assert max(np.abs(s).max() for s in shift) < 1e-12
