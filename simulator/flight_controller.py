@@ -34,8 +34,9 @@ of physical rate damping (docs/flight_controller.md).
 Frames: PX4 works in NED/FRD, this module in the simulator's ENU/FLU. The laws are the same
 vectors in other coordinates (the gains are per axis and sign-free), so nothing else changes.
 It flies on the attitude and rates its caller hands it: the simulator's exact ones, or with
-[devices] its estimator's (amcore.estimator, run by simulator.core from the emulated IMU and
-motion capture, as PX4 flies on EKF2's output).
+[devices] the estimator's attitude (amcore.estimator, run by simulator.core from the emulated
+IMU and motion capture, as PX4 flies on EKF2's output) and the IMU's rate less the estimator's
+gyro bias, which step 2 filters once (PX4's VehicleAngularVelocity).
 """
 from __future__ import annotations
 
