@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+sys.path.append(str(ROOT))  # if not installed; PYTHONPATH wins (benchmarks/ab.py)
 
 from amcore.config import load_scenario  # noqa: E402
 from amlink import fastcodec, wire  # noqa: E402
