@@ -102,7 +102,7 @@ class SitlCore:
             am.sysid: SensorModel(spec.sensors, self.model.n, spec.control_dt_s, spec.seed, am.sysid) for am in spec.ams}
         # [devices]: each AM's sensors and estimator, sampled every physics step (made at the first)
         self.devices: dict[int, DeviceSuite] = {}
-        self._odometry: dict[int, list[float]] = {}  # the estimator's last frame values, per AM
+        self._odometry: dict[int, list[float]] = {}  # the estimator's last values, per AM (odometry first)
         self._reported: dict[int, list[float]] = {}  # the last frame's base state, per AM (telemetry)
         self.failsafes: dict[int, Failsafe] = {}  # companion lost
         self.landing: dict[int, Failsafe] = {}  # landing on a GCS command (companion ignored)
@@ -230,9 +230,10 @@ class SitlCore:
         ground truth is sampled as on control steps."""
         self.observe()
         if self.spec.devices.enabled:  # the devices and the estimator run at the IMU rate
-            t = self.world.time_s
-            for s in self.sysids:
-                self._sense(s, self.world.sensor_values(s), t)
+            t, w = self.world.time_s, self.world
+            for s in self.sysids:  # no frame: the base alone, unless the F/T tare reads the wrist
+                dev = self.devices.get(s)
+                self._sense(s, w.sensor_values(s) if dev is None or dev.needs_reading(t) else w.base_values(s), t)
         if k % TRUTH_EVERY == 0:
             self._truth({s: self.world.wrench_ee(s) for s in self.sysids})
         self.actuate(k, {}, lost)

@@ -101,3 +101,19 @@ def devices_sample(values, n_joints, f_B, imu_c, b_g, b_a, imu_n, omega_m, f_m, 
     quantize(values[13:13 + n], dq, out[0:n])
     quantize(values[13 + n:13 + 2 * n], dqdot, out[n:2 * n])
     ft_sample(ft_c, ft_s, values[13 + 2 * n:19 + 2 * n], t, ft_n, out[2 * n:2 * n + 6])
+
+
+@kernel
+def ft_drift(c, s, n):
+    """`ForceTorque.sample`'s random-walk step of the offset alone (a step whose reading
+    nobody reads, outside the tare's window: `DeviceSuite.needs_reading`)."""
+    for i in range(6):
+        s[FT_OFFSET + i] = s[FT_OFFSET + i] + c[FT_DRIFT + i] * n[i]
+
+
+@kernel
+def devices_advance(values, f_B, imu_c, b_g, b_a, imu_n, omega_m, f_m, ft_c, ft_s, ft_n):
+    """`devices_sample` for a step without a frame: the IMU from the base's values (p_WB,
+    quat_WB, v_B, w_B) and the F/T sensor's drift; nothing read of the arm or the wrist."""
+    imu_sample(imu_c, b_g, b_a, f_B, values[10:13], imu_n, omega_m, f_m)
+    ft_drift(ft_c, ft_s, ft_n)

@@ -247,17 +247,34 @@ class DeviceSuite:
         wrench = self.ft.sample(values[13 + 2 * n:19 + 2 * n], t)
         return [*odo.tolist(), *q.tolist(), *qdot.tolist(), *wrench.tolist()]
 
+    def needs_reading(self, t: float) -> bool:
+        """Whether a step at t needs the arm's and the wrist's values although no frame is sent:
+        the F/T tare averages its readings until it is done."""
+        if self.compiled:
+            return self._ft_s[dk.FT_TARED] == 0.0 and t >= self._ft_c[dk.FT_LO]
+        return True
+
     def _step_compiled(self, values: list[float], t: float) -> list[float]:
         """`step` with the devices' arithmetic compiled (class doc); the truth's two products
-        as `_truth` and `Imu.sample` make them (numpy's)."""
+        as `_truth` and `Imu.sample` make them (numpy's). `values` may be the base's alone (the
+        first 13, `World.base_values`) on a step that sends no frame and reads no F/T
+        (`needs_reading` False): then only the odometry (the first 13 of a frame) is returned,
+        and the encoders are not read; the devices' draws and drift advance as on any step."""
         self._k = k = self._k + 1
         truth = self._truth(values, self._v_W_prev)
         self._v_W_prev = truth.v_W
         f_B = truth.R_WB.T @ (truth.a_W + self._g_e3)
-        dk.devices_sample(np.array(values), self.n, f_B, self._imu_c, self._b_g, self._b_a, self._imu_noise.next(),
-                          self._omega_m, self._f_m, self.encoders.dq, self.encoders.dqdot, self._ft_c, self._ft_s, t,
-                          self._ft_noise.next(), self._tail)
+        full = len(values) > 13
+        if full:
+            dk.devices_sample(np.array(values), self.n, f_B, self._imu_c, self._b_g, self._b_a, self._imu_noise.next(),
+                              self._omega_m, self._f_m, self.encoders.dq, self.encoders.dqdot, self._ft_c, self._ft_s,
+                              t, self._ft_noise.next(), self._tail)
+        else:
+            if self.needs_reading(t):
+                raise ValueError(f"t = {t} s: the F/T tare needs this step's reading; give the full values")
+            dk.devices_advance(np.array(values), f_B, self._imu_c, self._b_g, self._b_a, self._imu_noise.next(),
+                               self._omega_m, self._f_m, self._ft_c, self._ft_s, self._ft_noise.next())
         arrived = self.mocap.sample(truth, t)
         pose, lag = arrived if arrived is not None else (None, 0)
         odo = self.estimator.step(k, self._omega_m, self._f_m, pose, lag)
-        return [*odo.tolist(), *self._tail.tolist()]
+        return [*odo.tolist(), *self._tail.tolist()] if full else odo.tolist()

@@ -55,3 +55,23 @@ def test_compiled_devices_give_the_python_devices_frames_bit_for_bit(spec):
         assert fast.step(v, k * DT) == slow.step(v, k * DT), f"step {k}"
     assert fast.mocap.captured == slow.mocap.captured and fast.mocap.dropped == slow.mocap.dropped
     assert bool(fast._ft_s[dk.FT_TARED]) == slow.ft.tared
+
+
+def test_steps_without_a_frame_read_the_base_alone_and_keep_the_draws_in_step():
+    """Frames every 4th step (attitude mode): between them the compiled suite gets the base's
+    values alone, except while the F/T tare reads; the odometry and every frame stay the
+    Python suite's, which reads everything every step."""
+    values = moving_values(np.random.default_rng(6), 1200)
+    fast = DeviceSuite(FULL, 3, DT, G, 3, 5, values[0], compiled=True)
+    slow = DeviceSuite(FULL, 3, DT, G, 3, 5, values[0], compiled=False)
+    read_base_alone = 0
+    for k, v in enumerate(values):
+        t = k * DT
+        frame = k % 4 == 0 or fast.needs_reading(t)
+        read_base_alone += not frame
+        a, b = fast.step(v if frame else v[:13], t), slow.step(v, t)
+        assert a == (b if frame else b[:13]), f"step {k}"
+    assert read_base_alone > 600  # the tare (0.4 .. 0.5 s) read every step, then it was done
+    with pytest.raises(ValueError, match="tare"):
+        early = DeviceSuite(FULL, 3, DT, G, 3, 5, values[0], compiled=True)
+        early.step(values[0][:13], 0.45)
