@@ -180,7 +180,7 @@ class FlightController:
         self.every = max(1, round(1.0 / (fc.rate_hz * physics_dt_s)))
         self.dt_s = self.every * physics_dt_s
         rate_hz = 1.0 / self.dt_s
-        self.allocation = Allocation(rotors)
+        self.allocation = Allocation(rotors, compiled=compiled)
         self.yaw_weight = fc.MC_YAW_WEIGHT
         w = fc.MC_YAW_WEIGHT
         # AttitudeControl::setProportionalGain: the yaw gain compensates the yaw weight's scaling
@@ -229,7 +229,8 @@ class FlightController:
         """`_update` with steps 1 and 2 compiled (simulator.fc_kernels), step 3 as there."""
         out, s = self._out, self._s
         self._rate_loops(self._p, s, q, w, target.quat_wxyz, target.rates_rad_s, out)
-        rates_sp, torque = out.tolist()[0:3], out.tolist()[3:6]
+        v = out.tolist()
+        rates_sp, torque = v[0:3], v[3:6]
         thrust = min(max(float(target.thrust_normalized), 0.0), 1.0)
         a = self.allocation.allocate(*torque, thrust)
         achieved = not a.saturated

@@ -157,7 +157,7 @@ class World:
             raise ValueError(f"initial states given for sysids {sorted(initial)}, scenario has {expected}")
         self.spec = spec
         self._initial = dict(initial)
-        self._alloc = Allocation(spec.vehicle.rotors)
+        self._alloc = Allocation(spec.vehicle.rotors, compiled=True)
         # each rotor's least thrust and range [N], for the busiest/idlest rotor's share in the truth
         self._rotor_ranges = tuple(zip(spec.vehicle.rotors.thrust_min(),
                                        (hi - lo for lo, hi in zip(spec.vehicle.rotors.thrust_min(),
