@@ -261,18 +261,23 @@ class DeviceSuite:
         (`needs_reading` False): then only the odometry (the first 13 of a frame) is returned,
         and the encoders are not read; the devices' draws and drift advance as on any step."""
         self._k = k = self._k + 1
-        truth = self._truth(values, self._v_W_prev)
-        self._v_W_prev = truth.v_W
-        f_B = truth.R_WB.T @ (truth.a_W + self._g_e3)
+        x = np.array(values)
+        quat = x[3:7]
+        R = rotation(quat)
+        v_W = R @ np.array(values[7:10])  # as `_truth`: the product of a fresh array, numpy's
+        a_W = np.zeros(3) if self._v_W_prev is None else (v_W - self._v_W_prev) / self.dt
+        truth = BodyTruth(x[0:3], quat, R, v_W, x[10:13], a_W)
+        self._v_W_prev = v_W
+        f_B = R.T @ (a_W + self._g_e3)
         full = len(values) > 13
         if full:
-            dk.devices_sample(np.array(values), self.n, f_B, self._imu_c, self._b_g, self._b_a, self._imu_noise.next(),
+            dk.devices_sample(x, self.n, f_B, self._imu_c, self._b_g, self._b_a, self._imu_noise.next(),
                               self._omega_m, self._f_m, self.encoders.dq, self.encoders.dqdot, self._ft_c, self._ft_s,
                               t, self._ft_noise.next(), self._tail)
         else:
             if self.needs_reading(t):
                 raise ValueError(f"t = {t} s: the F/T tare needs this step's reading; give the full values")
-            dk.devices_advance(np.array(values), f_B, self._imu_c, self._b_g, self._b_a, self._imu_noise.next(),
+            dk.devices_advance(x, f_B, self._imu_c, self._b_g, self._b_a, self._imu_noise.next(),
                                self._omega_m, self._f_m, self._ft_c, self._ft_s, self._ft_noise.next())
         arrived = self.mocap.sample(truth, t)
         pose, lag = arrived if arrived is not None else (None, 0)

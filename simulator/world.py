@@ -181,6 +181,7 @@ class World:
         self._arm_ids: dict[int, list[int]] = {}
         self._sensed_links: dict[int, list[int]] = {}
         self._sensed_joints: dict[int, list[int]] = {}  # the arm's joints, then the wrist sensor's
+        self._last_limited: dict[int, tuple[np.ndarray, JointTorqueResult]] = {}  # `_limited`'s last, per AM
         self._tool_weights: dict[int, tuple[float, ...]] = {}
 
     # ------------------------------------------------------------------ lifecycle
@@ -291,7 +292,7 @@ class World:
         thrust) whether its allocation fell short) and the joint torques [N m] (limited
         here); they act from the next `step()` until replaced."""
         self._am(sysid)
-        joints = limit_joint_torques(tau_q_nm, self._tau_q_max)
+        joints = self._limited(sysid, tau_q_nm)
         self._count_saturation(sysid, saturated_axes, joints.saturated)
         f = [float(x) for x in rotor_thrusts_n]
         if self._lags:
@@ -301,6 +302,18 @@ class World:
             force, tau_B = self._alloc.wrench(f)
             self._commands[sysid] = (force, tau_B, joints.applied_nm.tolist())
             self._rotors_now[sysid] = f
+        return joints
+
+    def _limited(self, sysid: int, tau_q_nm) -> JointTorqueResult:
+        """`limit_joint_torques` of tau_q_nm; the last result again if given the same array
+        object (a held setpoint's joint torques, re-applied every physics step)."""
+        last = self._last_limited.get(sysid)
+        if last is not None and last[0] is tau_q_nm:
+            return last[1]
+        joints = limit_joint_torques(tau_q_nm, self._tau_q_max)
+        # a frozen setpoint's array (read-only, owning its data: amlink.types) cannot change under us
+        if isinstance(tau_q_nm, np.ndarray) and not tau_q_nm.flags.writeable and tau_q_nm.base is None:
+            self._last_limited[sysid] = (tau_q_nm, joints)
         return joints
 
     def _count_saturation(self, sysid: int, axes: tuple[bool, bool, bool, bool], joints: bool) -> None:
