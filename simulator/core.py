@@ -360,7 +360,7 @@ class SitlCore:
 
     def step(self) -> None:
         for s, sensor in self.efforts.items():  # the torque acting over this step, as the servo reads it
-            sensor.sample(self.world.joint_torques(s))
+            sensor.advance(self.world.joint_torques(s))  # its reading formed when a frame reads it
         self.world.step()
 
     # -- flight-controller commands (from the GCS) and state ---------------------------

@@ -20,6 +20,8 @@ import numpy as np
 
 from amcore.jit import kernel
 
+from .noise import NoiseBlock  # noqa: F401 (DeviceSuite's draws)
+
 # IMU constants: Gauss-Markov factors and step deviations of both biases, white noise
 # deviations, then the turn-on biases
 IMU_PHI_G, IMU_SIGMA_BG, IMU_PHI_A, IMU_SIGMA_BA, IMU_SIGMA_G, IMU_SIGMA_A, IMU_TURN_ON_G, IMU_TURN_ON_A = 0, 1, 2, 3, 4, 5, 6, 9
@@ -30,24 +32,6 @@ FT_OFFSET, FT_TARE, FT_SUM, FT_COUNT, FT_TARED = 0, 6, 12, 18, 19
 N_FT_STATE = 20
 FT_DRIFT, FT_SIGMA, FT_LO, FT_HI = 0, 6, 12, 13
 N_FT = 14
-
-
-class NoiseBlock:
-    """Draws of `rng.standard_normal(width)` step after step, taken from blocks of `rows`
-    draws at once: numpy's generator fills a large array with the numbers, in the order,
-    that the small calls would give (tests/simulator/test_device_kernels.py)."""
-
-    def __init__(self, rng: np.random.Generator, width: int, rows: int = 256) -> None:
-        self.rng, self.width, self.rows = rng, width, rows
-        self._block = np.empty((0, width))
-        self._i = 0
-
-    def next(self) -> np.ndarray:
-        if self._i == self._block.shape[0]:
-            self._block = self.rng.standard_normal(self.rows * self.width).reshape(self.rows, self.width)
-            self._i = 0
-        self._i += 1
-        return self._block[self._i - 1]
 
 
 @kernel
