@@ -1,10 +1,12 @@
 """Before and after in one run: a benchmark run alternately against two source trees.
 
     python benchmarks/ab.py --base /path/to/old/tree [--rounds 3] -- benchmarks/bench_core.py --n 2
+    python benchmarks/ab.py --base /path/to/old/tree -- -m simulator.bench_world
 
 The machine is shared and its load changes from minute to minute, so a figure measured today
 is compared only with one measured in the same run: this runs the given benchmark script
-(of this tree) `--rounds` times against each tree in turn (base, this, base, this, ...),
+(of this tree; with -m, each tree's own module) `--rounds` times against each tree in turn
+(base, this, base, this, ...),
 with PYTHONPATH set to that tree so that every project module is imported from it, and
 prints each round's output under its label. Make the base tree with, for example,
 `git archive <commit> | tar -x -C /tmp/base` (numba compiles its kernels there on the first
@@ -36,7 +38,8 @@ def main() -> None:
     ap.add_argument("script", nargs=argparse.REMAINDER, help="-- then the benchmark script and its arguments")
     a = ap.parse_args()
     script = a.script[1:] if a.script[:1] == ["--"] else a.script
-    script = [str((ROOT / script[0]).resolve()), *script[1:]]
+    if script[0] != "-m":
+        script = [str((ROOT / script[0]).resolve()), *script[1:]]
     trees = {"before": a.base.resolve(), "after": a.after.resolve()}
     if a.warm:
         for tree in trees.values():
