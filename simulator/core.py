@@ -38,12 +38,13 @@ from collections.abc import Callable, Collection, Iterator, Mapping
 
 import numpy as np
 
-from amcore.config import AmSpec, JointEffortSpec, ScenarioSpec
+from amcore.config import AmSpec, DevicesSpec, JointEffortSpec, ScenarioSpec
 from amcore.mission import ObjectPose, am_mission
 from amcore.model import AmState, build_model
 from amcore.so3 import Rz
 from amlink.impair import ImpairedLink, LinkImpairment
-from amlink.types import AttitudeSetpoint, SensorFrame, TorqueSetpoint, sensor_frame_from_wire, with_autopilot_reports
+from amlink.types import (AttitudeSetpoint, AttitudeTarget, SensorFrame, TorqueSetpoint, sensor_frame_from_wire,
+                          with_autopilot_reports)
 
 from .failsafe import Failsafe, FailsafeGains
 from .fcstate import FcMode, FleetSnapshot, VehicleSnapshot
@@ -72,6 +73,23 @@ def initial_state(spec: ScenarioSpec, am: AmSpec, model, object_pose: ObjectPose
         return x
     return x._replace(p_WB=x.p_WB + np.array(am.start_offset_m),
                       R_WB=Rz(np.deg2rad(am.start_heading_deg)) @ x.R_WB)
+
+
+def warm_up_kernels(spec: ScenarioSpec) -> None:
+    """One call of each of the simulator's compiled kernels (the autopilot's loops and
+    allocation, the devices) with a run's argument types, so that numba compiles them (once
+    per machine, a few seconds) or loads them from its cache here, before a lockstep starts,
+    not at a run's first steps."""
+    v = spec.vehicle
+    n = v.n_joints
+    target = AttitudeTarget(0, quat_wxyz=np.array([1.0, 0.0, 0.0, 0.0]), rates_rad_s=np.zeros(3),
+                            thrust_normalized=0.5)
+    FlightController(v.flight_controller, v.rotors, spec.dt_s).step((1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), target)
+    values = [0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0] + [0.0] * (6 + 2 * n + 6)
+    dev = DeviceSuite(DevicesSpec(enabled=True), n, spec.dt_s, v.gravity_mps2, 0, 2, values)
+    dev.step(values, 0.0)
+    if not dev.needs_reading(spec.dt_s):
+        dev.step(values[:13], spec.dt_s)
 
 
 class SitlCore:
@@ -138,6 +156,7 @@ class SitlCore:
         self._values_t = 0.0
 
     def connect(self) -> None:
+        warm_up_kernels(self.spec)
         self.world.connect()
 
     def close(self) -> None:

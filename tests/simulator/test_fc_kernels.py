@@ -62,3 +62,25 @@ def test_compiled_flight_controller_flies_bit_for_bit_as_the_python_one(spec, sc
             assert a == b, f"step {k}"
             assert fast.rate_int == slow.rate_int
         assert any(fast.output.allocation.saturated_axes) or scale < 1.0
+
+
+@pytest.mark.parametrize("name", ["two_am_comp_attitude", "two_am_comp"])
+def test_the_warm_up_compiles_what_a_run_calls(name):
+    """SitlCore.connect warms the simulator's kernels: a run afterwards adds no specialization
+    (none is compiled at a lockstep's first steps), with [devices] on and in either mode."""
+    from pathlib import Path
+
+    from amcore import allocation_kernels
+    from amcore.config import load_scenario
+    from amcore.jit import kernels
+    from simulator import device_kernels
+    from simulator.core import warm_up_kernels
+    from simulator.inprocess import run
+
+    spec = load_scenario(Path(__file__).resolve().parents[2] / "configs" / "scenarios" / f"{name}.toml")
+    spec = dataclasses.replace(spec, devices=dataclasses.replace(spec.devices, enabled=True))
+    warm_up_kernels(spec)
+    ks = [k for m in (fk, device_kernels, allocation_kernels) for k in kernels(m)]
+    before = {k.py_func.__name__: len(k.signatures) for k in ks}
+    run(spec, 0.2)
+    assert {k.py_func.__name__: len(k.signatures) for k in ks} == before
