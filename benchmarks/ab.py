@@ -25,6 +25,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def run(tree: Path, script: list[str]) -> str:
     env = dict(os.environ, PYTHONPATH=str(tree))
+    if script[0] != "-m":  # as `python script`, but with the tree, not the script's folder, first on sys.path
+        script = ["-c", "import runpy, sys; sys.argv = sys.argv[1:]; runpy.run_path(sys.argv[0], run_name='__main__')",
+                  *script]
     out = subprocess.run([sys.executable, *script], cwd=tree, env=env, capture_output=True, text=True)
     return out.stdout + (f"[exit {out.returncode}] {out.stderr[-2000:]}" if out.returncode else "")
 

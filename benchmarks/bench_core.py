@@ -20,7 +20,10 @@ run leaves them, not back to back), summed over the run and divided by AMs x phy
 - bookkeeping: the digest and the ground-truth samples (`SitlCore.observe`).
 
 "lockstep work" is the sum of sense .. apply: the issue's "simulator's lockstep work per AM
-and physics step"; physics is PyBullet's stepping of the whole world, divided by N.
+and physics step"; physics is PyBullet's stepping of the whole world, divided by N. The
+parts are wall time (a part during which another process took the core counts that time);
+"CPU per AM" is this process's CPU time over the whole loop (time.process_time) per AM and
+physics step, every part included, which other processes' load does not inflate.
 """
 from __future__ import annotations
 
@@ -107,7 +110,7 @@ def run(mode: str, n: int, duration_s: float, devices: bool) -> dict[str, float]
     # the answers are made before the run (they are the companions' work)
     pre = {s: {k: makers[s](k) for k in range(0, steps, core.control_every)} for s in core.sysids}
     core.connect()
-    wall0 = pc()
+    cpu0, wall0 = time.process_time(), pc()
     try:
         for k in range(steps):
             if core.is_control_step(k):
@@ -141,7 +144,7 @@ def run(mode: str, n: int, duration_s: float, devices: bool) -> dict[str, float]
             t0 = pc()
             core.step()
             t["physics"] += pc() - t0
-        wall = pc() - wall0
+        wall, cpu = pc() - wall0, time.process_time() - cpu0
     finally:
         core.close()
     # the sign column was measured inside the frame window: take it out
@@ -150,6 +153,7 @@ def run(mode: str, n: int, duration_s: float, devices: bool) -> dict[str, float]
     per["lockstep work"] = sum(per[k] for k in ("sense", "estimate", "frame", "sign", "verify", "apply"))
     per["rtf"] = steps * spec.dt_s / wall
     per["wall per step"] = 1e6 * wall / steps
+    per["cpu per AM"] = 1e6 * cpu / (steps * n)
     return per
 
 
@@ -162,12 +166,13 @@ def main(argv=None) -> None:
     a = ap.parse_args(argv)
     cols = PARTS + ("lockstep work",)
     print(f"[us per AM and physics step] devices {'on' if a.devices else 'off'}, {a.duration:g} s each")
-    print(f"{'mode':9s} {'N':>3s} " + " ".join(f"{c:>13s}" for c in cols) + f" {'wall/step':>10s} {'one-core rtf':>12s}")
+    print(f"{'mode':9s} {'N':>3s} " + " ".join(f"{c:>13s}" for c in cols)
+          + f" {'wall/step':>10s} {'one-core rtf':>12s} {'CPU per AM':>11s}")
     for mode in a.mode:
         for n in a.n:
             r = run(mode, n, a.duration, a.devices)
             print(f"{mode:9s} {n:3d} " + " ".join(f"{r[c]:13.1f}" for c in cols)
-                  + f" {r['wall per step']:10.0f} {r['rtf']:11.2f}x", flush=True)
+                  + f" {r['wall per step']:10.0f} {r['rtf']:11.2f}x {r['cpu per AM']:11.1f}", flush=True)
 
 
 if __name__ == "__main__":
