@@ -30,6 +30,8 @@ ControlAllocationPseudoInverse and ControlAllocationSequentialDesaturation (MC_A
 
 Torque mode (the companion's thrust and body torque) and the emulated PX4 (attitude mode)
 both call `Allocation.allocate`; torque mode converts its physical request with the scales.
+`Allocation(rotors, compiled=True)` (the simulator's) runs `allocate` as
+`amcore.allocation_kernels.allocate` (numba), bit for bit the Python method's result.
 """
 from __future__ import annotations
 

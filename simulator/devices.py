@@ -16,6 +16,10 @@ parameters under the names of its reference model ([devices] in a scenario,
   random walk, and a tare (the driver's bias command) at a set time.
 - `Encoders`: joint positions quantized to whole counts, velocities to the servo's unit.
 
+The per-step arithmetic of the IMU, the encoders and the F/T sensor also runs compiled
+(`simulator.device_kernels`, numba), bit for bit as these classes compute it; `DeviceSuite`
+uses it unless built with compiled=False.
+
 `DeviceSuite` holds one AM's devices and its `amcore.estimator.Estimator` (it runs where PX4
 runs EKF2, in the flight controller, and its output is the frame's odometry, as PX4 streams
 ODOMETRY). `step(values, k)` takes the AM's exact values (the order of

@@ -1,5 +1,6 @@
 """Emulated stock autopilot for attitude mode: PX4's multicopter attitude and rate loops and its
-control allocation, fed SET_ATTITUDE_TARGET (pure: numpy for set-up, Python floats per step).
+control allocation, fed SET_ATTITUDE_TARGET (pure: numpy for set-up; per step the loops compiled with numba,
+`simulator.fc_kernels`, which the Python loops below define and the tests compare them with).
 
 What runs, at [flight_controller].rate_hz, each named after the PX4 code it follows:
 
