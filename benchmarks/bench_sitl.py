@@ -22,7 +22,8 @@ really add up to) and uss (its own pages). Target for a companion: <= 120 MiB (g
 
 "CPU cap": the real-time factor at which the simulator's and the N companions' CPU per step
 (the two columns above; the recorder's not counted) would fill every core of this machine:
-cores x step / (sim CPU + N x companion CPU). The lockstep cannot run faster than that however
+cores x step / (sim CPU + N x companion CPU / control_every). The simulator's CPU is per
+physics step, a companion's per control step (attitude mode: one physics step in four). The lockstep cannot run faster than that however
 the processes are scheduled, so a target above it needs less CPU per step, not better waiting.
 
 More columns take the whole apart, measured in the same run:
@@ -201,11 +202,14 @@ def udp_rtf(n: int, steps: int = 3000) -> float:
     return steps * 1e-3 / wall
 
 
-def cpu_cap(sim_cpu_us: float, comp_cpu_us: float, n: int, step_us: float, cores: int | None = None) -> float:
+def cpu_cap(sim_cpu_us: float, comp_cpu_us: float, n: int, step_us: float, cores: int | None = None,
+            control_every: int = 1) -> float:
     """The real-time factor at which the simulator's and n companions' CPU per step fill every
-    core (see the module doc): cores * step / (sim + n * companion)."""
+    core (see the module doc): cores * step / (sim + n * companion / control_every); the
+    simulator's CPU is per physics step, a companion's per control step (one in
+    control_every physics steps)."""
     cores = os.cpu_count() if cores is None else cores
-    return cores * step_us / (sim_cpu_us + n * comp_cpu_us)
+    return cores * step_us / (sim_cpu_us + n * comp_cpu_us / control_every)
 
 
 def main() -> None:
@@ -235,7 +239,8 @@ def main() -> None:
             echo = nan if a.sitl_only else echo_rtf(path, a.duration, Path(tmp) / f"echo{n}")
             spun = f" {echo_rtf(path, a.duration, Path(tmp) / f'spin{n}', spin):12.2f}" if spin is not None else ""
             udp = nan if a.sitl_only else udp_rtf(n)
-            cap = cpu_cap(proc["sim_cpu_us"], proc["comp_cpu_us"], n, 1e6 / load_scenario(path).rate_hz)
+            sp = load_scenario(path)
+            cap = cpu_cap(proc["sim_cpu_us"], proc["comp_cpu_us"], n, 1e6 / sp.rate_hz, control_every=sp.control_every)
             print(f"{n:>3} {rtf:7.2f} {echo:7.2f}{spun} {udp:7.1f} {bare:14.1f} {bare / rtf:10.0f} {wall:19.1f}s | "
                   f"{proc['sim_cpu_us']:10.0f}us {proc['comp_cpu_us']:11.0f}us {cap:7.2f}x {proc['rss']:6.0f}MiB "
                   f"{proc['pss']:6.0f} "
