@@ -9,7 +9,8 @@ Each part is timed with `time.perf_counter` around it inside the running loop (c
 run leaves them, not back to back), summed over the run and divided by AMs x physics steps:
 
 - sense: `World.sensor_values` (PyBullet's getters and the F/T wrench), every control step;
-  with --devices every physics step;
+  with --devices every physics step (on a step without a frame, `World.base_values` where
+  the tree has it);
 - estimate: the devices and the estimator (`DeviceSuite.step`), with --devices;
 - frame: the frame's value type and the autopilot's reports (`SitlCore.iter_frames` less the above);
 - sign: the sensor batch packed and signed (`fastcodec.sensor_frame_payloads`, `Encoder.pack_payloads`);
@@ -94,6 +95,15 @@ def run(mode: str, n: int, duration_s: float, devices: bool) -> dict[str, float]
         t["sense"] += pc() - t0
         return v
     w.sensor_values = sensor_values
+    if hasattr(w, "base_values"):  # the base alone, on steps without a frame ([devices])
+        base0 = w.base_values
+
+        def base_values(s):
+            t0 = pc()
+            v = base0(s)
+            t["sense"] += pc() - t0
+            return v
+        w.base_values = base_values
     sense_core = core._sense
 
     def timed_sense(s, values, tt):
