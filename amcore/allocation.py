@@ -30,6 +30,8 @@ ControlAllocationPseudoInverse and ControlAllocationSequentialDesaturation (MC_A
 
 Torque mode (the companion's thrust and body torque) and the emulated PX4 (attitude mode)
 both call `Allocation.allocate`; torque mode converts its physical request with the scales.
+`Allocation(rotors, compiled=True)` (the simulator's) runs `allocate` as
+`amcore.allocation_kernels.allocate` (numba), bit for bit the Python method's result.
 """
 from __future__ import annotations
 
@@ -99,7 +101,9 @@ class Allocation:
     """PX4's pseudo-inverse allocation with sequential desaturation, airmode off, for any
     rotor table (see the module docstring)."""
 
-    def __init__(self, rotors: "RotorParams") -> None:
+    def __init__(self, rotors: "RotorParams", compiled: bool = False) -> None:
+        """compiled: `allocate` runs as `amcore.allocation_kernels.allocate` (numba; the same
+        numbers bit for bit), else as the Python below (the form the tests compare it with)."""
         self.rotors = rotors
         self.count = rotors.count
         self.B = effectiveness(rotors)  # (6, n) per newton
@@ -130,6 +134,13 @@ class Allocation:
         self._eff = tuple(map(tuple, self.effectiveness_normalized.tolist()))
         self._f_max = self.rotor_thrust_max_n = tuple(self.f_max.tolist())  # per rotor [N]
         self._inv_scale = (scale[0], scale[1], scale[2], scale[5])
+        self.compiled = compiled
+        if compiled:
+            from . import allocation_kernels
+            self._kernel = allocation_kernels.allocate
+            self._c = allocation_kernels.constants((self._roll, self._pitch, self._yaw, self._thrust), self.out_min,
+                                                   self._eff)
+            self._result = np.zeros(self.count + 9)
 
     # ------------------------------------------------------------------ desaturation
     def _gain(self, v, out, hi: float) -> float:
@@ -158,6 +169,8 @@ class Allocation:
 
     def allocate(self, roll: float, pitch: float, yaw: float, thrust: float) -> AllocationResult:
         """Outputs for normalized (roll, pitch, yaw) torque and thrust (mixAirmodeDisabled)."""
+        if self.compiled:
+            return self._allocate_compiled(roll, pitch, yaw, thrust)
         r, p, y, t = self._roll, self._pitch, self._yaw, self._thrust
         lo, hi = self.out_min, self.out_max
         out = [roll * a + pitch * b + thrust * c for a, b, c in zip(r, p, t)]
@@ -177,6 +190,16 @@ class Allocation:
         unallocated = (roll - allocated[0], pitch - allocated[1], yaw - allocated[2], thrust - allocated[3])
         axes = tuple(bool(abs(u) > SATURATION_TOL) for u in unallocated)
         return AllocationResult(out, allocated, unallocated, any(axes), axes)
+
+    def _allocate_compiled(self, roll: float, pitch: float, yaw: float, thrust: float) -> AllocationResult:
+        """`allocate` by `amcore.allocation_kernels.allocate`."""
+        self._kernel(self._c, roll, pitch, yaw, thrust, self.out_max, _WEAK_EFFECTIVENESS, _YAW_MARGIN, self._result)
+        v, n = self._result.tolist(), self.count
+        if v[n + 8] == 0.0:
+            return AllocationResult(tuple(v[:n]), (roll, pitch, yaw, thrust), (0.0, 0.0, 0.0, 0.0), False)
+        unallocated = tuple(v[n + 4:n + 8])
+        axes = tuple(bool(abs(u) > SATURATION_TOL) for u in unallocated)
+        return AllocationResult(tuple(v[:n]), tuple(v[n:n + 4]), unallocated, any(axes), axes)
 
     # ------------------------------------------------------------------ physical units
     def normalized(self, thrust_n: float, tau_B_nm) -> tuple[float, float, float, float]:

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+sys.path.append(str(ROOT))  # if not installed; PYTHONPATH wins (benchmarks/ab.py)
 
 from amcore.config import devices_from_table  # noqa: E402
 from amcore.estimator import Estimator, estimator_step  # noqa: E402

@@ -2,7 +2,12 @@
 MAVLink over loopback UDP, lockstep) for N = 2, 5, 10, 20 AMs, next to bare PyBullet stepping
 of the same world measured in the same run, and how the processes' CPU and memory grow with N.
 
-    python benchmarks/bench_sitl.py [--duration 3] [--n 2 5 10 20]
+    python benchmarks/bench_sitl.py [--duration 3] [--n 2 5 10 20] [--attitude] [--devices] [--sitl-only]
+
+--attitude runs ten_am_attitude (SET_ATTITUDE_TARGET at 250 Hz, the emulated autopilot at
+1 kHz) instead of ten_am (torque setpoints at 1 kHz); --devices turns [devices] on (the
+sensors as devices and the flight controller's estimator, configs/randomize/default.toml's
+levels); --sitl-only leaves out the echo, UDP and bare PyBullet columns.
 
 Each N runs the ten_am scenario's object (a cylinder, r = 0.6 m, 1 kg here) with N AMs evenly spaced
 around it, for --duration simulated seconds of the approach phase. The SITL figure is the
@@ -17,7 +22,8 @@ really add up to) and uss (its own pages). Target for a companion: <= 120 MiB (g
 
 "CPU cap": the real-time factor at which the simulator's and the N companions' CPU per step
 (the two columns above; the recorder's not counted) would fill every core of this machine:
-cores x step / (sim CPU + N x companion CPU). The lockstep cannot run faster than that however
+cores x step / (sim CPU + N x companion CPU / control_every). The simulator's CPU is per
+physics step, a companion's per control step (attitude mode: one physics step in four). The lockstep cannot run faster than that however
 the processes are scheduled, so a target above it needs less CPU per step, not better waiting.
 
 More columns take the whole apart, measured in the same run:
@@ -46,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+sys.path.append(str(ROOT))  # if not installed; PYTHONPATH wins (benchmarks/ab.py)
 
 from amcore.config import load_scenario  # noqa: E402
 from amcore.mission import am_mission  # noqa: E402
@@ -55,17 +61,30 @@ from simulator.verdict import MISSION_FAILED  # noqa: E402
 from simulator.world import World  # noqa: E402
 
 BASE = ROOT / "configs" / "scenarios" / "ten_am.toml"
+ATTITUDE = ROOT / "configs" / "scenarios" / "ten_am_attitude.toml"
+DEVICES = ROOT / "configs" / "randomize" / "default.toml"
 
 
-def scenario_with(n: int, folder: Path) -> Path:
-    text = BASE.read_text()
+def devices_table() -> str:
+    """[devices] of the default randomization, as TOML tables of a scenario."""
+    import tomllib
+    d = tomllib.loads(DEVICES.read_text())["randomize"]["devices"]
+    out = "[devices]\n" + "".join(f"{k} = {json.dumps(v)}\n" for k, v in d.items() if not isinstance(v, dict))
+    for name, sub in d.items():
+        if isinstance(sub, dict):
+            out += f"[devices.{name}]\n" + "".join(f"{k} = {json.dumps(v)}\n" for k, v in sub.items())
+    return out
+
+
+def scenario_with(n: int, folder: Path, base: Path = BASE, devices: bool = False) -> Path:
+    text = base.read_text()
     head = text.split("[[am]]")[0].replace('vehicle = "../vehicles/am3dof.toml"',
                                            f'vehicle = "{ROOT / "configs" / "vehicles" / "am3dof.toml"}"')
-    head = re.sub(r'name = "ten_am"', f'name = "bench_{n}am"', head)
+    head = re.sub(r'name = "ten_am(_attitude)?"', f'name = "bench_{n}am"', head)
     head = re.sub(r"(?m)^mass_kg = .*$", "mass_kg = 1.0", head)  # liftable by any N (the approach is what runs)
     ams = "".join(f"[[am]]\nsysid = {2 + i}\nazimuth_deg = {360.0 * i / n}\n" for i in range(n))
     path = folder / f"bench_{n}am.toml"
-    path.write_text(head + ams)
+    path.write_text(head + (devices_table() if devices else "") + ams)
     return path
 
 
@@ -183,21 +202,28 @@ def udp_rtf(n: int, steps: int = 3000) -> float:
     return steps * 1e-3 / wall
 
 
-def cpu_cap(sim_cpu_us: float, comp_cpu_us: float, n: int, step_us: float, cores: int | None = None) -> float:
+def cpu_cap(sim_cpu_us: float, comp_cpu_us: float, n: int, step_us: float, cores: int | None = None,
+            control_every: int = 1) -> float:
     """The real-time factor at which the simulator's and n companions' CPU per step fill every
-    core (see the module doc): cores * step / (sim + n * companion)."""
+    core (see the module doc): cores * step / (sim + n * companion / control_every); the
+    simulator's CPU is per physics step, a companion's per control step (one in
+    control_every physics steps)."""
     cores = os.cpu_count() if cores is None else cores
-    return cores * step_us / (sim_cpu_us + n * comp_cpu_us)
+    return cores * step_us / (sim_cpu_us + n * comp_cpu_us / control_every)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--duration", type=float, default=3.0)
     ap.add_argument("--n", type=int, nargs="+", default=[2, 5, 10, 20])
+    ap.add_argument("--attitude", action="store_true", help="attitude mode (ten_am_attitude) instead of torque mode")
+    ap.add_argument("--devices", action="store_true", help="[devices] on: sensors as devices and the estimator")
+    ap.add_argument("--sitl-only", action="store_true", help="only the SITL column (and its CPU and memory)")
     ap.add_argument("--echo-spin-us", type=float, default=None,
                     help="also run echo companions that busy-wait this long per step (a controller's compute)")
     a = ap.parse_args()
-    print(f"load average before: {os.getloadavg()[0]:.2f}; {os.cpu_count()} cores; {a.duration} s simulated per N")
+    print(f"load average before: {os.getloadavg()[0]:.2f}; {os.cpu_count()} cores; {a.duration} s simulated per N; "
+          f"{'attitude' if a.attitude else 'torque'} mode; [devices] {'on' if a.devices else 'off'}")
     print("x real time (simulated s / wall s), each column measured in this run:")
     spin = a.echo_spin_us
     spin_head = f" {'echo+' + format(spin, 'g') + 'us':>12}" if spin is not None else ""
@@ -206,13 +232,15 @@ def main() -> None:
           f"{'pss':>6} {'uss':>6}")
     with tempfile.TemporaryDirectory() as tmp:
         for n in a.n:
-            path = scenario_with(n, Path(tmp))
-            bare = bare_rtf(path, a.duration)
+            path = scenario_with(n, Path(tmp), ATTITUDE if a.attitude else BASE, a.devices)
+            nan = float("nan")
+            bare = nan if a.sitl_only else bare_rtf(path, a.duration)
             rtf, wall, proc = sitl_rtf(path, a.duration, Path(tmp) / f"run{n}")
-            echo = echo_rtf(path, a.duration, Path(tmp) / f"echo{n}")
+            echo = nan if a.sitl_only else echo_rtf(path, a.duration, Path(tmp) / f"echo{n}")
             spun = f" {echo_rtf(path, a.duration, Path(tmp) / f'spin{n}', spin):12.2f}" if spin is not None else ""
-            udp = udp_rtf(n)
-            cap = cpu_cap(proc["sim_cpu_us"], proc["comp_cpu_us"], n, 1e6 / load_scenario(path).rate_hz)
+            udp = nan if a.sitl_only else udp_rtf(n)
+            sp = load_scenario(path)
+            cap = cpu_cap(proc["sim_cpu_us"], proc["comp_cpu_us"], n, 1e6 / sp.rate_hz, control_every=sp.control_every)
             print(f"{n:>3} {rtf:7.2f} {echo:7.2f}{spun} {udp:7.1f} {bare:14.1f} {bare / rtf:10.0f} {wall:19.1f}s | "
                   f"{proc['sim_cpu_us']:10.0f}us {proc['comp_cpu_us']:11.0f}us {cap:7.2f}x {proc['rss']:6.0f}MiB "
                   f"{proc['pss']:6.0f} "

@@ -6,10 +6,17 @@ pool of 1 and of 2 worker processes, on the same trials (default randomization).
 Each row runs the same `--trials` trials (seed 1) through `trials.runner` and prints wall
 time, trials per minute, and simulated seconds per wall second per worker. Worker start-up
 (spawning, importing pinocchio and PyBullet) is inside the wall time, as in a campaign.
+It also prints the workers' CPU time per trial (user + system of the pool's processes,
+start-up included) and the trials per minute that CPU time allows with each worker on a
+core of its own (workers x 60 s / CPU per trial): on a machine shared with other work the
+wall-clock figure falls with the load, this one does not (it is a bound, reached when the
+workers have their cores to themselves).
 """
 from __future__ import annotations
 
 import argparse
+import os
+import resource
 import tempfile
 import time
 from pathlib import Path
@@ -31,19 +38,29 @@ def main() -> None:
     spec = load_scenario(a.scenario)
     rand = load_randomize(DEFAULT_RANDOMIZE)
     print(f"{a.trials} trials of {a.scenario.name} ({spec.duration_s:g} s simulated each), default randomization")
-    print(f"{'workers':>8} {'wall [s]':>9} {'trials/min':>11} {'sim s per wall s per worker':>28}")
+    print(f"load average before: {os.getloadavg()[0]:.2f}; {os.cpu_count()} cores")
+    print(f"{'workers':>8} {'wall [s]':>9} {'trials/min':>11} {'sim s per wall s per worker':>28} "
+          f"{'CPU per trial [s]':>18} {'trials/min, a core each':>24}")
     digests = None
     for w in a.workers:
         with tempfile.TemporaryDirectory() as tmp:
             tasks = build_tasks(_read_toml(a.scenario), a.scenario.resolve(), rand, 1, a.trials, Path(tmp), None)
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), _children_cpu_s()
             with executor(w) as ex:
                 rows = run_all(tasks, ex)
-            wall = time.perf_counter() - t0
+            wall, cpu = time.perf_counter() - t0, _children_cpu_s() - c0
         d = [r["state_digest"] for r in rows]
         assert digests is None or d == digests, "the same trials gave other digests"
         digests = d
-        print(f"{w:>8} {wall:9.1f} {60.0 * len(rows) / wall:11.2f} {a.trials * spec.duration_s / wall / w:28.2f}")
+        per = cpu / len(rows)
+        print(f"{w:>8} {wall:9.1f} {60.0 * len(rows) / wall:11.2f} {a.trials * spec.duration_s / wall / w:28.2f} "
+              f"{per:18.1f} {w * 60.0 / per:24.2f}")
+
+
+def _children_cpu_s() -> float:
+    """User + system CPU time of this process's ended children (the pool's workers) [s]."""
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
 
 
 if __name__ == "__main__":

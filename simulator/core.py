@@ -38,12 +38,13 @@ from collections.abc import Callable, Collection, Iterator, Mapping
 
 import numpy as np
 
-from amcore.config import AmSpec, JointEffortSpec, ScenarioSpec
+from amcore.config import AmSpec, DevicesSpec, JointEffortSpec, ScenarioSpec
 from amcore.mission import ObjectPose, am_mission
 from amcore.model import AmState, build_model
 from amcore.so3 import Rz
 from amlink.impair import ImpairedLink, LinkImpairment
-from amlink.types import AttitudeSetpoint, SensorFrame, TorqueSetpoint, sensor_frame_from_wire, with_autopilot_reports
+from amlink.types import (AttitudeSetpoint, AttitudeTarget, SensorFrame, TorqueSetpoint, sensor_frame_from_wire,
+                          with_autopilot_reports)
 
 from .failsafe import Failsafe, FailsafeGains
 from .fcstate import FcMode, FleetSnapshot, VehicleSnapshot
@@ -74,6 +75,23 @@ def initial_state(spec: ScenarioSpec, am: AmSpec, model, object_pose: ObjectPose
                       R_WB=Rz(np.deg2rad(am.start_heading_deg)) @ x.R_WB)
 
 
+def warm_up_kernels(spec: ScenarioSpec) -> None:
+    """One call of each of the simulator's compiled kernels (the autopilot's loops and
+    allocation, the devices) with a run's argument types, so that numba compiles them (once
+    per machine, a few seconds) or loads them from its cache here, before a lockstep starts,
+    not at a run's first steps."""
+    v = spec.vehicle
+    n = v.n_joints
+    target = AttitudeTarget(0, quat_wxyz=np.array([1.0, 0.0, 0.0, 0.0]), rates_rad_s=np.zeros(3),
+                            thrust_normalized=0.5)
+    FlightController(v.flight_controller, v.rotors, spec.dt_s).step((1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), target)
+    values = [0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0] + [0.0] * (6 + 2 * n + 6)
+    dev = DeviceSuite(DevicesSpec(enabled=True), n, spec.dt_s, v.gravity_mps2, 0, 2, values)
+    dev.step(values, 0.0)
+    if not dev.needs_reading(spec.dt_s):
+        dev.step(values[:13], spec.dt_s)
+
+
 class SitlCore:
     def __init__(self, spec: ScenarioSpec, log: Callable[[str], None] = lambda _msg: None,
                  on_truth: Callable[[object], None] | None = None,
@@ -102,7 +120,7 @@ class SitlCore:
             am.sysid: SensorModel(spec.sensors, self.model.n, spec.control_dt_s, spec.seed, am.sysid) for am in spec.ams}
         # [devices]: each AM's sensors and estimator, sampled every physics step (made at the first)
         self.devices: dict[int, DeviceSuite] = {}
-        self._odometry: dict[int, list[float]] = {}  # the estimator's last frame values, per AM
+        self._odometry: dict[int, list[float]] = {}  # the estimator's last values, per AM (odometry first)
         self._reported: dict[int, list[float]] = {}  # the last frame's base state, per AM (telemetry)
         self.failsafes: dict[int, Failsafe] = {}  # companion lost
         self.landing: dict[int, Failsafe] = {}  # landing on a GCS command (companion ignored)
@@ -138,6 +156,7 @@ class SitlCore:
         self._values_t = 0.0
 
     def connect(self) -> None:
+        warm_up_kernels(self.spec)
         self.world.connect()
 
     def close(self) -> None:
@@ -230,9 +249,10 @@ class SitlCore:
         ground truth is sampled as on control steps."""
         self.observe()
         if self.spec.devices.enabled:  # the devices and the estimator run at the IMU rate
-            t = self.world.time_s
-            for s in self.sysids:
-                self._sense(s, self.world.sensor_values(s), t)
+            t, w = self.world.time_s, self.world
+            for s in self.sysids:  # no frame: the base alone, unless the F/T tare reads the wrist
+                dev = self.devices.get(s)
+                self._sense(s, w.sensor_values(s) if dev is None or dev.needs_reading(t) else w.base_values(s), t)
         if k % TRUTH_EVERY == 0:
             self._truth({s: self.world.wrench_ee(s) for s in self.sysids})
         self.actuate(k, {}, lost)
@@ -359,7 +379,7 @@ class SitlCore:
 
     def step(self) -> None:
         for s, sensor in self.efforts.items():  # the torque acting over this step, as the servo reads it
-            sensor.sample(self.world.joint_torques(s))
+            sensor.advance(self.world.joint_torques(s))  # its reading formed when a frame reads it
         self.world.step()
 
     # -- flight-controller commands (from the GCS) and state ---------------------------

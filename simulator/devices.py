@@ -16,6 +16,10 @@ parameters under the names of its reference model ([devices] in a scenario,
   random walk, and a tare (the driver's bias command) at a set time.
 - `Encoders`: joint positions quantized to whole counts, velocities to the servo's unit.
 
+The per-step arithmetic of the IMU, the encoders and the F/T sensor also runs compiled
+(`simulator.device_kernels`, numba), bit for bit as these classes compute it; `DeviceSuite`
+uses it unless built with compiled=False.
+
 `DeviceSuite` holds one AM's devices and its `amcore.estimator.Estimator` (it runs where PX4
 runs EKF2, in the flight controller, and its output is the frame's odometry, as PX4 streams
 ODOMETRY). `step(values, k)` takes the AM's exact values (the order of
@@ -31,6 +35,8 @@ import numpy as np
 
 from amcore.config import DevicesSpec, EncoderSpec, ForceTorqueSpec, ImuSpec, MocapSpec
 from amcore.estimator import BG, Estimator, quat_exp, quat_mul, rotation
+
+from . import device_kernels as dk
 
 _STREAM = 0xDE71  # distinguishes the devices' streams from the other seeded streams of an AM
 IMU, MOCAP, FT = 1, 2, 3  # each device's sub-stream
@@ -172,10 +178,15 @@ class Encoders:
 class DeviceSuite:
     """One AM's devices and estimator (module doc). Seeded by (scenario seed, sysid); each
     device draws from its own stream, so changing one device's levels leaves the others'
-    draws alone."""
+    draws alone.
+
+    compiled: the IMU's, the encoders' and the F/T sensor's per-step arithmetic runs as
+    `simulator.device_kernels.devices_sample` (numba; the same numbers bit for bit, their
+    draws taken in blocks), else through the device objects' `sample` (the Python form the
+    tests compare it with). The device objects hold the draws made at construction either way."""
 
     def __init__(self, spec: DevicesSpec, n_joints: int, dt_s: float, g: float, seed: int, sysid: int,
-                 initial_values: list[float]) -> None:
+                 initial_values: list[float], compiled: bool = True) -> None:
         rng = lambda sub: np.random.default_rng([seed, sysid, _STREAM, sub])  # noqa: E731
         self.n, self.dt = n_joints, dt_s
         self.imu = Imu(spec.imu, spec.scale, dt_s, g, rng(IMU))
@@ -194,6 +205,26 @@ class DeviceSuite:
                                    e.position_bandwidth_radps, e.gyro_cutoff_hz, e.history_steps)
         self._v_W_prev: np.ndarray | None = None
         self._k = -1
+        self.compiled = compiled
+        if compiled:
+            self._compiled_state()
+
+    def _compiled_state(self) -> None:
+        """The device objects' constants and state as `simulator.device_kernels` takes them."""
+        imu, ft = self.imu, self.ft
+        c = np.zeros(dk.N_IMU)
+        c[[dk.IMU_PHI_G, dk.IMU_SIGMA_BG, dk.IMU_PHI_A, dk.IMU_SIGMA_BA, dk.IMU_SIGMA_G, dk.IMU_SIGMA_A]] = (
+            imu.phi_g, imu.sigma_bg, imu.phi_a, imu.sigma_ba, imu.sigma_g, imu.sigma_a)
+        c[dk.IMU_TURN_ON_G:dk.IMU_TURN_ON_G + 3], c[dk.IMU_TURN_ON_A:dk.IMU_TURN_ON_A + 3] = imu.turn_on_g, imu.turn_on_a
+        self._imu_c, self._b_g, self._b_a = c, imu.b_g.copy(), imu.b_a.copy()
+        self._imu_noise, self._ft_noise = dk.NoiseBlock(imu.rng, 12), dk.NoiseBlock(ft.rng, 12)
+        self._ft_c = np.zeros(dk.N_FT)
+        self._ft_c[dk.FT_DRIFT:dk.FT_DRIFT + 6], self._ft_c[dk.FT_SIGMA:dk.FT_SIGMA + 6] = ft.drift, ft.sigma
+        self._ft_c[dk.FT_LO], self._ft_c[dk.FT_HI] = ft._window
+        self._ft_s = np.zeros(dk.N_FT_STATE)
+        self._ft_s[dk.FT_OFFSET:dk.FT_OFFSET + 6], self._ft_s[dk.FT_TARED] = ft.offset, 1.0 if ft.tared else 0.0
+        self._g_e3 = np.array([0.0, 0.0, self.imu.g])
+        self._omega_m, self._f_m, self._tail = np.empty(3), np.empty(3), np.empty(2 * self.n + 6)
 
     def _truth(self, v: list[float], v_W_prev) -> BodyTruth:
         p = np.array(v[0:3])
@@ -206,6 +237,8 @@ class DeviceSuite:
     def step(self, values: list[float], t: float) -> list[float]:
         """The sensor frame's values (p_WB, quat_WB, v_B, w_B from the estimator; q, qdot from
         the encoders; wrench_E from the F/T sensor) after this physics step's exact values."""
+        if self.compiled:
+            return self._step_compiled(values, t)
         self._k = k = self._k + 1
         truth = self._truth(values, self._v_W_prev)
         self._v_W_prev = truth.v_W
@@ -221,3 +254,40 @@ class DeviceSuite:
         q, qdot = self.encoders.sample(values[13:13 + n], values[13 + n:13 + 2 * n])
         wrench = self.ft.sample(values[13 + 2 * n:19 + 2 * n], t)
         return [*odo.tolist(), *q.tolist(), *qdot.tolist(), *wrench.tolist()]
+
+    def needs_reading(self, t: float) -> bool:
+        """Whether a step at t needs the arm's and the wrist's values although no frame is sent:
+        the F/T tare averages its readings until it is done."""
+        if self.compiled:
+            return self._ft_s[dk.FT_TARED] == 0.0 and t >= self._ft_c[dk.FT_LO]
+        return True
+
+    def _step_compiled(self, values: list[float], t: float) -> list[float]:
+        """`step` with the devices' arithmetic compiled (class doc); the truth's two products
+        as `_truth` and `Imu.sample` make them (numpy's). `values` may be the base's alone (the
+        first 13, `World.base_values`) on a step that sends no frame and reads no F/T
+        (`needs_reading` False): then only the odometry (the first 13 of a frame) is returned,
+        and the encoders are not read; the devices' draws and drift advance as on any step."""
+        self._k = k = self._k + 1
+        x = np.array(values)
+        quat = x[3:7]
+        R = rotation(quat)
+        v_W = R @ np.array(values[7:10])  # as `_truth`: the product of a fresh array, numpy's
+        a_W = np.zeros(3) if self._v_W_prev is None else (v_W - self._v_W_prev) / self.dt
+        truth = BodyTruth(x[0:3], quat, R, v_W, x[10:13], a_W)
+        self._v_W_prev = v_W
+        f_B = R.T @ (a_W + self._g_e3)
+        full = len(values) > 13
+        if full:
+            dk.devices_sample(x, self.n, f_B, self._imu_c, self._b_g, self._b_a, self._imu_noise.next(),
+                              self._omega_m, self._f_m, self.encoders.dq, self.encoders.dqdot, self._ft_c, self._ft_s,
+                              t, self._ft_noise.next(), self._tail)
+        else:
+            if self.needs_reading(t):
+                raise ValueError(f"t = {t} s: the F/T tare needs this step's reading; give the full values")
+            dk.devices_advance(x, f_B, self._imu_c, self._b_g, self._b_a, self._imu_noise.next(),
+                               self._omega_m, self._f_m, self._ft_c, self._ft_s, self._ft_noise.next())
+        arrived = self.mocap.sample(truth, t)
+        pose, lag = arrived if arrived is not None else (None, 0)
+        odo = self.estimator.step(k, self._omega_m, self._f_m, pose, lag)
+        return [*odo.tolist(), *self._tail.tolist()] if full else odo.tolist()

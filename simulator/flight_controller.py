@@ -1,5 +1,6 @@
 """Emulated stock autopilot for attitude mode: PX4's multicopter attitude and rate loops and its
-control allocation, fed SET_ATTITUDE_TARGET (pure: numpy for set-up, Python floats per step).
+control allocation, fed SET_ATTITUDE_TARGET (pure: numpy for set-up; per step the loops compiled with numba,
+`simulator.fc_kernels`, which the Python loops below define and the tests compare them with).
 
 What runs, at [flight_controller].rate_hz, each named after the PX4 code it follows:
 
@@ -47,6 +48,8 @@ import numpy as np
 
 from amcore.allocation import Allocation, AllocationResult
 from amcore.config import FlightControllerParams, RotorParams
+
+from . import fc_kernels
 
 _I_ATTENUATION_RAD_S = math.radians(400.0)  # RateControl::updateIntegral's i_factor scale
 
@@ -167,14 +170,19 @@ class FcOutput:
 class FlightController:
     """One vehicle's emulated PX4 (see module doc). `step(quat_WB_wxyz, w_B, target)` once per
     physics step; it runs its loops every `physics rate / rate_hz` steps and holds its output
-    between. `target` is the held SET_ATTITUDE_TARGET (`amlink.types.AttitudeTarget`, ENU/FLU)."""
+    between. `target` is the held SET_ATTITUDE_TARGET (`amlink.types.AttitudeTarget`, ENU/FLU).
 
-    def __init__(self, fc: FlightControllerParams, rotors: RotorParams, physics_dt_s: float) -> None:
+    compiled: steps 1 and 2 run as `simulator.fc_kernels.rate_loops` (numba; the same numbers
+    bit for bit), else as the Python below (`_update`, the literal form the tests compare it
+    with)."""
+
+    def __init__(self, fc: FlightControllerParams, rotors: RotorParams, physics_dt_s: float,
+                 compiled: bool = True) -> None:
         self.params = fc
         self.every = max(1, round(1.0 / (fc.rate_hz * physics_dt_s)))
         self.dt_s = self.every * physics_dt_s
         rate_hz = 1.0 / self.dt_s
-        self.allocation = Allocation(rotors)
+        self.allocation = Allocation(rotors, compiled=compiled)
         self.yaw_weight = fc.MC_YAW_WEIGHT
         w = fc.MC_YAW_WEIGHT
         # AttitudeControl::setProportionalGain: the yaw gain compensates the yaw weight's scaling
@@ -189,11 +197,15 @@ class FlightController:
         self.feedforward = fc.body_rate_feedforward
         self._gyro = [LowPass2p(rate_hz, fc.IMU_GYRO_CUTOFF) for _ in range(3)]
         self._dgyro = [LowPass2p(rate_hz, fc.IMU_DGYRO_CUTOFF) for _ in range(3)]
-        self.rate_int = [0.0, 0.0, 0.0]
+        self._rate_int = [0.0, 0.0, 0.0]  # the Python loops' integral (compiled: in _s)
         self._w_prev: tuple[float, float, float] | None = None
         self._sat_pos = self._sat_neg = (False, False, False)
         self._k = 0
         self.output: FcOutput | None = None
+        self.compiled = compiled
+        if compiled:
+            self._p, self._s, self._out = fc_kernels.constants(self), np.zeros(fc_kernels.N_S), np.zeros(6)
+            self._rate_loops = fc_kernels.rate_loops
 
     def step(self, quat_WB_wxyz, w_B, target) -> FcOutput | None:
         """The output for this physics step (None until a target has arrived)."""
@@ -202,8 +214,33 @@ class FlightController:
             return self.output
         if self.output is not None and k % self.every:
             return self.output
-        self.output = self._update(quat_normalized(quat_WB_wxyz), tuple(w_B), target)
+        if self.compiled:
+            self.output = self._update_compiled(tuple(quat_WB_wxyz), tuple(w_B), target)
+        else:
+            self.output = self._update(quat_normalized(quat_WB_wxyz), tuple(w_B), target)
         return self.output
+
+    @property
+    def rate_int(self) -> list[float]:
+        """The rate loop's integral per axis (normalized torque)."""
+        if self.compiled:
+            return self._s[fc_kernels.S_RATE_INT:fc_kernels.S_RATE_INT + 3].tolist()
+        return self._rate_int
+
+    def _update_compiled(self, q, w, target) -> FcOutput:
+        """`_update` with steps 1 and 2 compiled (simulator.fc_kernels), step 3 as there."""
+        out, s = self._out, self._s
+        self._rate_loops(self._p, s, q, w, target.quat_wxyz, target.rates_rad_s, out)
+        v = out.tolist()
+        rates_sp, torque = v[0:3], v[3:6]
+        thrust = min(max(float(target.thrust_normalized), 0.0), 1.0)
+        a = self.allocation.allocate(*torque, thrust)
+        achieved = not a.saturated
+        for ax, u in enumerate(a.unallocated[:3]):
+            s[fc_kernels.S_SAT_POS + ax] = not achieved and u > 1.2e-7
+            s[fc_kernels.S_SAT_NEG + ax] = not achieved and u < -1.2e-7
+        return FcOutput(tuple(f * x for f, x in zip(self.allocation.rotor_thrust_max_n, a.outputs)), a,
+                        tuple(rates_sp), tuple(torque), thrust)
 
     def _update(self, q: Quat, w, target) -> FcOutput:
         # gyro and its derivative (VehicleAngularVelocity): differentiate the raw rate, then filter
@@ -221,7 +258,7 @@ class FlightController:
         # 2. rate PID, the integral updated after the output (RateControl::update)
         err = [s - r for s, r in zip(rates_sp, rate)]
         torque = tuple(p * ei + i - d * a + f * s for p, ei, i, d, a, f, s in
-                       zip(self.gain_p, err, self.rate_int, self.gain_d, accel, self.gain_ff, rates_sp))
+                       zip(self.gain_p, err, self._rate_int, self.gain_d, accel, self.gain_ff, rates_sp))
         for ax in range(3):
             ei = err[ax]
             if self._sat_pos[ax]:
@@ -229,9 +266,9 @@ class FlightController:
             if self._sat_neg[ax]:
                 ei = max(ei, 0.0)
             i_factor = max(0.0, 1.0 - (ei / _I_ATTENUATION_RAD_S) ** 2)
-            r_i = self.rate_int[ax] + i_factor * self.gain_i[ax] * ei * self.dt_s
+            r_i = self._rate_int[ax] + i_factor * self.gain_i[ax] * ei * self.dt_s
             if math.isfinite(r_i):
-                self.rate_int[ax] = min(max(r_i, -self.int_lim[ax]), self.int_lim[ax])
+                self._rate_int[ax] = min(max(r_i, -self.int_lim[ax]), self.int_lim[ax])
 
         # 3. allocation; its saturation steers the next integration (control_allocator_status)
         thrust = min(max(float(target.thrust_normalized), 0.0), 1.0)

@@ -157,7 +157,7 @@ class World:
             raise ValueError(f"initial states given for sysids {sorted(initial)}, scenario has {expected}")
         self.spec = spec
         self._initial = dict(initial)
-        self._alloc = Allocation(spec.vehicle.rotors)
+        self._alloc = Allocation(spec.vehicle.rotors, compiled=True)
         # each rotor's least thrust and range [N], for the busiest/idlest rotor's share in the truth
         self._rotor_ranges = tuple(zip(spec.vehicle.rotors.thrust_min(),
                                        (hi - lo for lo, hi in zip(spec.vehicle.rotors.thrust_min(),
@@ -180,6 +180,8 @@ class World:
         # per AM, for the per-step paths: link lists as PyBullet takes them, tool CoM weights
         self._arm_ids: dict[int, list[int]] = {}
         self._sensed_links: dict[int, list[int]] = {}
+        self._sensed_joints: dict[int, list[int]] = {}  # the arm's joints, then the wrist sensor's
+        self._last_limited: dict[int, tuple[np.ndarray, JointTorqueResult]] = {}  # `_limited`'s last, per AM
         self._tool_weights: dict[int, tuple[float, ...]] = {}
 
     # ------------------------------------------------------------------ lifecycle
@@ -211,6 +213,7 @@ class World:
                 self._rotor_commands[a.sysid] = None
                 self._joint_commands[a.sysid] = [0.0] * n
             self._arm_ids[a.sysid] = list(am.arm_joint_ids)
+            self._sensed_joints[a.sysid] = [*am.arm_joint_ids, am.ft_joint_id]
             self._sensed_links[a.sysid] = [am.pad_link_id, am.ee_link_id, *am.tool_link_ids]
             self._tool_weights[a.sysid] = tuple(m / am.tool_mass_kg for m in am.tool_link_masses_kg)
         self._step_index = 0
@@ -289,7 +292,7 @@ class World:
         thrust) whether its allocation fell short) and the joint torques [N m] (limited
         here); they act from the next `step()` until replaced."""
         self._am(sysid)
-        joints = limit_joint_torques(tau_q_nm, self._tau_q_max)
+        joints = self._limited(sysid, tau_q_nm)
         self._count_saturation(sysid, saturated_axes, joints.saturated)
         f = [float(x) for x in rotor_thrusts_n]
         if self._lags:
@@ -299,6 +302,18 @@ class World:
             force, tau_B = self._alloc.wrench(f)
             self._commands[sysid] = (force, tau_B, joints.applied_nm.tolist())
             self._rotors_now[sysid] = f
+        return joints
+
+    def _limited(self, sysid: int, tau_q_nm) -> JointTorqueResult:
+        """`limit_joint_torques` of tau_q_nm; the last result again if given the same array
+        object (a held setpoint's joint torques, re-applied every physics step)."""
+        last = self._last_limited.get(sysid)
+        if last is not None and last[0] is tau_q_nm:
+            return last[1]
+        joints = limit_joint_torques(tau_q_nm, self._tau_q_max)
+        # a frozen setpoint's array (read-only, owning its data: amlink.types) cannot change under us
+        if isinstance(tau_q_nm, np.ndarray) and not tau_q_nm.flags.writeable and tau_q_nm.base is None:
+            self._last_limited[sysid] = (tau_q_nm, joints)
         return joints
 
     def _count_saturation(self, sysid: int, axes: tuple[bool, bool, bool, bool], joints: bool) -> None:
@@ -366,17 +381,38 @@ class World:
         the per-step path, where numpy's per-call cost on 3-vectors would dominate.
         """
         c, am = self._c(), self._am(sysid)
-        p, quat, _, v_B, w_B, q, qdot = self._base_and_joints(c, sysid, am)
-        return [*p, *quat, *v_B, *w_B, *q, *qdot, *self._wrench_E(c, sysid, am)]
+        p, quat, R = self._base_pose(c, am)
+        v_W, w_W = pb.getBaseVelocity(am.body_id, physicsClientId=c)
+        if self._step_index == 0:  # nothing measured yet: no wrench (`wrench_ee`)
+            joints = pb.getJointStates(am.body_id, self._arm_ids[sysid], physicsClientId=c)
+            wrench = [0.0] * 6
+        else:  # the arm's joints and the wrist sensor's joint in one call
+            joints = pb.getJointStates(am.body_id, self._sensed_joints[sysid], physicsClientId=c)
+            wrench = self._wrench_from(c, sysid, am, joints[-1][2])
+            joints = joints[:-1]
+        return [*p, *quat, *_mtv(R, v_W), *_mtv(R, w_W), *[j[0] for j in joints], *[j[1] for j in joints], *wrench]
+
+    def base_values(self, sysid: int) -> list[float]:
+        """The first 13 of `sensor_values` (p_WB, quat_WB, v_B, w_B), the base alone: what an
+        IMU and a motion capture see, without the arm's and the wrist sensor's reads."""
+        c, am = self._c(), self._am(sysid)
+        p, quat, R = self._base_pose(c, am)
+        v_W, w_W = pb.getBaseVelocity(am.body_id, physicsClientId=c)
+        return [*p, *quat, *_mtv(R, v_W), *_mtv(R, w_W)]
+
+    @staticmethod
+    def _base_pose(c: int, am: scene.AmBody):
+        """(p_WB, quat_WB (w, x, y, z; w >= 0), R_WB row-major as 9 floats) from PyBullet."""
+        p, (x, y, z, w) = pb.getBasePositionAndOrientation(am.body_id, physicsClientId=c)
+        R = pb.getMatrixFromQuaternion((x, y, z, w))  # row-major 3x3 as a 9-tuple
+        return p, ((w, x, y, z) if w >= 0.0 else (-w, -x, -y, -z)), R
 
     def _base_and_joints(self, c: int, sysid: int, am: scene.AmBody):
         """(p_WB, quat_WB (w, x, y, z; w >= 0), R_WB row-major as 9 floats, v_B, w_B, q, qdot)
         read from PyBullet, on Python floats."""
-        p, (x, y, z, w) = pb.getBasePositionAndOrientation(am.body_id, physicsClientId=c)
+        p, quat, R = self._base_pose(c, am)
         v_W, w_W = pb.getBaseVelocity(am.body_id, physicsClientId=c)
-        R = pb.getMatrixFromQuaternion((x, y, z, w))  # row-major 3x3 as a 9-tuple
         joints = pb.getJointStates(am.body_id, self._arm_ids[sysid], physicsClientId=c)
-        quat = (w, x, y, z) if w >= 0.0 else (-w, -x, -y, -z)
         return (p, quat, R, _mtv(R, v_W), _mtv(R, w_W), [j[0] for j in joints], [j[1] for j in joints])
 
     def wrench_ee(self, sysid: int) -> np.ndarray:
@@ -400,7 +436,10 @@ class World:
         m_env = -R_WP m_s - (c_tool - c_pad) x F_grav; then moved to E and turned into E."""
         if self._step_index == 0:
             return [0.0] * 6
-        f_s = pb.getJointState(am.body_id, am.ft_joint_id, physicsClientId=c)[2]
+        return self._wrench_from(c, sysid, am, pb.getJointState(am.body_id, am.ft_joint_id, physicsClientId=c)[2])
+
+    def _wrench_from(self, c: int, sysid: int, am: scene.AmBody, f_s) -> list[float]:
+        """`_wrench_E` from the wrist sensor's reading f_s (its joint's reaction forces)."""
         links = pb.getLinkStates(am.body_id, self._sensed_links[sysid], computeForwardKinematics=1, physicsClientId=c)
         pad, ee = links[0], links[1]
         RP = pb.getMatrixFromQuaternion(pad[1])  # pad's inertial frame: the sensor's frame

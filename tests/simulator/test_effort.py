@@ -53,3 +53,36 @@ def test_same_seed_same_reading_other_sysid_other_draws():
     ya = [a.sample([0.1, 0.2, 0.3]).tolist() for _ in range(100)]
     assert ya == [b.sample([0.1, 0.2, 0.3]).tolist() for _ in range(100)]
     assert ya != [c.sample([0.1, 0.2, 0.3]).tolist() for _ in range(100)]
+
+
+class LiteralEffort:
+    """The reading as the module doc writes it, in numpy, one draw call per step."""
+
+    def __init__(self, spec, scale, n, dt, seed, sysid):
+        from simulator.effort import _STREAM
+        self.noise, self.res = scale * spec.noise_nm, spec.resolution_nm
+        self.alpha = 1.0 if spec.lag_s <= 0.0 else -math.expm1(-dt / spec.lag_s)
+        self.rng, self.n, self.x = np.random.default_rng([seed, sysid, _STREAM]), n, None
+
+    def sample(self, u):
+        u = np.asarray(u, dtype=float)
+        self.x = u.copy() if self.x is None else self.x + self.alpha * (u - self.x)
+        y = self.x + self.noise * self.rng.standard_normal(self.n) if self.noise > 0.0 else self.x.copy()
+        return self.resolution(y)
+
+    def resolution(self, y):
+        return self.res * np.round(y / self.res) if self.res > 0.0 else y
+
+
+@pytest.mark.parametrize("spec", [JointEffortSpec(), JointEffortSpec(lag_s=0.002, noise_nm=0.013, resolution_nm=0.0065),
+                                  JointEffortSpec(noise_nm=0.01)])
+def test_readings_formed_when_read_equal_the_literal_ones_bit_for_bit(spec):
+    """Every step advances; a frame reads the reading every 4th step (attitude mode)."""
+    fast, slow = JointEffortSensor(spec, 1.5, 3, DT, 2, 4), LiteralEffort(spec, 1.5, 3, DT, 2, 4)
+    rng = np.random.default_rng(0)
+    for k in range(1000):
+        u = rng.normal(scale=0.5, size=3).tolist()
+        y = slow.sample(u)
+        fast.advance(u)
+        if k % 4 == 0 or k > 900:
+            assert fast.last.tolist() == y.tolist(), f"step {k}"

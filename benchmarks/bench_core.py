@@ -1,0 +1,189 @@
+"""Where the simulator's lockstep time goes, per AM and physics step, in place: `SitlCore`
+driven as `simulator.main` drives it, with the MAVLink work of `amlink.server` for each AM
+(frame and sign the sensor batch; verify and decode a signed answer) but no sockets and no
+companions: every AM answers each control step with the same hovering setpoint.
+
+    python benchmarks/bench_core.py [--n 2 10] [--duration 2] [--mode attitude torque] [--devices]
+
+Each part is timed with `time.perf_counter` around it inside the running loop (caches as a
+run leaves them, not back to back), summed over the run and divided by AMs x physics steps:
+
+- sense: `World.sensor_values` (PyBullet's getters and the F/T wrench), every control step;
+  with --devices every physics step (on a step without a frame, `World.base_values` where
+  the tree has it);
+- estimate: the devices and the estimator (`DeviceSuite.step`), with --devices;
+- frame: the frame's value type and the autopilot's reports (`SitlCore.iter_frames` less the above);
+- sign: the sensor batch packed and signed (`fastcodec.sensor_frame_payloads`, `Encoder.pack_payloads`);
+- verify: the answer verified and decoded (`Decoder.feed_records`, `SetpointAssembler`);
+- apply: the flight controllers (attitude mode: the emulated autopilot and allocation every
+  physics step) and the world's actuation (`SitlCore.actuate` / `hold`);
+- physics: `SitlCore.step` (the rotors' lag, PyBullet's setters, `stepSimulation`), per AM;
+- bookkeeping: the digest and the ground-truth samples (`SitlCore.observe`).
+
+"lockstep work" is the sum of sense .. apply: the issue's "simulator's lockstep work per AM
+and physics step"; physics is PyBullet's stepping of the whole world, divided by N. The
+parts are wall time (a part during which another process took the core counts that time);
+"CPU per AM" is this process's CPU time over the whole loop (time.process_time) per AM and
+physics step, every part included, which other processes' load does not inflate.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.append(str(ROOT))  # if not installed; PYTHONPATH wins (benchmarks/ab.py)
+
+from amcore.config import load_scenario  # noqa: E402
+from amlink import fastcodec, wire  # noqa: E402
+from amlink.types import AttitudeSetpoint, AttitudeTarget, TorqueSetpoint  # noqa: E402
+from amlink.udp import SIM_COMPID, SIM_SYSID  # noqa: E402
+from simulator.core import SitlCore  # noqa: E402
+
+SCENARIOS = {"attitude": ROOT / "configs" / "scenarios" / "ten_am_attitude.toml",
+             "torque": ROOT / "configs" / "scenarios" / "ten_am.toml"}
+KEY = bytes(range(32))
+PARTS = ("sense", "estimate", "frame", "sign", "verify", "apply", "physics", "bookkeeping")
+
+
+def spec_for(mode: str, n: int, devices: bool):
+    from amcore.config import AmSpec
+    spec = load_scenario(SCENARIOS[mode])
+    ams = tuple(AmSpec(sysid=2 + i, azimuth_deg=360.0 * i / n) for i in range(n))
+    spec = dataclasses.replace(spec, ams=ams, object=dataclasses.replace(spec.object, mass_kg=1.0))
+    if devices:
+        spec = dataclasses.replace(spec, devices=dataclasses.replace(spec.devices, enabled=True))
+    return spec
+
+
+def answers(core: SitlCore, s: int, mode: str) -> list[bytes]:
+    """Signed answers of AM s for steps 0, every, 2 every, ...: a hovering setpoint."""
+    n = core.model.n
+    hover = core.model.mass_kg * core.model.gravity_mps2
+    enc = wire.Encoder(s, 191, signing_key=KEY, link_id=2)
+    out = []
+    steps = range(0, 1 << 20, core.control_every)
+
+    def one(k):
+        if mode == "attitude":
+            att = AttitudeTarget(k, quat_wxyz=np.array([1.0, 0.0, 0.0, 0.0]), rates_rad_s=np.zeros(3),
+                                 thrust_normalized=hover / core.fcs[s].allocation.thrust_scale_n)
+            sp = AttitudeSetpoint(step=k, attitude=att, tau_q_nm=np.zeros(n))
+            return enc.pack_payloads(fastcodec.attitude_setpoint_payloads(sp))
+        sp = TorqueSetpoint(step=k, thrust_n=hover, tau_B_nm=np.zeros(3), tau_q_nm=np.zeros(n))
+        return enc.pack_payloads(fastcodec.setpoint_payloads(sp, None))
+    return one, steps
+
+
+def run(mode: str, n: int, duration_s: float, devices: bool) -> dict[str, float]:
+    spec = spec_for(mode, n, devices)
+    core = SitlCore(spec)
+    t = dict.fromkeys(PARTS, 0.0)
+    pc = time.perf_counter
+    # split iter_frames into sense, estimate and frame by timing the world's and the devices' calls
+    w = core.world
+    sense0, dev_step = w.sensor_values, None
+
+    def sensor_values(s):
+        t0 = pc()
+        v = sense0(s)
+        t["sense"] += pc() - t0
+        return v
+    w.sensor_values = sensor_values
+    if hasattr(w, "base_values"):  # the base alone, on steps without a frame ([devices])
+        base0 = w.base_values
+
+        def base_values(s):
+            t0 = pc()
+            v = base0(s)
+            t["sense"] += pc() - t0
+            return v
+        w.base_values = base_values
+    sense_core = core._sense
+
+    def timed_sense(s, values, tt):
+        t0 = pc()
+        out = sense_core(s, values, tt)
+        t["estimate"] += pc() - t0
+        return out
+    core._sense = timed_sense
+    encs = {s: wire.Encoder(SIM_SYSID, SIM_COMPID, signing_key=KEY, link_id=1) for s in core.sysids}
+    dec = wire.Decoder({s: KEY for s in core.sysids}, readers=fastcodec.READERS)
+    asm = {s: fastcodec.SetpointAssembler() for s in core.sysids}
+    makers = {s: answers(core, s, mode)[0] for s in core.sysids}
+    steps = int(round(duration_s * spec.rate_hz))
+    # the answers are made before the run (they are the companions' work)
+    pre = {s: {k: makers[s](k) for k in range(0, steps, core.control_every)} for s in core.sysids}
+    core.connect()
+    cpu0, wall0 = time.process_time(), pc()
+    try:
+        for k in range(steps):
+            if core.is_control_step(k):
+                t0 = pc()
+                before = t["sense"] + t["estimate"]
+                sent = []
+                for s, f in core.iter_frames(k):
+                    t1 = pc()
+                    sent.append(encs[s].pack_payloads(fastcodec.sensor_frame_payloads(f, 0)))
+                    t["sign"] += pc() - t1
+                t["frame"] += pc() - t0 - (t["sense"] + t["estimate"] - before) - 0.0
+                t0 = pc()
+                core.observe()
+                t["bookkeeping"] += pc() - t0
+                setpoints = {}
+                for s in core.sysids:
+                    t0 = pc()
+                    for mid, _sysid, _compid, body in dec.feed_records(pre[s][k]):
+                        r = asm[s].push(mid, body)
+                        if r is not None:
+                            setpoints[s] = r[0]
+                    t["verify"] += pc() - t0
+                t0 = pc()
+                core.actuate(k, setpoints, ())
+                t["apply"] += pc() - t0
+            else:
+                t0 = pc()
+                before = t["sense"] + t["estimate"]
+                core.hold(k, ())
+                t["apply"] += pc() - t0 - (t["sense"] + t["estimate"] - before)
+            t0 = pc()
+            core.step()
+            t["physics"] += pc() - t0
+        wall, cpu = pc() - wall0, time.process_time() - cpu0
+    finally:
+        core.close()
+    # the sign column was measured inside the frame window: take it out
+    t["frame"] -= t["sign"]
+    per = {k: 1e6 * v / (steps * n) for k, v in t.items()}
+    per["lockstep work"] = sum(per[k] for k in ("sense", "estimate", "frame", "sign", "verify", "apply"))
+    per["rtf"] = steps * spec.dt_s / wall
+    per["wall per step"] = 1e6 * wall / steps
+    per["cpu per AM"] = 1e6 * cpu / (steps * n)
+    return per
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--n", type=int, nargs="+", default=[2, 10])
+    ap.add_argument("--duration", type=float, default=2.0)
+    ap.add_argument("--mode", nargs="+", default=["attitude", "torque"], choices=sorted(SCENARIOS))
+    ap.add_argument("--devices", action="store_true", help="[devices] on: the sensors as devices and the estimator")
+    a = ap.parse_args(argv)
+    cols = PARTS + ("lockstep work",)
+    print(f"[us per AM and physics step] devices {'on' if a.devices else 'off'}, {a.duration:g} s each")
+    print(f"{'mode':9s} {'N':>3s} " + " ".join(f"{c:>13s}" for c in cols)
+          + f" {'wall/step':>10s} {'one-core rtf':>12s} {'CPU per AM':>11s}")
+    for mode in a.mode:
+        for n in a.n:
+            r = run(mode, n, a.duration, a.devices)
+            print(f"{mode:9s} {n:3d} " + " ".join(f"{r[c]:13.1f}" for c in cols)
+                  + f" {r['wall per step']:10.0f} {r['rtf']:11.2f}x {r['cpu per AM']:11.1f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()

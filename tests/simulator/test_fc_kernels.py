@@ -1,0 +1,86 @@
+"""The compiled autopilot loops (simulator.fc_kernels) against the Python ones they transcribe
+(simulator.flight_controller): equal bit for bit, step after step, saturated or not."""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from amlink.types import AttitudeTarget
+from simulator import fc_kernels as fk
+from simulator import flight_controller as pyfc
+from simulator.flight_controller import FlightController
+
+
+def random_quat(rng) -> tuple[float, ...]:
+    q = rng.normal(size=4)
+    return tuple((q / np.linalg.norm(q) * rng.uniform(0.98, 1.02)).tolist())  # not quite unit, as estimates
+
+
+def test_square_is_pythons_power_of_two():
+    for x in np.random.default_rng(3).normal(scale=2.0, size=20000).tolist() + [0.0, -0.0, 1e-200, 1e150]:
+        assert fk._square(x, 2.0) == x ** 2
+
+
+def test_min_max_keep_pythons_order_on_ties_and_nan():
+    for a, b in ((1.0, 2.0), (2.0, 1.0), (0.0, -0.0), (-0.0, 0.0), (math.nan, 1.0), (1.0, math.nan)):
+        for fast, slow in ((fk._min, min), (fk._max, max)):
+            r, e = fast(a, b), slow(a, b)
+            assert (math.isnan(r) and math.isnan(e)) or (r == e and math.copysign(1, r) == math.copysign(1, e))
+
+
+def test_attitude_error_equals_the_python_one():
+    rng = np.random.default_rng(7)
+    cases = [(random_quat(rng), random_quat(rng)) for _ in range(3000)]
+    q = random_quat(rng)
+    cases += [(q, q), (q, tuple(-x for x in q)),  # no error; the same attitude
+              ((1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0))]  # thrust axes opposite
+    for q, q_d in cases:
+        q, q_d = pyfc.quat_normalized(q), pyfc.quat_normalized(q_d)
+        for w in (0.4, 1.0, 0.0):
+            assert fk.attitude_error(q, q_d, w) == pyfc.attitude_error(q, q_d, w)
+
+
+@pytest.mark.parametrize("scale", [0.05, 3.0])  # gentle; far off, the allocation and the integral saturate
+def test_compiled_flight_controller_flies_bit_for_bit_as_the_python_one(spec, scale):
+    v = spec.vehicle
+    for params in (v.flight_controller,
+                   dataclasses.replace(v.flight_controller, IMU_GYRO_CUTOFF=0.0, body_rate_feedforward=False)):
+        fast = FlightController(params, v.rotors, spec.dt_s, compiled=True)
+        slow = FlightController(params, v.rotors, spec.dt_s, compiled=False)
+        rng = np.random.default_rng(11)
+        q, w = random_quat(rng), (0.0, 0.0, 0.0)
+        for k in range(600):
+            if k % 4 == 0:  # a new target at the control rate
+                target = AttitudeTarget(k, quat_wxyz=np.array(random_quat(rng)),
+                                        rates_rad_s=scale * rng.normal(size=3), thrust_normalized=rng.uniform(0.0, 1.1))
+            q = pyfc.quat_normalized(tuple(np.add(q, scale * 0.02 * rng.normal(size=4)).tolist()))
+            w = tuple((np.array(w) + scale * rng.normal(size=3)).tolist())
+            a, b = fast.step(q, w, target), slow.step(q, w, target)
+            assert a == b, f"step {k}"
+            assert fast.rate_int == slow.rate_int
+        assert any(fast.output.allocation.saturated_axes) or scale < 1.0
+
+
+@pytest.mark.parametrize("name", ["two_am_comp_attitude", "two_am_comp"])
+def test_the_warm_up_compiles_what_a_run_calls(name):
+    """SitlCore.connect warms the simulator's kernels: a run afterwards adds no specialization
+    (none is compiled at a lockstep's first steps), with [devices] on and in either mode."""
+    from pathlib import Path
+
+    from amcore import allocation_kernels
+    from amcore.config import load_scenario
+    from amcore.jit import kernels
+    from simulator import device_kernels
+    from simulator.core import warm_up_kernels
+    from simulator.inprocess import run
+
+    spec = load_scenario(Path(__file__).resolve().parents[2] / "configs" / "scenarios" / f"{name}.toml")
+    spec = dataclasses.replace(spec, devices=dataclasses.replace(spec.devices, enabled=True))
+    warm_up_kernels(spec)
+    ks = [k for m in (fk, device_kernels, allocation_kernels) for k in kernels(m)]
+    before = {k.py_func.__name__: len(k.signatures) for k in ks}
+    run(spec, 0.2)
+    assert {k.py_func.__name__: len(k.signatures) for k in ks} == before
