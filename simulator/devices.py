@@ -290,4 +290,5 @@ class DeviceSuite:
         arrived = self.mocap.sample(truth, t)
         pose, lag = arrived if arrived is not None else (None, 0)
         odo = self.estimator.step(k, self._omega_m, self._f_m, pose, lag)
+        self.autopilot_rate = self._omega_m - self.estimator.x[BG:BG + 3]  # as `step`
         return [*odo.tolist(), *self._tail.tolist()] if full else odo.tolist()
