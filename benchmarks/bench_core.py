@@ -89,21 +89,16 @@ def run(mode: str, n: int, duration_s: float, devices: bool) -> dict[str, float]
     w = core.world
     sense0, dev_step = w.sensor_values, None
 
-    def sensor_values(s):
-        t0 = pc()
-        v = sense0(s)
-        t["sense"] += pc() - t0
-        return v
-    w.sensor_values = sensor_values
-    if hasattr(w, "base_values"):  # the base alone, on steps without a frame ([devices])
-        base0 = w.base_values
-
-        def base_values(s):
+    def timed_read(read):
+        def timed(s):
             t0 = pc()
-            v = base0(s)
+            v = read(s)
             t["sense"] += pc() - t0
             return v
-        w.base_values = base_values
+        return timed
+    w.sensor_values = timed_read(sense0)
+    if hasattr(w, "base_values"):  # the base alone, on steps without a frame ([devices])
+        w.base_values = timed_read(w.base_values)
     sense_core = core._sense
 
     def timed_sense(s, values, tt):

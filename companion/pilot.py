@@ -151,7 +151,7 @@ class Pilot:
             res = self.law(*args) if task_frame is None else self.law(*args, task_frame)
             self.memory = res.memory
         self._wrench_E_f, self._t_last = res.diagnostics.wrench_E_filtered, t
-        if self.trim is not None:
+        if self.trim is not None and self.mission.phase(t) == "approach":  # held from the grasp on
             self._r_c_err = np.array(res.diagnostics.r_c_err)
         if self.attitude_mode:
             return attitude_setpoint_from_result(frame.step, res, self.thrust_max_n), None, res

@@ -246,14 +246,19 @@ class DeviceSuite:
         arrived = self.mocap.sample(truth, t)
         pose, lag = arrived if arrived is not None else (None, 0)
         odo = self.estimator.step(k, omega_m, f_m, pose, lag)
-        # The autopilot's rate loop takes the gyro with the estimator's bias removed and filters it
-        # once itself (IMU_GYRO_CUTOFF), as PX4's VehicleAngularVelocity takes EKF2's bias; the
-        # odometry's rate, already low-passed for the law, would be filtered twice.
-        self.autopilot_rate = omega_m - self.estimator.x[BG:BG + 3]
+        self._omega_m = omega_m  # the autopilot's rate reads it
         n = self.n
         q, qdot = self.encoders.sample(values[13:13 + n], values[13 + n:13 + 2 * n])
         wrench = self.ft.sample(values[13 + 2 * n:19 + 2 * n], t)
         return [*odo.tolist(), *q.tolist(), *qdot.tolist(), *wrench.tolist()]
+
+    @property
+    def autopilot_rate(self) -> np.ndarray:
+        """The body rate the autopilot's rate loop takes after the last step [rad/s]: the gyro
+        with the estimator's bias removed, which the loop filters once itself (IMU_GYRO_CUTOFF),
+        as PX4's VehicleAngularVelocity takes EKF2's bias; the odometry's rate, already
+        low-passed for the law, would be filtered twice. Formed when read (attitude mode only)."""
+        return self._omega_m - self.estimator.x[BG:BG + 3]
 
     def needs_reading(self, t: float) -> bool:
         """Whether a step at t needs the arm's and the wrist's values although no frame is sent:
@@ -290,5 +295,4 @@ class DeviceSuite:
         arrived = self.mocap.sample(truth, t)
         pose, lag = arrived if arrived is not None else (None, 0)
         odo = self.estimator.step(k, self._omega_m, self._f_m, pose, lag)
-        self.autopilot_rate = self._omega_m - self.estimator.x[BG:BG + 3]  # as `step`
         return [*odo.tolist(), *self._tail.tolist()] if full else odo.tolist()
