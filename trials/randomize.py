@@ -21,6 +21,12 @@ it replays with `am-run`. Ranges are uniform:
                                   in [-d, d] ([object].position_m)
     object_yaw_deg = a            the object (and its table) turned about z, uniform in [-a, a]
                                   ([object].yaw_deg)
+    object_pose = "mocap"         where every trial's team takes the object's pose from
+                                  ([mission].object_pose): "mocap", the motion capture's
+                                  measurement; "config", the scenario's [object] pose, blind
+                                  to a moved object. Unset: the scenario's own. A table that
+                                  moves or turns the object while its trials would plan from
+                                  the configured pose is refused unless it says "config".
     [randomize.sensors]           the [sensors] levels every trial gets (noise and bias standard
                                   deviations; each trial's noise and biases follow its own seed)
     [randomize.devices]           the [devices] every trial gets (sensor devices and the flight
@@ -41,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
-from amcore.config import MASS_TOLERANCE_MAX, ConfigError, SensorSpec, _build, _read_toml, devices_from_table
+from amcore.config import MASS_TOLERANCE_MAX, OBJECT_POSE_SOURCES, ConfigError, SensorSpec, _build, _read_toml, devices_from_table
 
 Range = tuple[float, ...]
 
@@ -59,6 +65,7 @@ class RandomizeSpec:
     planned_mass_tolerance: float = 0.0
     object_position_m: float = 0.0
     object_yaw_deg: float = 0.0
+    object_pose: str = ""  # "" leaves the scenario's [mission].object_pose
     sensors: dict = dataclasses.field(default_factory=dict)  # a [sensors] table
     devices: dict = dataclasses.field(default_factory=dict)  # a [devices] table
 
@@ -111,6 +118,9 @@ def randomize_from_table(table: dict, where: str) -> RandomizeSpec:
         if not 0.0 <= getattr(spec, name) <= most:
             raise ConfigError(f"{where}: [randomize].{name}: must be in [0, {most:g}] ({why}), "
                               f"got {getattr(spec, name)!r}")
+    if spec.object_pose not in ("", *OBJECT_POSE_SOURCES):
+        raise ConfigError(f"{where}: [randomize].object_pose: expected one of {', '.join(OBJECT_POSE_SOURCES)}, "
+                          f"got {spec.object_pose!r}")
     return spec
 
 
@@ -182,6 +192,14 @@ def draw_trial(base: dict, rand: RandomizeSpec, campaign_seed: int, index: int) 
     if rand.object_yaw_deg:
         a = rand.object_yaw_deg
         obj["yaw_deg"] = p["object_yaw_deg"] = float(obj.get("yaw_deg", 0.0)) + _uniform(rng, (-a, a))
+    if rand.object_pose:
+        data.setdefault("mission", {})["object_pose"] = rand.object_pose
+    elif (rand.object_position_m or rand.object_yaw_deg) and data.get("mission", {}).get("object_pose",
+                                                                                           "config") == "config":
+        raise ConfigError("[randomize] moves or turns the object (object_position_m, object_yaw_deg) but the "
+                          "team plans from the scenario's [object] pose, blind to where it is: set "
+                          "[randomize].object_pose = \"mocap\" (the motion capture's measurement), or \"config\" "
+                          "to fly blind on purpose")
     sc = data.setdefault("scenario", {})
     sc["seed"] = p["seed"] = int(rng.integers(0, 2**31 - 1))
     sc["name"] = f"{str(sc.get('name', 'trial'))[:26]}-{index:04d}"

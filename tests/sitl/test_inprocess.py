@@ -137,7 +137,7 @@ def test_rejected_setpoints_are_answered_at_once_and_the_run_stays_deterministic
 
 
 def test_a_deployment_trial_plans_from_the_same_measured_object_in_process_and_through_the_processes(tmp_path):
-    """A trial of the deployment randomization on two_am_robust (the object moved and turned on its
+    """A trial of the default randomization (the deployment) on two_am_robust (the object moved and turned on its
     table, measured by motion capture, [mission].object_pose = "mocap"): the simulator sends its
     measurement in the handshake (AM_OBJECT_POSE), each companion plans from it, and `am-run`
     agrees with the in-process runner bit for bit."""
@@ -149,7 +149,7 @@ def test_a_deployment_trial_plans_from_the_same_measured_object_in_process_and_t
     from trials.randomize import load_randomize
 
     base = SCENARIOS / "two_am_robust.toml"
-    rand = load_randomize(SCENARIOS.parent / "randomize" / "deployment.toml")
+    rand = load_randomize(SCENARIOS.parent / "randomize" / "default.toml")
     tasks = build_tasks(_read_toml(base), base, rand, 23, 6, tmp_path, None)
     task = next(t for t in tasks if preflight(load_scenario(t.path)).inside)  # a draw the team flies
     spec = load_scenario(task.path)

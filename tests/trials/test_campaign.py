@@ -57,8 +57,8 @@ def test_the_summary_counts_the_table(campaign):
 
 def test_plots_show_success_against_each_drawn_parameter(campaign):
     names = {p.name for p in (campaign / "plots").glob("*.png")}
-    for param in ("object_mass_kg", "pad_friction", "setpoint_loss", "am4_misalignment_deg",
-                  "max_abs_misalignment_deg"):
+    for param in ("object_mass_kg", "pad_friction", "setpoint_loss", "object_yaw_deg", "am4_start_heading_deg",
+                  "max_start_offset_m"):
         assert f"success_vs_{param}.png" in names
 
 
@@ -66,7 +66,8 @@ def test_a_trial_replays_from_its_scenario_file(campaign):
     row = read_csv(campaign / "trials.csv")[1]
     spec = load_scenario(row["scenario_file"])
     assert spec.object.mass_kg == row["object_mass_kg"] and spec.seed == row["seed"]
-    assert dict((a.sysid, a.misalignment_deg) for a in spec.ams)[5] == row["am5_misalignment_deg"]
+    assert dict((a.sysid, a.start_heading_deg) for a in spec.ams)[5] == row["am5_start_heading_deg"]
+    assert spec.object.yaw_deg == row["object_yaw_deg"] and spec.mission.object_pose == "mocap"
     again = run(spec)
     assert again["state_digest"] == row["state_digest"]
     assert again["verdict"]["status"] == row["verdict"]

@@ -1,4 +1,4 @@
-"""A short campaign of the deployment randomization on two_am_robust, as a regression check with
+"""A short campaign of the default randomization (the deployment) on two_am_robust, as a regression check with
 a loose bound: the draws outside the team's envelope are refused before flight, and of the
 flown ones (the object moved and turned, measured by motion capture, every device at its
 default level) at least half succeed. Two 20 s missions on two workers: 77 s measured on two
@@ -18,8 +18,7 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_a_short_deployment_campaign_refuses_what_it_cannot_hold_and_holds_the_rest(tmp_path):
     out = tmp_path / "c"
     assert cli.main([str(ROOT / "configs" / "scenarios" / "two_am_robust.toml"), "--trials", "3", "--seed", "31",
-                     "--out", str(out), "--workers", "2", "--no-progress", "--no-plots",
-                     "--randomize", str(ROOT / "configs" / "randomize" / "deployment.toml")]) == 0
+                     "--out", str(out), "--workers", "2", "--no-progress", "--no-plots"]) == 0
     rows = read_csv(out / "trials.csv")
     s = json.loads((out / "summary.json").read_text())
     refused = [r for r in rows if r["verdict"] == "refused"]

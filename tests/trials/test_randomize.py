@@ -16,6 +16,7 @@ from trials.toml_write import dumps
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "configs" / "scenarios" / "two_am_comp.toml"
 TEN = ROOT / "configs" / "scenarios" / "ten_am.toml"
+ROBUST = ROOT / "configs" / "scenarios" / "two_am_robust.toml"
 DEFAULT = load_randomize(ROOT / "configs" / "randomize" / "default.toml")
 
 
@@ -29,19 +30,38 @@ def test_a_trial_is_a_function_of_seed_and_index_alone():
 
 
 def test_draws_stay_in_the_default_ranges_and_make_valid_scenarios():
-    base = _read_toml(SCENARIO)
+    base = _read_toml(SCENARIO)  # a paper scenario: the draws make it plan from the measured object
+    assert base.get("mission", {}).get("object_pose", "config") == "config"
     for i in range(40):
         data, p = draw_trial(base, DEFAULT, 1, i)
         spec = scenario_from_dict(data, SCENARIO)
-        assert 0.5 <= spec.object.mass_kg <= 2.0 and 0.5 <= spec.object.pad_object_friction <= 1.2
+        assert 0.5 <= spec.object.mass_kg <= 1.5 and 0.5 <= spec.object.pad_object_friction <= 1.2
         assert spec.object.size_m[0] == pytest.approx(0.2 * p["object_size_scale"]) and 0.16 <= spec.object.size_m[0] <= 0.24
-        assert 0.0 <= spec.link.loss <= 0.1 and spec.sensors.exact
+        assert 0.0 <= spec.link.loss <= 0.05 and spec.sensors.exact
         assert spec.devices.enabled and spec.devices.mocap.latency_s == DEFAULT.devices["mocap"]["latency_s"]
         assert spec.devices.imu.gyroscope_noise_density == DEFAULT.devices["imu"]["gyroscope_noise_density"]
+        assert spec.mission.object_pose == "mocap"
         for am in spec.ams:
-            assert abs(am.misalignment_deg) <= 5.0 and abs(am.start_heading_deg) <= 5.0
+            assert am.misalignment_deg == 0.0 and abs(am.start_heading_deg) <= 5.0
             assert max(map(abs, am.start_offset_m)) <= 0.05
         assert spec.seed == p["seed"] and spec.name == f"two_am_comp-{i:04d}"
+
+
+def test_a_table_that_moves_the_object_sets_or_demands_where_the_team_takes_its_pose_from():
+    base = _read_toml(SCENARIO)
+    moved = {"object_position_m": 0.1, "object_yaw_deg": 30.0}
+    with pytest.raises(ConfigError) as e:  # a blind team would miss the moved object: refused, named
+        draw_trial(base, randomize_from_table(moved, "r.toml"), 1, 0)
+    assert "object_pose" in str(e.value) and "mocap" in str(e.value)
+    blind, _ = draw_trial(base, randomize_from_table({**moved, "object_pose": "config"}, "r.toml"), 1, 0)
+    assert scenario_from_dict(blind, SCENARIO).mission.object_pose == "config"  # on purpose: allowed
+    measured, _ = draw_trial(base, randomize_from_table({**moved, "object_pose": "mocap"}, "r.toml"), 1, 0)
+    assert scenario_from_dict(measured, SCENARIO).mission.object_pose == "mocap"
+    # the key draws nothing: the same trial with or without it, but for where the pose comes from
+    assert {k: v for k, v in measured.items() if k != "mission"} == {k: v for k, v in blind.items() if k != "mission"}
+    robust = _read_toml(ROBUST)  # a scenario that plans from the measurement already needs no key
+    assert scenario_from_dict(draw_trial(robust, randomize_from_table(moved, "r.toml"), 1, 0)[0],
+                              ROBUST).mission.object_pose == "mocap"
 
 
 def test_a_cylinder_scales_radius_and_height():
@@ -49,7 +69,7 @@ def test_a_cylinder_scales_radius_and_height():
     spec = scenario_from_dict(data, TEN)
     assert spec.object.radius_m == pytest.approx(0.6 * p["object_size_scale"])
     assert spec.object.height_m == pytest.approx(0.3 * p["object_size_scale"])
-    assert len([k for k in p if k.endswith("_misalignment_deg")]) == 10
+    assert len([k for k in p if k.endswith("_start_heading_deg")]) == 10
 
 
 def test_a_written_trial_reads_back_as_the_same_scenario(tmp_path):
@@ -89,6 +109,7 @@ def test_toml_writer_round_trips_values(value):
     ({"object_yaw_deg": 200.0}, "object_yaw_deg: must be in [0, 180]"),
     ({"object_position_m": -0.1}, "object_position_m: must be in [0, 1]"),
     ({"object_position_m": "far"}, "object_position_m: expected a number"),
+    ({"object_pose": "gps"}, "object_pose: expected one of config, mocap, got 'gps'"),
 ])
 def test_a_bad_randomize_table_names_the_key(table, words):
     with pytest.raises(ConfigError) as e:
@@ -120,16 +141,14 @@ def test_a_scenarios_own_device_keys_win_over_the_randomized_ones():
     assert spec.devices.imu.gyroscope_noise_density == DEFAULT.devices["imu"]["gyroscope_noise_density"]
 
 
-ROBUST = ROOT / "configs" / "scenarios" / "two_am_robust.toml"
-DEPLOYMENT = load_randomize(ROOT / "configs" / "randomize" / "deployment.toml")
 STRESS = load_randomize(ROOT / "configs" / "randomize" / "stress.toml")
 
 
-def test_the_deployment_draws_stay_in_its_ranges_and_make_valid_scenarios():
+def test_the_default_draws_on_two_am_robust_make_deployment_trials():
     base = _read_toml(ROBUST)
     yaws = []
     for i in range(40):
-        data, p = draw_trial(base, DEPLOYMENT, 11, i)
+        data, p = draw_trial(base, DEFAULT, 11, i)
         spec = scenario_from_dict(data, ROBUST)
         m, plan = spec.object.mass_kg, spec.mission.planned_mass_kg
         assert 0.5 <= m <= 1.5 and abs(plan / m - 1.0) <= 0.1 and spec.mission.mass_tolerance == 0.1
@@ -145,20 +164,22 @@ def test_the_deployment_draws_stay_in_its_ranges_and_make_valid_scenarios():
     assert max(yaws) - min(yaws) > 180.0  # the draws reach across the whole turn
 
 
-def test_the_deployment_stress_and_ten_am_files_keep_the_default_device_levels():
+def test_the_stress_and_ten_am_files_keep_the_default_device_levels():
     ten = load_randomize(ROOT / "configs" / "scenarios" / "ten_am_robust.toml")
-    assert DEPLOYMENT.devices == DEFAULT.devices and ten.devices == DEFAULT.devices
+    assert ten.devices == DEFAULT.devices
     assert {k: v for k, v in STRESS.devices.items() if k != "scale"} == DEFAULT.devices
     assert STRESS.devices["scale"] == 2.0 and STRESS.misalignment_deg == 5.0 and STRESS.setpoint_loss == (0.1, 0.1)
     for name in ("object_mass_kg", "object_size_scale", "pad_friction"):  # the same ranges otherwise
-        assert getattr(STRESS, name) == getattr(DEPLOYMENT, name) == getattr(ten, name) or name == "object_mass_kg"
-    assert ten.object_mass_kg == tuple(10 / 2 * m for m in DEPLOYMENT.object_mass_kg)  # the mass scales with the team
+        assert getattr(STRESS, name) == getattr(DEFAULT, name) == getattr(ten, name) or name == "object_mass_kg"
+    assert ten.object_mass_kg == tuple(10 / 2 * m for m in DEFAULT.object_mass_kg)  # the mass scales with the team
+    assert STRESS.object_pose == DEFAULT.object_pose == ten.object_pose == "mocap"
     for name in ("planned_mass_tolerance", "object_position_m", "object_yaw_deg", "start_offset_m"):
-        assert getattr(STRESS, name) == getattr(DEPLOYMENT, name) == getattr(ten, name) > 0.0
+        assert getattr(STRESS, name) == getattr(DEFAULT, name) == getattr(ten, name) > 0.0
 
 
 def test_a_table_without_the_new_keys_draws_none_of_them():
-    _, p = draw_trial(_read_toml(SCENARIO), DEFAULT, 5, 0)
+    old = randomize_from_table({"object_mass_kg": [0.5, 2.0], "misalignment_deg": 5.0, "setpoint_loss": [0.0, 0.1]}, "r")
+    _, p = draw_trial(_read_toml(SCENARIO), old, 5, 0)
     assert not {"planned_mass_kg", "object_dx_m", "object_yaw_deg"} & set(p)
 
 
