@@ -64,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
         m = env.payload_kg(args.team, args.friction, args.friction_margin)
         mg = env.margins
         print(f"team of {args.team} at friction {args.friction:g} (margin {args.friction_margin:g}) holds up to "
-              f"{m:.2f} kg (rotors within {mg.thrust_fraction_max:.0%}, {mg.yaw_reserve_nm:g} N m of yaw left, "
+              f"{m:.2f} kg (rotors within {mg.thrust_fraction_max:.0%}, {mg.yaw_reserve_nm:g} N m of yaw and {mg.pitch_reserve_nm:g} N m of pitch left, "
               f"arm joints within {mg.joint_fraction_max:.0%})")
         if args.mass is not None:
             print(verdict_line(env, args.mass, args.team, args.friction, args.friction_margin))
