@@ -61,7 +61,9 @@ off by default, the law above):
   the last step, F_d += R f and M += p_BE x f + m (f = (w_x, 0, w_z), m = (0, w_pitch, 0) and
   p_BE, the pad's position, in {b}): the squeeze's reaction and the load's share, which the
   integrals otherwise take seconds to build up, while the base is pushed back by centimetres.
-  In the joint mode w = J^-T K_q (q_d - q).
+  With the cartesian arm only: the joint PD's wrench, J^-T K_q (q_d - q), comes from the IK's
+  target seen from the base's reference, and fed forward it closed the loop through R_d above
+  (measured: diverged in the grasp).
 
 Diagnostics are defined as in `amcore.control` where a quantity exists for both laws: r_c
 and rdot_c are the model's CoM (not the base), y and ydot the task values in the same task
@@ -124,6 +126,14 @@ class BaselineParams:
     K_y: np.ndarray | None = None  # (3,) x, z, pitch in the task frame [N/m, N/m, N m/rad] (arm = "cartesian")
     D_y: np.ndarray | None = None  # (3,) [N s/m, N s/m, N m s/rad]
     reaction_feedforward: bool = False
+
+    def __post_init__(self) -> None:
+        if self.arm not in ("joint", "cartesian"):
+            raise ValueError(f"arm: expected 'joint' or 'cartesian', got {self.arm!r}")
+        if self.arm == "cartesian" and (self.K_y is None or self.D_y is None):
+            raise ValueError("arm = 'cartesian' needs K_y and D_y")
+        if self.reaction_feedforward and self.arm != "cartesian":
+            raise ValueError("reaction_feedforward needs arm = 'cartesian'")
 
     @staticmethod
     def from_vehicle(v: VehicleParams, model: AmModel, task_frame: TaskFrame) -> "BaselineParams":
@@ -333,12 +343,7 @@ def step(model: AmModel, data: pin.Data, params: BaselineParams, state: AmState,
         iterations = p.ik_iterations if memory.q_d is not None else 10 * p.ik_iterations  # the first from q_nominal
         q_d, sigma = inverse_kinematics(model, data, ik_target(p, p_d, R_d, ref.y), q_start, iterations,
                                         p.ik_damping, p.q_min, p.q_max)
-        tau_spring = p.K_q * (q_d - state.q)
-        tau_q = tau_spring - p.D_q * state.qdot + grav[6:]
-        if p.reaction_feedforward:
-            _, J_b = planar_fk(model, data, state.q)
-            p_BE = data.oMf[model.ee_frame_id].translation.copy()
-            w_arm = linalg3.solve(J_b.T.copy(), tau_spring)
+        tau_q = p.K_q * (q_d - state.q) - p.D_q * state.qdot + grav[6:]
     if p.reaction_feedforward:  # the moment of the last step's wrench, as its force above
         f_b = np.array((memory.w_arm[0], 0.0, memory.w_arm[1]))
         tau_B = tau_B + cross(p_BE, f_b) + np.array((0.0, memory.w_arm[2], 0.0))

@@ -184,9 +184,9 @@ class BaselineGains:
     arm: str = "joint"
     K_y: tuple[float, ...] = ()
     D_y: tuple[float, ...] = ()
-    # true: the base feeds forward the reaction of the pad wrench the arm commanded at the last
-    # step (its spring part), force in F_d and moment about the base origin in M: the squeeze's
-    # reaction and the load's share then need no integral to build up.
+    # true (arm = "cartesian" only): the base feeds forward the reaction of the pad wrench the arm
+    # commanded at the last step (its spring part), force in F_d and moment about the base origin
+    # in M: the squeeze's reaction and the load's share then need no integral to build up.
     reaction_feedforward: bool = False
 
 
@@ -1091,6 +1091,9 @@ def _check_baseline(b: BaselineGains, n: int, where: str) -> None:
                 raise ConfigError(f"{where}.{key}: arm = 'cartesian' needs {n} entries (one per task component), "
                                   f"got {len(getattr(b, key))}")
             _positive(f"{where}.{key}", getattr(b, key))
+    if b.reaction_feedforward and b.arm != "cartesian":
+        raise ConfigError(f"{where}.reaction_feedforward: needs arm = 'cartesian' (fed forward, the joint PD's "
+                          f"wrench closes a loop through the base's desired attitude)")
 
 
 def _check_flight_controller(fc: FlightControllerParams, where: str) -> None:

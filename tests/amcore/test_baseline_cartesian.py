@@ -128,13 +128,12 @@ def test_cartesian_damping_opposes_the_pads_velocity(hex_spec, hex_model, hex_mi
     assert v @ w < 0.0
 
 
-@pytest.mark.parametrize("arm", ["joint", "cartesian"])
-def test_reaction_feedforward_adds_the_arms_last_wrench_to_the_base(hex_spec, hex_model, hex_mission, arm):
+def test_reaction_feedforward_adds_the_arms_last_wrench_to_the_base(hex_spec, hex_model, hex_mission):
     """With the feed-forward, F_d is F_d without it plus R f, and the body torque is that of the
     law without it flying the same F_d plus p_BE x f + m, (f, m) the pad wrench the last step
     left in memory; the memory then holds the spring wrench this step's arm commands."""
     model, data = hex_model, create_data(hex_model)
-    on = _params(hex_spec, model, hex_mission, arm=arm, K_y=np.array([300.0, 300.0, 1.5]),
+    on = _params(hex_spec, model, hex_mission, arm="cartesian", K_y=np.array([300.0, 300.0, 1.5]),
                  D_y=np.array([14.0, 14.0, 0.03]), reaction_feedforward=True)
     off = dataclasses.replace(on, reaction_feedforward=False)
     x, ref, _ = _grasp_state(model, data, on, hex_mission, 9.0, squeeze_plan(hex_spec, model).depth_m, 3.0)
@@ -159,10 +158,7 @@ def test_reaction_feedforward_adds_the_arms_last_wrench_to_the_base(hex_spec, he
     # memory: the spring wrench this step commands, J^-T of its spring torque
     g = pin.computeGeneralizedGravity(model.pin_model, create_data(model), x.pin_q())[6:]
     _, J = bl.planar_fk(model, create_data(model), x.q)
-    if arm == "cartesian":  # at rest, all of tau_q - g is the spring's
-        spring = np.asarray(r_on.command.tau_q_nm) - g
-    else:
-        spring = on.K_q * (r_on.memory.q_d - x.q)
+    spring = np.asarray(r_on.command.tau_q_nm) - g  # at rest, all of tau_q - g is the spring's
     np.testing.assert_allclose(r_on.memory.w_arm, np.linalg.solve(J.T, spring), atol=1e-9)
     assert np.linalg.norm(r_on.memory.w_arm) > 1.0
     assert r_off.memory.w_arm == w_last  # off: carried, never used
@@ -174,3 +170,13 @@ def test_defaults_are_the_first_write_ups_law(spec, model, mission):
     p = bl.BaselineParams.from_vehicle(load_scenario(ROOT / "configs" / "scenarios" / "two_am_baseline.toml").vehicle,
                                        model, mission.frame)
     assert p.arm == "joint" and not p.reaction_feedforward and p.K_y is None
+
+
+def test_the_feed_forward_needs_the_cartesian_arm(hex_spec, hex_model, hex_mission):
+    """Fed forward, the joint PD's wrench closes a loop through R_d (measured: diverged): refused."""
+    p = _params(hex_spec, hex_model, hex_mission, arm="cartesian", K_y=np.ones(3), D_y=np.ones(3),
+                reaction_feedforward=False)
+    with pytest.raises(ValueError, match="reaction_feedforward needs arm = 'cartesian'"):
+        dataclasses.replace(p, arm="joint", reaction_feedforward=True)
+    with pytest.raises(ValueError, match="needs K_y and D_y"):
+        dataclasses.replace(p, K_y=None)

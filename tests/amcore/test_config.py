@@ -138,6 +138,8 @@ def _vehicle_variant(tmp_path, old: str, new: str, options: str = "") -> Path:
     ("ik_damping = 0.01", 'ik_damping = 0.01\narm = "cartesian"', "[baseline].K_y: arm = 'cartesian' needs 3 entries"),
     ("ik_damping = 0.01", 'ik_damping = 0.01\narm = "cartesian"\nK_y = [300.0, 300.0, 1.5]\nD_y = [14.0, 0.0, 0.03]',
      "[baseline].D_y: must be > 0"),
+    ("ik_damping = 0.01", "ik_damping = 0.01\nreaction_feedforward = true",
+     "[baseline].reaction_feedforward: needs arm = 'cartesian'"),
 ])
 def test_malformed_baseline_table_names_file_and_key(tmp_path, old, new, key):
     p = _vehicle_variant(tmp_path, old, new)
