@@ -39,6 +39,32 @@ treat both alike. It has no inertial decoupling, no task impedance and no F/T se
   grasp the target lies inside the object; the squeeze is what K_q makes of the joints' offset,
   F = J^-T K_q (q_d - q).
 
+Two additions a practitioner makes next, options of [baseline] (`amcore.config.BaselineGains`;
+off by default, the law above):
+
+- arm = "cartesian": an impedance at the pad through the arm's Jacobian instead of the joint PD,
+
+      tau_q = J^T w + g_q(q, R),  w = (A^T f, m),
+      f = K_y,xz e_xz - D_y,xz edot_xz,  m = K_y,pitch e_pitch - D_y,pitch edot_pitch,
+
+  e = y_d - y and edot = ydot - y_d' the pad's (x, z, pitch) error in the task frame from the
+  measured state (as the diagnostics' y), J = d(x, z, pitch)/dq in {b}, and A the x-z block of
+  R_WT^T R: it turns {b}'s x-z plane into the task frame's, where K_y acts (the base pitches by
+  tenths of a radian in the grasp; a stiffness along the body axes would push askew). At rest
+  with the pad held on the face, the squeeze is K_y,x times the grasp target's depth, which the
+  mission sizes as force / [gains].K_y,x (amcore.mission.squeeze_for): with K_y,x equal to it,
+  exactly the planned force, wherever the base is. A load along z no longer turns the joints'
+  offsets into pitch. (The pad's error is measured from the base's pose, not from its
+  reference as the IK's target is: seen from the reference, the feed-forward below closes a
+  loop through R_d, F_d -> R_d -> the target -> w -> F_d, that diverged in the grasp.)
+- reaction_feedforward: the base adds the reaction of the spring wrench w the arm commanded at
+  the last step, F_d += R f and M += p_BE x f + m (f = (w_x, 0, w_z), m = (0, w_pitch, 0) and
+  p_BE, the pad's position, in {b}): the squeeze's reaction and the load's share, which the
+  integrals otherwise take seconds to build up, while the base is pushed back by centimetres.
+  With the cartesian arm only: the joint PD's wrench, J^-T K_q (q_d - q), comes from the IK's
+  target seen from the base's reference, and fed forward it closed the loop through R_d above
+  (measured: diverged in the grasp).
+
 Diagnostics are defined as in `amcore.control` where a quantity exists for both laws: r_c
 and rdot_c are the model's CoM (not the base), y and ydot the task values in the same task
 frame (`amcore.task`), e_R, e_w, R_d, w_bd, wdot_bd, Omega_d as above, f_d = F_d. The wrist
@@ -46,7 +72,8 @@ F/T reading is low-pass filtered with the vehicle's wrench filter for the diagno
 (F_rc, wrench_E_filtered, wrench_W_filtered): it never reaches the command. Fields without a
 counterpart hold placeholders: F_y = 0, Lambda_y = 0, u = 0 (no decoupled coordinates),
 y_err_saturated = False. Reused with this law's meaning: sigma_min_J3 is the smallest
-singular value of the arm's planar Jacobian at q_d (the IK's margin from a straight elbow),
+singular value of the arm's planar Jacobian at q_d (the IK's margin from a straight elbow; at q
+in the cartesian mode),
 damping the IK's damping squared, com_err_saturated whether the position integral sits at
 its anti-windup clamp.
 """
@@ -95,6 +122,18 @@ class BaselineParams:
     wrench_filter: LowPass2  # diagnostics only
     task_frame: TaskFrame
     components: tuple[str, ...]
+    arm: str = "joint"  # "joint" (K_q, D_q on the IK's q_d) or "cartesian" (K_y, D_y at the pad)
+    K_y: np.ndarray | None = None  # (3,) x, z, pitch in the task frame [N/m, N/m, N m/rad] (arm = "cartesian")
+    D_y: np.ndarray | None = None  # (3,) [N s/m, N s/m, N m s/rad]
+    reaction_feedforward: bool = False
+
+    def __post_init__(self) -> None:
+        if self.arm not in ("joint", "cartesian"):
+            raise ValueError(f"arm: expected 'joint' or 'cartesian', got {self.arm!r}")
+        if self.arm == "cartesian" and (self.K_y is None or self.D_y is None):
+            raise ValueError("arm = 'cartesian' needs K_y and D_y")
+        if self.reaction_feedforward and self.arm != "cartesian":
+            raise ValueError("reaction_feedforward needs arm = 'cartesian'")
 
     @staticmethod
     def from_vehicle(v: VehicleParams, model: AmModel, task_frame: TaskFrame) -> "BaselineParams":
@@ -116,6 +155,8 @@ class BaselineParams:
             q_nominal=np.array(v.q_nominal_rad), r_BC=nominal_geometry(model).r_BC,
             wrench_filter=LowPass2(v.options.force_filter_hz, v.options.force_filter_zeta),
             task_frame=task_frame, components=tuple(v.task.components),
+            arm=b.arm, K_y=np.array(b.K_y) if b.K_y else None, D_y=np.array(b.D_y) if b.D_y else None,
+            reaction_feedforward=b.reaction_feedforward,
         )
 
 
@@ -128,6 +169,7 @@ class BaselineMemory:
     i_x: tuple[float, float, float] = (0.0, 0.0, 0.0)  # int e_x dt [m s]
     i_R: tuple[float, float, float] = (0.0, 0.0, 0.0)  # int e_R dt [rad s]
     q_d: np.ndarray | None = None  # last IK solution (warm start) [rad]
+    w_arm: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the arm's spring wrench on the pad, (x, z, pitch) in {b} [N, N, N m]
 
 
 def composite_inertia(model: AmModel, q_arm) -> np.ndarray:
@@ -195,6 +237,40 @@ def ik_target(params: BaselineParams, p_d: np.ndarray, R_d: np.ndarray, y_d: np.
     return np.array([p_BE[0], p_BE[2], angle_of(R_BE, "pitch")])
 
 
+def body_to_task_xz(frame: TaskFrame, R_d: np.ndarray) -> np.ndarray:
+    """A: the x-z block of R_WT^T R_d, which turns a vector of the arm's plane from the base's
+    reference axes into the task frame's (a pitch rotation when R_d's heading is {t}'s)."""
+    M = frame.R_WT.T.dot(R_d)
+    return M[np.ix_((0, 2), (0, 2))]
+
+
+def cartesian_wrench(params: BaselineParams, A: np.ndarray, e: np.ndarray,
+                     edot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pad impedance's (x, z, pitch) wrench in {b}, its spring part K_y e and its damping
+    part -D_y edot, from the pad's task error e = y_d - y and its rate edot = ydot - y_d' (in the
+    task frame); A turns {b}'s x-z plane into the task frame's (`body_to_task_xz`)."""
+    e = np.array(e, dtype=float)
+    e[2] = math.remainder(e[2], 2.0 * math.pi)
+    k, d = params.K_y, params.D_y
+    spring = np.concatenate((A.T.dot(k[0:2] * e[0:2]), (k[2] * e[2],)))
+    damp = -np.concatenate((A.T.dot(d[0:2] * edot[0:2]), (d[2] * edot[2],)))
+    return spring, damp
+
+
+def measured_task_pose(model: AmModel, data: pin.Data, frame: TaskFrame, q_pin: np.ndarray,
+                       v_pin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pad's (x, z, pitch) in the task frame and their rates, from the measured state."""
+    pin.forwardKinematics(model.pin_model, data, q_pin, v_pin)
+    fid = model.ee_frame_id
+    H = pin.updateFramePlacement(model.pin_model, data, fid)
+    twist = pin.getFrameVelocity(model.pin_model, data, fid, pin.LOCAL_WORLD_ALIGNED)
+    p_T = frame.R_WT.T.dot(H.translation - frame.p_WT)
+    R_TE = frame.R_WT.T.dot(H.rotation)
+    v_T, w_T = frame.R_WT.T.dot(twist.linear), frame.R_WT.T.dot(twist.angular)
+    return (np.array([p_T[0], p_T[2], angle_of(R_TE, "pitch")]),
+            np.array([v_T[0], v_T[2], _pitch_rate(R_TE, w_T)]))
+
+
 def _pitch_rate(R_TE: np.ndarray, w_T: np.ndarray) -> float:
     """d/dt of angle_of(R_TE, "pitch") for {e} turning at w_T (in {t}); see amcore.task."""
     u = R_TE[:, 2]  # {e}'s z axis in {t}: i = z, j = x, k = y
@@ -226,6 +302,9 @@ def step(model: AmModel, data: pin.Data, params: BaselineParams, state: AmState,
     clamped = bool(np.any((np.abs(i_x) > p.i_max) & (p.k_i > 0.0)))  # anti-windup acts
     i_x = np.clip(i_x, -p.i_max, p.i_max)
     F_d = -p.k_x * e_x - p.k_v * e_v - p.k_i * i_x + m * (p_d2 + (0.0, 0.0, g))
+    if p.reaction_feedforward:  # the reaction of the pad wrench the arm commanded at the last step
+        f_b = np.array((memory.w_arm[0], 0.0, memory.w_arm[1]))
+        F_d = F_d + R.dot(f_b)
     thrust = float(F_d.dot(R[:, 2]))
 
     # --- desired attitude and Lee's attitude law; W_d, Wdot_d from the reference's jerk and snap
@@ -249,12 +328,26 @@ def step(model: AmModel, data: pin.Data, params: BaselineParams, state: AmState,
     tau_B = -p.k_R * e_R - p.k_w * e_w - p.k_iR * i_R + cross(w, p.J.dot(w)) + p.J.dot(wdot_bd) + grav[3:6]
     # (-J (hat(W) R^T R_d W_d - R^T R_d Wdot_d) = J wdot_bd)
 
-    # --- arm: IK of y_d from the base's reference pose, joint PD with gravity compensation
-    q_start = p.q_nominal if memory.q_d is None else memory.q_d
-    iterations = p.ik_iterations if memory.q_d is not None else 10 * p.ik_iterations  # the first from q_nominal
-    q_d, sigma = inverse_kinematics(model, data, ik_target(p, p_d, R_d, ref.y), q_start, iterations,
-                                    p.ik_damping, p.q_min, p.q_max)
-    tau_q = p.K_q * (q_d - state.q) - p.D_q * state.qdot + grav[6:]
+    # --- arm: the pad's reference seen from the base's reference pose; joint PD on its IK, or
+    # the impedance at the pad; gravity compensation either way
+    if p.arm == "cartesian":
+        q_d = memory.q_d  # no IK
+        y_m, ydot_m = measured_task_pose(model, data, p.task_frame, q_pin, v_pin)
+        _, J_b = planar_fk(model, data, state.q)
+        p_BE = data.oMf[model.ee_frame_id].translation.copy()  # base at the origin: the pad in {b}
+        sigma = linalg3.sigma_min(J_b)
+        w_arm, w_damp = cartesian_wrench(p, body_to_task_xz(p.task_frame, R), ref.y - y_m, ydot_m - ref.y_d1)
+        tau_q = J_b.T.dot(w_arm + w_damp) + grav[6:]
+    else:
+        q_start = p.q_nominal if memory.q_d is None else memory.q_d
+        iterations = p.ik_iterations if memory.q_d is not None else 10 * p.ik_iterations  # the first from q_nominal
+        q_d, sigma = inverse_kinematics(model, data, ik_target(p, p_d, R_d, ref.y), q_start, iterations,
+                                        p.ik_damping, p.q_min, p.q_max)
+        tau_q = p.K_q * (q_d - state.q) - p.D_q * state.qdot + grav[6:]
+    if p.reaction_feedforward:  # the moment of the last step's wrench, as its force above
+        f_b = np.array((memory.w_arm[0], 0.0, memory.w_arm[1]))
+        tau_B = tau_B + cross(p_BE, f_b) + np.array((0.0, memory.w_arm[2], 0.0))
+    w_next = tuple(w_arm.tolist()) if p.reaction_feedforward else memory.w_arm
 
     # --- diagnostics on the measured state (after the IK, which used `data` for its own poses)
     r_c = pin.centerOfMass(pm, data, q_pin, v_pin).copy()
@@ -286,5 +379,6 @@ def step(model: AmModel, data: pin.Data, params: BaselineParams, state: AmState,
         sigma_min_J3=sigma, damping=p.ik_damping**2, com_err_saturated=clamped, y_err_saturated=False,
         u=np.zeros(n + 6), tau=tau, Lambda_y=np.zeros((n, n)), wrench_W_filtered=x_W,
     )
-    mem = BaselineMemory(t_s, FilterState(x_W.copy(), np.array(xd_W)), tuple(i_x.tolist()), tuple(i_R.tolist()), q_d)
+    mem = BaselineMemory(t_s, FilterState(x_W.copy(), np.array(xd_W)), tuple(i_x.tolist()), tuple(i_R.tolist()), q_d,
+                         w_next)
     return StepResult(cmd, diag, mem)

@@ -148,6 +148,7 @@ class Safety:
 
 
 CONTROLLERS = ("passivity", "baseline")  # amcore.control (the paper's law), amcore.baseline
+BASELINE_ARMS = ("joint", "cartesian")  # [baseline].arm: joint PD on the IK's q_d, or impedance at the pad
 
 
 @dataclass(frozen=True)
@@ -175,6 +176,18 @@ class BaselineGains:
     D_q: tuple[float, ...]
     ik_iterations: int
     ik_damping: float
+    # Two additions a practitioner makes next (docs/baseline.md, "On the canted hexarotor"); the
+    # defaults are the first write-up's law. arm: "joint", the joint PD above on the IK's q_d;
+    # "cartesian", an impedance at the pad through the arm's Jacobian, tau_q = J^T (K_y e - D_y edot)
+    # + g_q, e the pad's (x, z, pitch) error in the task frame from the measured state, K_y
+    # [N/m, N/m, N m/rad] and D_y [N s/m, N s/m, N m s/rad] (needed only then).
+    arm: str = "joint"
+    K_y: tuple[float, ...] = ()
+    D_y: tuple[float, ...] = ()
+    # true (arm = "cartesian" only): the base feeds forward the reaction of the pad wrench the arm
+    # commanded at the last step (its spring part), force in F_d and moment about the base origin
+    # in M: the squeeze's reaction and the load's share then need no integral to build up.
+    reaction_feedforward: bool = False
 
 
 @dataclass(frozen=True)
@@ -1070,6 +1083,17 @@ def _check_baseline(b: BaselineGains, n: int, where: str) -> None:
         raise ConfigError(f"{where}.ik_iterations: must be >= 1, got {b.ik_iterations}")
     if b.ik_damping < 0.0:
         raise ConfigError(f"{where}.ik_damping: must be >= 0, got {b.ik_damping!r}")
+    if b.arm not in BASELINE_ARMS:
+        raise ConfigError(f"{where}.arm: expected one of {', '.join(BASELINE_ARMS)}, got '{b.arm}'")
+    if b.arm == "cartesian":
+        for key in ("K_y", "D_y"):
+            if len(getattr(b, key)) != n:
+                raise ConfigError(f"{where}.{key}: arm = 'cartesian' needs {n} entries (one per task component), "
+                                  f"got {len(getattr(b, key))}")
+            _positive(f"{where}.{key}", getattr(b, key))
+    if b.reaction_feedforward and b.arm != "cartesian":
+        raise ConfigError(f"{where}.reaction_feedforward: needs arm = 'cartesian' (fed forward, the joint PD's "
+                          f"wrench closes a loop through the base's desired attitude)")
 
 
 def _check_flight_controller(fc: FlightControllerParams, where: str) -> None:

@@ -69,13 +69,17 @@ class Pilot:
         self.last: tuple[float, object] | None = None
         self.steps = 0
         o = spec.vehicle.options
+        # The heading and lateral admittances are driven by the wrist sensor, which the baseline
+        # ignores (amcore.baseline): under it they are off, whatever [options] says. The trim
+        # reads only the CoM error, which both laws give: it flies with either.
+        sensed = spec.vehicle.options.controller != "baseline"
         self.heading = (HeadingAdmittance(2.0 * math.pi * o.heading_admittance_hz, o.heading_admittance_zeta,
-                                          spec.vehicle.pad.crown_radius_m) if o.heading_admittance_hz > 0.0 else None)
+                                          spec.vehicle.pad.crown_radius_m) if sensed and o.heading_admittance_hz > 0.0 else None)
         self.heading_state = HeadingState()
         K_t = np.asarray(spec.vehicle.gains.K_t, dtype=float)
         y_W = self.mission.frame.R_WT[:, 1]
         self.lateral = (LateralAdmittance(2.0 * math.pi * o.lateral_admittance_hz, o.lateral_admittance_zeta,
-                                          float(y_W @ (K_t * y_W))) if o.lateral_admittance_hz > 0.0 else None)
+                                          float(y_W @ (K_t * y_W))) if sensed and o.lateral_admittance_hz > 0.0 else None)
         self.lateral_state = LateralState()
         self.trim = Trim(2.0 * math.pi * o.trim_hz) if o.trim_hz > 0.0 else None
         self.trim_dr = np.zeros(3)

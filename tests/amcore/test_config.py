@@ -134,6 +134,12 @@ def _vehicle_variant(tmp_path, old: str, new: str, options: str = "") -> Path:
     ("k_x = [86.4, 86.4, 86.4]", "k_x = [86.4, 0.0, 86.4]", "[baseline].k_x: must be > 0"),
     ("k_i = [40.0, 40.0, 40.0]", "k_i = [40.0, -1.0, 40.0]", "[baseline].k_i: must be >= 0"),
     ("ik_iterations = 3", "ik_iterations = 0", "[baseline].ik_iterations: must be >= 1"),
+    ("ik_damping = 0.01", 'ik_damping = 0.01\narm = "spline"', "[baseline].arm: expected one of joint, cartesian"),
+    ("ik_damping = 0.01", 'ik_damping = 0.01\narm = "cartesian"', "[baseline].K_y: arm = 'cartesian' needs 3 entries"),
+    ("ik_damping = 0.01", 'ik_damping = 0.01\narm = "cartesian"\nK_y = [300.0, 300.0, 1.5]\nD_y = [14.0, 0.0, 0.03]',
+     "[baseline].D_y: must be > 0"),
+    ("ik_damping = 0.01", "ik_damping = 0.01\nreaction_feedforward = true",
+     "[baseline].reaction_feedforward: needs arm = 'cartesian'"),
 ])
 def test_malformed_baseline_table_names_file_and_key(tmp_path, old, new, key):
     p = _vehicle_variant(tmp_path, old, new)

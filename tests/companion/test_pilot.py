@@ -171,3 +171,26 @@ def test_trim_moves_the_com_reference_against_a_steady_offset_in_the_approachs_h
         assert shift[-1][2] == 0.0
     else:
         assert max(np.abs(s).max() for s in shift) < 1e-12
+
+
+def test_the_baseline_flies_two_am_robust_without_the_wrist_sensor_admittances():
+    """The heading and lateral admittances are driven by the wrist sensor, which the baseline
+    ignores: under it they are off whatever [options] says (the baseline's step takes no turned
+    task frame), and the trim, which reads the CoM error both laws give, stays on."""
+    from amcore import baseline
+    from amcore.config import _read_toml, scenario_from_dict
+    from trials.cli import apply_overrides
+
+    from ..conftest import ROOT
+
+    robust = ROOT / "configs" / "scenarios" / "two_am_robust.toml"
+    paper = Pilot(load_scenario(robust), 4)
+    assert paper.heading is not None and paper.lateral is not None and paper.trim is not None
+    spec_b = scenario_from_dict(apply_overrides(_read_toml(robust), ['options.controller="baseline"']), robust)
+    base = Pilot(spec_b, 4, model=paper.model)
+    assert base.law is baseline.step
+    assert base.heading is None and base.lateral is None and base.trim is not None
+    x0 = base.mission.initial_state()
+    for k, t in enumerate((0.0, 0.001, 6.0)):  # the approach and the grasp, where the admittances would act
+        sp, _, res = base.command(_frame(k, t, x0, base.mission.psi))
+        assert np.isfinite(sp.thrust_n) and np.all(np.isfinite(sp.tau_q_nm))

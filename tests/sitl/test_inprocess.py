@@ -96,6 +96,34 @@ def test_baseline_flies_the_approach_through_the_same_runner():
         assert max(abs(e) for e in a["y_err"]) < 5e-3
         assert out["ams"][str(sysid)]["saturated_steps"] == 0
         assert out["ams"][str(sysid)]["base_contacts"] == []
+def test_baseline_squeezes_two_am_robusts_object_with_the_planned_force():
+    """two_am_robust flown by the baseline (hex3dof's [baseline]: the impedance at the pad and the
+    reaction feed-forward) in the in-process SITL: at the end of the grasp each pad presses the
+    object with the squeeze sizing's planned force (within 2 %, PyBullet's contact), not the
+    fixed K_y,x squeeze_m, and no base touches anything."""
+    from amcore.config import _read_toml, scenario_from_dict
+    from amcore.mission import squeeze_plan
+    from amcore.model import build_model
+    from trials.cli import apply_overrides
+
+    path = SCENARIOS / "two_am_robust.toml"
+    spec = scenario_from_dict(apply_overrides(_read_toml(path), ['options.controller="baseline"']), path)
+    plan = squeeze_plan(spec, build_model(spec.vehicle))
+    assert plan.force_n > spec.vehicle.gains.K_y[0] * spec.mission.squeeze_m + 1.0
+    normal: dict[int, list[float]] = {}
+
+    def on_truth(gt):
+        if gt.time_s >= spec.mission.grasp_end_s - 1.0:
+            for s, am in gt.ams.items():
+                normal.setdefault(s, []).append(am.pad_object_contact.normal_force_n)
+
+    out = run(spec, duration_s=spec.mission.grasp_end_s, on_truth=on_truth)
+    assert sorted(normal) == [4, 5]
+    for s, n in normal.items():
+        assert sum(n) / len(n) == pytest.approx(plan.force_n, rel=0.02)
+        assert out["ams"][str(s)]["base_contacts"] == []
+
+
 def test_attitude_mode_in_process_run_is_bit_identical_to_the_multi_process_one(tmp_path):
     """Attitude mode at 250 Hz: the lockstep exchanges on control steps only, the emulated
     autopilot flies between them; SET_ATTITUDE_TARGET's float32 rounding is the same in both."""
