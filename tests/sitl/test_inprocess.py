@@ -44,22 +44,24 @@ def test_impaired_link_is_deterministic_across_runs_and_transports(tmp_path):
                                    "discrete_damping": True}),
 ], ids=["torque", "attitude"])
 def test_a_drawn_trial_is_bit_identical_in_process_and_through_the_processes(tmp_path, scenario, options):
-    """A trial of the default randomization (sensor devices and the estimator, setpoint loss,
-    misalignment, start offsets, another object) written as a scenario file: `am-run` and the
+    """A trial of the stress randomization (sensor devices and the estimator at twice their
+    levels, setpoint loss, blind misalignment, start offsets, another object moved, turned and
+    planned from the motion capture) written as a scenario file: `am-run` and the
     in-process runner agree bit for bit, so a campaign's rows replay through the processes.
     In attitude mode with the arm law on the autopilot's reports, those reports (ATTITUDE_TARGET,
     AM_JOINT_STATE's measured effort) travel the wire to each companion process."""
     from amcore.config import _read_toml
-    from trials.cli import DEFAULT_RANDOMIZE, build_tasks
+    from trials.cli import build_tasks
     from trials.randomize import load_randomize
 
     base = SCENARIOS / scenario
     data = _read_toml(base)
     data.setdefault("options", {}).update(options)
-    task = build_tasks(data, base, load_randomize(DEFAULT_RANDOMIZE), 11, 1, tmp_path, None)[0]
+    task = build_tasks(data, base, load_randomize(SCENARIOS.parent / "randomize" / "stress.toml"), 11, 1, tmp_path,
+                       None)[0]
     spec = load_scenario(task.path)
     assert spec.devices.enabled and spec.devices.ft.force_noise_n > 0  # sensor devices and the estimator
-    assert spec.link.loss > 0 and spec.am(4).misalignment_deg != 0
+    assert spec.link.loss > 0 and spec.am(4).misalignment_deg != 0 and spec.mission.object_pose == "mocap"
     ours = run(spec, duration_s=0.4)
     sitl = am_run(task.path, tmp_path / "r", "--duration", "0.4", "--no-telemetry", timeout_s=300)
     assert sitl.code == (4 if ours["verdict"]["status"] == "failed" else 0), sitl.stderr
