@@ -189,3 +189,15 @@ def test_the_setpoint_loss_campaigns_lose_ten_percent_on_every_trial_and_nothing
     assert (loss.misalignment_deg, loss.start_offset_m, loss.start_heading_deg) == (0.0, 0.0, 0.0)
     sensors = load_randomize(ROOT / "configs" / "randomize" / "setpoint_loss_sensors.toml")
     assert sensors.ranges() == loss.ranges() and sensors.devices == DEFAULT.devices and not sensors.sensors
+
+
+def test_am_trials_refuses_a_campaign_that_moves_the_object_for_a_blind_team(tmp_path, capsys):
+    from trials import cli
+
+    rand = tmp_path / "moved.toml"
+    rand.write_text("[randomize]\nobject_yaw_deg = 30.0\n")
+    assert cli.main([str(SCENARIO), "--trials", "2", "--seed", "1", "--out", str(tmp_path / "c"),
+                     "--randomize", str(rand), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "am-trials: error:" in err and "object_pose" in err and "blind" in err
+    assert not (tmp_path / "c" / "trials.csv").exists()  # nothing flew
