@@ -84,11 +84,7 @@ class Envelope:
         self._cache: dict[float, float] = {}
 
     def _ok(self, squeeze_n: float, load_kg: float) -> bool:
-        op = operating_point(self.vehicle, self.model, self.q, squeeze_n, load_kg, self.alloc)
-        return (op.feasible and max(op.rotor_fractions) <= self.margins.thrust_fraction_max
-                and min(op.authority_nm["yaw"]) >= self.margins.yaw_reserve_nm
-                and min(op.authority_nm["pitch"]) >= self.margins.pitch_reserve_nm
-                and max(op.joint_fractions) <= self.margins.joint_fraction_max)
+        return self.broken_margin(squeeze_n, load_kg) is None  # one statement of the margins
 
     def broken_margin(self, squeeze_n: float, load_kg: float) -> str | None:
         """Which margin the loaded hover at (squeeze_n [N], load_kg [kg]) breaks first, in words
