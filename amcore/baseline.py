@@ -261,6 +261,11 @@ def measured_task_pose(model: AmModel, data: pin.Data, frame: TaskFrame, q_pin: 
                        v_pin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The pad's (x, z, pitch) in the task frame and their rates, from the measured state."""
     pin.forwardKinematics(model.pin_model, data, q_pin, v_pin)
+    return task_pose_of(model, data, frame)
+
+
+def task_pose_of(model: AmModel, data: pin.Data, frame: TaskFrame) -> tuple[np.ndarray, np.ndarray]:
+    """As `measured_task_pose`, from `data` whose forward kinematics (with velocities) is done."""
     fid = model.ee_frame_id
     H = pin.updateFramePlacement(model.pin_model, data, fid)
     twist = pin.getFrameVelocity(model.pin_model, data, fid, pin.LOCAL_WORLD_ALIGNED)
@@ -352,17 +357,9 @@ def step(model: AmModel, data: pin.Data, params: BaselineParams, state: AmState,
     # --- diagnostics on the measured state (after the IK, which used `data` for its own poses)
     r_c = pin.centerOfMass(pm, data, q_pin, v_pin).copy()
     rdot_c = data.vcom[0].copy()
-    fid = model.ee_frame_id
-    H_WE = pin.updateFramePlacement(pm, data, fid).homogeneous
-    twist_W = pin.getFrameVelocity(pm, data, fid, pin.LOCAL_WORLD_ALIGNED)
-    fr = p.task_frame
-    H_TE = fr.H_TW.dot(H_WE)
-    R_TE = H_TE[0:3, 0:3]
-    y = np.array([H_TE[0, 3], H_TE[2, 3], angle_of(R_TE, "pitch")])
-    v_T, w_T = fr.R_WT.T.dot(twist_W.linear), fr.R_WT.T.dot(twist_W.angular)
-    ydot = np.array([v_T[0], v_T[2], _pitch_rate(R_TE, w_T)])
-
-    R_WE = H_WE[0:3, 0:3]
+    # centerOfMass(q, v) ran the forward kinematics: the pad's task pose from it, once per step
+    y, ydot = (y_m, ydot_m) if p.arm == "cartesian" else task_pose_of(model, data, p.task_frame)
+    R_WE = pin.updateFramePlacement(pm, data, model.ee_frame_id).rotation
     wr = np.asarray(wrench_E, dtype=float)
     raw_W = np.concatenate((R_WE.dot(wr[0:3]), R_WE.dot(wr[3:6]))).tolist()
     x_W, xd_W = lowpass_update_floats(p.wrench_filter, memory.wrench, raw_W, dt)
