@@ -35,7 +35,8 @@ import numpy as np
 from .allocation import Allocation
 from .authority import operating_point
 from .config import VehicleParams
-from .model import AmModel, build_model
+from .mission import nominal_geometry
+from .model import AmModel, AmState, build_model, create_data, decoupled_terms
 
 _SQUEEZE_CEILING_N = 200.0  # no AM of this project pushes more; the bisection's upper end
 
@@ -49,6 +50,9 @@ class Margins:
     yaw_reserve_nm: float = 0.3
     pitch_reserve_nm: float = 0.7  # the static model's measured gap plus the hover's excursions (module docstring)
     joint_fraction_max: float = 0.8  # each arm joint at most this share of its torque limit
+    # the squeeze at most N_cr / this (buckling_squeeze_n): the criterion takes the heading's
+    # stiffness at the level nominal pose, and the flown edge sat within 10 % of it
+    buckling_margin: float = 1.2
 
 
 @dataclass(frozen=True)
@@ -169,3 +173,48 @@ def verdict_line(env: Envelope, mass_kg: float, n_ams: int, friction: float, fri
         return head + ": inside the envelope"
     n = env.smallest_team(mass_kg, friction, friction_margin)
     return head + (f": use {n} AMs" if n else ": no team of up to 32 of these AMs holds it")
+
+
+# ------------------------------------------------------------------ buckling of the grasp
+# Once a box hangs between two crowned pads on opposite faces, nothing but the pads holds its
+# turning about the vertical. Turned by theta, it rolls on the crowns (radius R, vertical
+# cylinders that do not turn with it): in the box's frame each crown rolls along its face by
+# R theta, so in the world each pad moves along its face by a theta (a: the face's distance
+# from the box's vertical axis), the two in opposite directions, and the faces come closer
+# between the crowns' axes by (a - R) theta^2. The AMs meet the sideways moves with their
+# stiffness along the face K (energy K a^2 theta^2, both AMs), and the squeeze N gives up
+# N (a - R) theta^2 as the pads close in. The grasp buckles, like a strut between two side
+# springs, once
+#
+#     N > N_cr = K a^2 / (a - R)            (a > R; with R >= a the squeeze steadies it),
+#
+# and the box turns until the squeeze, relaxing as the pads come together, falls to N_cr.
+# K is the pad's sideways stiffness: the CoM's along the face (eq. Com_controller's K_t) in
+# series with the heading's, a pad a lever L ahead of the CoM moving L^2 / k_psi per newton
+# for a yaw stiffness k_psi (eq. u2's Lambda_w Lambda_wb,d^-1 k_R about the vertical).
+# Flown (two_am_robust, every device on; docs/robust_grasp.md, section 9): on the hexarotor
+# K = 54 N/m, and a 0.18 m box (N_cr 11.0 N) held at 10.5 N and turned 30-50 deg at 12 and
+# 14.6 N; a 0.14 m box (13.2 N) held at 12 N; a 0.24 m box (11.1 N) turned at 12.5 N; with
+# K_t doubled along the face (16.7 N) and with crowns of 0.12 m radius (no buckling) the
+# 14.6 N grasp held.
+
+
+def buckling_squeeze_n(half_width_m: float, crown_radius_m: float, stiffness_n_per_m: float) -> float:
+    """N_cr = K a^2 / (a - R) [N] (above); inf when the crown's radius is at least a."""
+    a, R = half_width_m, crown_radius_m
+    return math.inf if a <= R else stiffness_n_per_m * a * a / (a - R)
+
+
+def pad_side_stiffness_n_per_m(vehicle: VehicleParams, model: AmModel) -> float:
+    """K of the buckling criterion: the CoM's stiffness along the face (K_t's horizontal part,
+    the smaller) in series with the heading's at the pad, L^2 / k_psi, k_psi the law's yaw
+    stiffness (Lambda_w Lambda_wb,d^-1 k_R about the body z axis) at q_nominal, level, and L
+    the pad's horizontal distance from the CoM there."""
+    g = vehicle.gains
+    q = np.array(vehicle.q_nominal_rad, dtype=float)
+    state = AmState(p_WB=np.zeros(3), R_WB=np.eye(3), v_B=np.zeros(3), w_B=np.zeros(3), q=q, qdot=np.zeros_like(q))
+    Lambda_w = decoupled_terms(model, create_data(model), state).Lambda_w
+    k_psi = float((Lambda_w @ np.diag(1.0 / np.asarray(g.Lambda_wb_d, dtype=float)))[2, 2]) * g.k_R
+    d = nominal_geometry(model)
+    lever = float(np.hypot(*(d.p_BE - d.r_BC)[:2]))
+    return 1.0 / (1.0 / min(g.K_t[0], g.K_t[1]) + lever * lever / k_psi)

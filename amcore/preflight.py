@@ -12,8 +12,14 @@ planned for, mu = [mission].friction_assumed, with [mission].friction_margin:
     N_max(m / n)                                       the most an AM pushes carrying its share m / n with
                                                        its margins kept (amcore.envelope.Envelope.capacity_n)
 
-The team holds the object when N_req <= N_plan <= N_max(m / n): the planned squeeze is
-enough, and each AM can push it while it carries its share. Otherwise the check names the
+    N_cr                                               the squeeze above which a box hanging between two
+                                                       crowned pads buckles out of them by turning about the
+                                                       vertical (amcore.envelope.buckling_squeeze_n, the
+                                                       smallest over the faces the AMs grasp; inf otherwise)
+
+The team holds the object when N_req <= N_plan <= N_max(m / n) and N_plan <= N_cr / margin:
+the planned squeeze is enough, each AM can push it while it carries its share, and it does
+not buckle the grasp. Otherwise the check names the
 limit (the scenario's squeeze cap, the rotors' thrust, or the envelope's margin that breaks)
 and the smallest team of these AMs that would hold it.
 """
@@ -22,8 +28,10 @@ from __future__ import annotations
 import functools
 from dataclasses import dataclass
 
-from .config import ConfigError, ScenarioSpec, VehicleParams, design_mass_kg
-from .envelope import Envelope, Margins
+import math
+
+from .config import ConfigError, ScenarioSpec, VehicleParams, design_mass_kg, face_azimuth, faces_from_pose, surface_distance
+from .envelope import Envelope, Margins, buckling_squeeze_n, pad_side_stiffness_n_per_m
 from .mission import squeeze_for
 from .model import build_model
 
@@ -39,10 +47,12 @@ class TeamCheck:
     planned_n: float  # N_plan
     capacity_n: float  # N_max at the share
     limit: str  # what caps the squeeze (empty when the team holds)
+    buckling_n: float = math.inf  # N_cr / the margin: the most squeeze the grasp takes without buckling
 
     @property
     def holds(self) -> bool:
-        return self.required_n <= self.planned_n + 1e-9 and self.planned_n <= self.capacity_n
+        return (self.required_n <= self.planned_n + 1e-9 and self.planned_n <= self.capacity_n
+                and self.planned_n <= self.buckling_n)
 
 
 @dataclass(frozen=True)
@@ -81,7 +91,36 @@ def team_check(spec: ScenarioSpec, n: int, env: Envelope | None = None) -> TeamC
                  f"the fixed squeeze ([mission].squeeze_sizing = false)")
     elif plan.force_n > cap:
         limit = env.broken_margin(plan.force_n, share) or "its margins"
-    return TeamCheck(n, plan.required_n, plan.force_n, cap, limit)
+    buckle, why = _buckling(spec, env)
+    if not limit and plan.force_n > buckle:
+        limit = why
+    return TeamCheck(n, plan.required_n, plan.force_n, cap, limit, buckle)
+
+
+@functools.lru_cache(maxsize=8)
+def _side_stiffness(vehicle: VehicleParams) -> float:
+    return pad_side_stiffness_n_per_m(vehicle, _envelope(vehicle, 0.8).model)
+
+
+def _buckling(spec: ScenarioSpec, env: Envelope) -> tuple[float, str]:
+    """N_cr / margin over the faces the scenario's AMs grasp [N] (inf but for a box between
+    crowned pads), and the limit in words."""
+    obj, pad = spec.object, spec.vehicle.pad
+    if obj.shape != "box" or pad.shape != "crowned":
+        return math.inf, ""
+    yaw = math.radians(obj.yaw_deg)
+    turned = faces_from_pose(spec)
+    halves = {surface_distance(obj, face_azimuth(math.radians(am.azimuth_deg), yaw) if turned
+                               else math.radians(am.azimuth_deg), yaw) for am in spec.ams}
+    K = _side_stiffness(spec.vehicle)
+    a, n_cr = min(((h, buckling_squeeze_n(h, pad.crown_radius_m, K)) for h in halves), key=lambda x: x[1])
+    margin = env.margins.buckling_margin
+    if math.isinf(n_cr):
+        return math.inf, ""
+    return n_cr / margin, (f"the grasp buckles: a box face {a:.3f} m from its axis between crowns of "
+                           f"{pad.crown_radius_m:g} m radius turns out of the pads above {n_cr:.1f} N "
+                           f"(side stiffness {K:.0f} N/m), and {n_cr / margin:.1f} N keeps the margin "
+                           f"{margin:g}; crowns of radius {a:.2f} m or more do not buckle")
 
 
 def preflight(spec: ScenarioSpec) -> Preflight:
@@ -101,7 +140,7 @@ def preflight(spec: ScenarioSpec) -> Preflight:
                    f"and can push {mine.capacity_n:.1f} N carrying its {m / n:.2f} kg share: inside the envelope")
     else:
         holds = (f"this team of {n} holds {mine.planned_n:.1f} N per pad ({mine.limit})"
-                 if mine.planned_n < mine.required_n else
+                 if mine.planned_n < mine.required_n or mine.planned_n > mine.buckling_n else
                  f"each AM of this team of {n} can push {mine.capacity_n:.1f} N per pad carrying its {m / n:.2f} kg "
                  f"share ({mine.limit})")
         if smallest is None:

@@ -11,7 +11,8 @@ import pytest
 
 from amcore.authority import operating_point
 from amcore.config import load_vehicle
-from amcore.envelope import Envelope, Margins, required_squeeze_n, verdict_line
+from amcore.envelope import (Envelope, Margins, buckling_squeeze_n, pad_side_stiffness_n_per_m, required_squeeze_n,
+                             verdict_line)
 from amcore.model import build_model
 
 VEHICLES = Path(__file__).resolve().parents[2] / "configs" / "vehicles"
@@ -109,3 +110,48 @@ def test_a_margin_that_recovers_at_a_larger_squeeze_does_not_move_the_edge(env):
     cap = env.capacity_n(load)
     far = [n for n in np.arange(cap + 1.0, 60.0, 1.0) if env._ok(n, load)]
     assert far and cap < min(far) - 1.0
+
+
+def _rolling_energy(theta, a, R, K, N):
+    """Potential of a box (faces a from its axis) turned by theta between two crowns of radius R
+    that roll on its faces without slipping and keep their orientation, each held sideways by
+    a spring K and pushed in by a constant squeeze N (exact trigonometry, no small angles)."""
+    c, s = math.cos(theta), math.sin(theta)
+    V = 0.0
+    for side in (1.0, -1.0):  # the crown's axis: (a + R) out along the face normal, R theta back along the face
+        x_b, y_b = side * (a + R), -side * R * theta
+        x, y = c * x_b - s * y_b, s * x_b + c * y_b
+        V += 0.5 * K * y * y - N * (a + R - side * x)  # the squeeze's work as the crown closes in
+    return V
+
+
+@pytest.mark.parametrize("a,R", [(0.089, 0.05), (0.12, 0.05), (0.07, 0.05), (0.1, 0.02)])
+def test_the_buckling_squeeze_is_where_the_rolling_box_stops_being_a_minimum(a, R):
+    K, h = 54.0, 1e-4
+    n_cr = buckling_squeeze_n(a, R, K)
+    assert n_cr == pytest.approx(K * a * a / (a - R))
+    for N, stable in ((0.97 * n_cr, True), (1.03 * n_cr, False)):
+        curvature = (_rolling_energy(h, a, R, K, N) - 2 * _rolling_energy(0.0, a, R, K, N)
+                     + _rolling_energy(-h, a, R, K, N)) / h**2
+        assert (curvature > 0.0) == stable
+
+
+def test_crowns_as_wide_as_the_box_never_buckle_and_the_worst_box_is_twice_the_crown():
+    K, R = 54.0, 0.05
+    assert buckling_squeeze_n(0.05, R, K) == math.inf and buckling_squeeze_n(0.04, R, K) == math.inf
+    assert all(_rolling_energy(0.01, 0.05, R, K, N) > _rolling_energy(0.0, 0.05, R, K, N) for N in (1.0, 100.0))
+    worst = min(buckling_squeeze_n(a, R, K) for a in np.linspace(0.051, 0.5, 2000))
+    assert worst == pytest.approx(4.0 * K * R, rel=1e-4) == pytest.approx(buckling_squeeze_n(2 * R, R, K))
+
+
+def test_the_pads_side_stiffness_is_the_com_in_series_with_the_heading(hexa, env):
+    import dataclasses
+    K = pad_side_stiffness_n_per_m(hexa, env.model)
+    assert 0.0 < K < min(hexa.gains.K_t[:2])
+    stiffer = dataclasses.replace(hexa, gains=dataclasses.replace(hexa.gains, K_t=(160.0, 160.0, 80.0)))
+    K2 = pad_side_stiffness_n_per_m(stiffer, env.model)
+    # 1/K = 1/K_t + L^2/k_psi: doubling K_t takes 1/80 - 1/160 off the compliance, nothing else
+    assert 1.0 / K - 1.0 / K2 == pytest.approx(1.0 / 80.0 - 1.0 / 160.0)
+    yawstiff = dataclasses.replace(hexa, gains=dataclasses.replace(hexa.gains, k_R=2 * hexa.gains.k_R))
+    K3 = pad_side_stiffness_n_per_m(yawstiff, env.model)
+    assert (1.0 / K3 - 1.0 / 80.0) == pytest.approx(0.5 * (1.0 / K - 1.0 / 80.0))

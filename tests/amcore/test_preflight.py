@@ -62,6 +62,31 @@ def test_at_the_vehicles_margins_just_inside_flies_and_just_outside_names_the_ma
     assert any(w in out.message for w in ("yaw", "pitch", "rotor", "joint")), out.message
 
 
+def _with_pad(spec, **pad):
+    v = spec.vehicle
+    return dataclasses.replace(spec, vehicle=dataclasses.replace(v, pad=dataclasses.replace(v.pad, **pad)))
+
+
+def test_a_squeeze_that_buckles_the_grasp_is_refused_at_the_edge_both_ways(robust):
+    """5 cm crowns on a 0.2 m box: the sized squeeze just under N_cr / margin flies, just over
+    it is refused, naming the buckling and the crown that would not buckle."""
+    from amcore.envelope import buckling_squeeze_n
+    small = with_(_with_pad(robust, crown_radius_m=0.05), squeeze_max_n=math.inf, mass_tolerance=0.0)
+    edge_n = pf.team_check(small, 2).buckling_n
+    K = pf._side_stiffness(small.vehicle)
+    assert edge_n == pytest.approx(buckling_squeeze_n(0.1, 0.05, K) / Margins().buckling_margin)
+    m, v = small.mission, small.vehicle
+    edge_kg = edge_n * 2 * m.friction_assumed / (m.friction_margin * v.gravity_mps2)
+    inside = pf.preflight(with_(small, {"mass_kg": 0.99 * edge_kg}))
+    outside = pf.preflight(with_(small, {"mass_kg": 1.01 * edge_kg}))
+    assert inside.inside
+    assert not outside.inside and "the grasp buckles" in outside.message
+    assert "crowns of radius 0.10 m or more do not buckle" in outside.message
+    # the same object between the scenario's own crowns (12 cm): nothing buckles
+    assert pf.team_check(with_(robust, {"mass_kg": 1.01 * edge_kg}), 2).buckling_n == math.inf
+    assert pf.preflight(with_(robust, {"mass_kg": 1.01 * edge_kg})).inside
+
+
 def test_the_plan_covers_the_mass_it_is_not_sure_of(robust):
     robust = with_(robust, squeeze_max_n=12.0)
     edge = cap_edge_kg(robust)
