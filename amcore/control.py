@@ -53,6 +53,7 @@ class Reference(NamedTuple):
 
     r_c: CoM position in {w} [m] with derivatives up to snap (r_c_d4); the heading psi of
     b_1d = [cos psi, sin psi, 0] [rad] with two derivatives; y_d in the task frame with two.
+    The fields are in law.control_law's order (`step` passes them on as `*ref`).
     """
 
     r_c: np.ndarray
@@ -117,6 +118,15 @@ class ControllerParams:
     @cached_property
     def zero_task(self) -> np.ndarray:
         return np.zeros(len(self.components))
+
+    @cached_property
+    def law_constants(self) -> tuple:
+        """law.control_law's constant arguments from filter_omega to force_rate_feedforward, in
+        its order (formed once; `step` passes them on as they are)."""
+        wf = self.wrench_filter
+        return (wf.omega, wf.zeta, self.gains_K_t, self.gains_D_t, self.k_R, self.k_w, self.Lambda_wb_d_inv,
+                self.K_y, self.D_y, self.com_err_max, self.y_err_max, self.sigma_damping, self.damping_max,
+                self.force_compensation, self.force_rate_feedforward)
 
 
 class ControllerMemory(NamedTuple):
@@ -330,12 +340,9 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     try:
         packed = law.control_law(
             model.mass_kg, model.gravity_mps2, state.R_WB, state.p_WB, state.w_B, V, Jcom, M_inv, C, H_WE, J_e,
-            Jdot_e, frame.H_TW, p.axes, ref.r_c, ref.r_c_d1, ref.r_c_d2, ref.r_c_d3, ref.r_c_d4,
-            ref.psi, ref.psi_d1, ref.psi_d2, ref.y, ref.y_d1, ref.y_d2,
-            wrench_E, x0, xdot0, wf.transition(max(dt, 0.0)), wf.omega, wf.zeta,
-            p.gains_K_t, p.gains_D_t, p.k_R, p.k_w, p.Lambda_wb_d_inv, p.K_y, p.D_y, p.com_err_max, p.y_err_max,
-            p.sigma_damping, p.damping_max, p.force_compensation, p.force_rate_feedforward, r_extra,
-            _ZERO3 if p.compensate_along_face else frame.R_WT[:, 1], p.damping_dt)
+            Jdot_e, frame.H_TW, p.axes, *ref,  # the reference: r_c .. r_c_d4, psi .. psi_d2, y .. y_d2
+            wrench_E, x0, xdot0, wf.transition(max(dt, 0.0)), *p.law_constants, r_extra,
+            _ZERO3 if p.compensate_along_face else frame.e_y_W, p.damping_dt)
     except ZeroDivisionError as e:
         raise np.linalg.LinAlgError(f"eq. u3: {e}") from None
     n = model.n

@@ -311,6 +311,13 @@ def free_flyer_configuration(p_WB, quat_xyzw, q, v_B, w_B, qdot):
     return qv[0:nq], qv[nq:]
 
 
+@kernel
+def free_flyer_configuration_of_R(p_WB, R_WB, q, v_B, w_B, qdot):
+    """free_flyer_configuration with the quaternion recovered from R_WB (quaternion_xyzw), in
+    one call."""
+    return free_flyer_configuration(p_WB, quaternion_xyzw(R_WB), q, v_B, w_B, qdot)
+
+
 # ----------------------------------------------------------------------------- eq. new_coord, new_dynamics
 @kernel
 def decoupled(m, R, p_WB, w_B, V, Jcom, M_inv, C):

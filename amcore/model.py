@@ -230,10 +230,9 @@ def _crba_returns_symmetric() -> bool:
 
 def pin_configuration(state: AmState) -> tuple[np.ndarray, np.ndarray]:
     """(state.pin_q(), state.pin_v()) as two views of one new array (amcore.law)."""
-    quat = state.quat_xyzw
-    if quat is None:
-        quat = law.quaternion_xyzw(state.R_WB)
-    return law.free_flyer_configuration(state.p_WB, quat, state.q, state.v_B, state.w_B, state.qdot)
+    if state.quat_xyzw is None:
+        return law.free_flyer_configuration_of_R(state.p_WB, state.R_WB, state.q, state.v_B, state.w_B, state.qdot)
+    return law.free_flyer_configuration(state.p_WB, state.quat_xyzw, state.q, state.v_B, state.w_B, state.qdot)
 
 
 def generalized_gravity(model: AmModel, data: pin.Data, state: AmState) -> np.ndarray:

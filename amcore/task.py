@@ -46,6 +46,11 @@ class TaskFrame:
         H[0:3, 3] = -self.R_WT.T.dot(self.p_WT)
         return H
 
+    @cached_property
+    def e_y_W(self) -> np.ndarray:
+        """{t}'s y axis in {w}, R_WT[:, 1] (computed once)."""
+        return self.R_WT[:, 1].copy()
+
 
 @dataclass
 class TaskTerms:
