@@ -1356,14 +1356,23 @@ def face_azimuth(azimuth_rad: float, yaw_rad: float) -> float:
     return yaw_rad + math.floor((azimuth_rad - yaw_rad) / (0.5 * math.pi) + 0.5) * (0.5 * math.pi)
 
 
+def grasped_face(spec: ScenarioSpec, am: AmSpec, yaw_rad: float | None = None) -> tuple[float, float]:
+    """The face AM `am` grasps, the object turned by yaw_rad (None: its [object].yaw_deg): the
+    azimuth of its outward normal [rad, W] (the box's face nearest the AM's azimuth with
+    `faces_from_pose`, else the azimuth itself) and its distance from the object's axis [m]."""
+    yaw = math.radians(spec.object.yaw_deg) if yaw_rad is None else yaw_rad
+    az = math.radians(am.azimuth_deg)
+    if faces_from_pose(spec):
+        az = face_azimuth(az, yaw)
+    return az, surface_distance(spec.object, az, yaw)
+
+
 def _pad_start_W(spec: ScenarioSpec, am: AmSpec) -> tuple[float, float, float]:
     """Where AM `am`'s pad starts [m, W]: [mission].standoff_m outside the face on its azimuth (the
     face nearest it, `faces_from_pose`), start_height_m above the grasp height, moved by its
     start_offset_m (amcore.mission)."""
-    az = math.radians(am.azimuth_deg)
-    if faces_from_pose(spec):
-        az = face_azimuth(az, math.radians(spec.object.yaw_deg))
-    r = surface_distance(spec.object, az) + spec.mission.standoff_m
+    az, half = grasped_face(spec, am)
+    r = half + spec.mission.standoff_m
     c = spec.object.position_m
     return (c[0] + r * math.cos(az) + am.start_offset_m[0], c[1] + r * math.sin(az) + am.start_offset_m[1],
             c[2] + spec.mission.start_height_m + am.start_offset_m[2])

@@ -27,6 +27,7 @@ of the steps (roll first); the 1.29 kg one, 0.71 N m left, on 1 step.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -86,6 +87,11 @@ class Envelope:
         self.alloc = Allocation(vehicle.rotors)
         self.q = np.array(vehicle.q_nominal_rad, dtype=float)
         self._cache: dict[float, float] = {}
+
+    @functools.cached_property
+    def pad_side_stiffness_n_per_m(self) -> float:
+        """`pad_side_stiffness_n_per_m` of this vehicle (formed once)."""
+        return pad_side_stiffness_n_per_m(self.vehicle, self.model)
 
     def _ok(self, squeeze_n: float, load_kg: float) -> bool:
         return self.broken_margin(squeeze_n, load_kg) is None  # one statement of the margins

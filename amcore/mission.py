@@ -22,8 +22,8 @@ import numpy as np
 import pinocchio as pin
 
 from . import law
-from .config import (AmSpec, MissionSpec, ScenarioSpec, VehicleParams, design_mass_kg, face_azimuth,  # noqa: F401
-                     faces_from_pose, surface_distance)  # (surface_distance: re-exported)
+from .config import (AmSpec, MissionSpec, ScenarioSpec, VehicleParams, design_mass_kg, grasped_face,  # noqa: F401
+                     surface_distance)  # (surface_distance: re-exported)
 from .control import Reference
 from .model import AmModel, AmState, create_data, decoupled_terms
 from .so3 import Rz
@@ -154,16 +154,13 @@ def am_mission(spec: ScenarioSpec, am: AmSpec, model: AmModel, object_pose: Obje
                          f"vehicle has {spec.vehicle.task.components}")
     ms = spec.mission
     pose = object_pose or config_object_pose(spec)
-    az = np.deg2rad(am.azimuth_deg)
-    if faces_from_pose(spec):
-        az = face_azimuth(az, pose.yaw_rad)
+    az, half = grasped_face(spec, am, pose.yaw_rad)
     # face the object; a misaligned AM approaches and faces along a direction turned by its
     # misalignment about the object centre, believing the face is where it would be
     psi = az + np.pi + np.deg2rad(am.misalignment_deg)
     frame = TaskFrame(R_WT=Rz(psi), p_WT=np.array(pose.p_W_m, dtype=float))
     geo = nominal_geometry(model)
     d = geo.p_BE - geo.r_BC  # end-effector relative to CoM, level, in {b} = {t} orientation
-    half = surface_distance(spec.object, az, pose.yaw_rad)
     pitch = geo.pitch_rad  # hold the nominal pose's pad orientation
     y0 = np.array([-(half + ms.standoff_m), ms.start_height_m, pitch])
     y_app = np.array([-(half + ms.pre_gap_m), 0.0, pitch])

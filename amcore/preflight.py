@@ -26,12 +26,11 @@ and the smallest team of these AMs that would hold it.
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
-import math
-
-from .config import ConfigError, ScenarioSpec, VehicleParams, design_mass_kg, face_azimuth, faces_from_pose, surface_distance
-from .envelope import Envelope, Margins, buckling_squeeze_n, pad_side_stiffness_n_per_m
+from .config import ConfigError, ScenarioSpec, VehicleParams, design_mass_kg, grasped_face
+from .envelope import Envelope, Margins, buckling_squeeze_n
 from .mission import squeeze_for
 from .model import build_model
 
@@ -97,22 +96,14 @@ def team_check(spec: ScenarioSpec, n: int, env: Envelope | None = None) -> TeamC
     return TeamCheck(n, plan.required_n, plan.force_n, cap, limit, buckle)
 
 
-@functools.lru_cache(maxsize=8)
-def _side_stiffness(vehicle: VehicleParams) -> float:
-    return pad_side_stiffness_n_per_m(vehicle, _envelope(vehicle, 0.8).model)
-
-
 def _buckling(spec: ScenarioSpec, env: Envelope) -> tuple[float, str]:
     """N_cr / margin over the faces the scenario's AMs grasp [N] (inf but for a box between
     crowned pads), and the limit in words."""
     obj, pad = spec.object, spec.vehicle.pad
     if obj.shape != "box" or pad.shape != "crowned":
         return math.inf, ""
-    yaw = math.radians(obj.yaw_deg)
-    turned = faces_from_pose(spec)
-    halves = {surface_distance(obj, face_azimuth(math.radians(am.azimuth_deg), yaw) if turned
-                               else math.radians(am.azimuth_deg), yaw) for am in spec.ams}
-    K = _side_stiffness(spec.vehicle)
+    halves = {grasped_face(spec, am)[1] for am in spec.ams}
+    K = env.pad_side_stiffness_n_per_m
     a, n_cr = min(((h, buckling_squeeze_n(h, pad.crown_radius_m, K)) for h in halves), key=lambda x: x[1])
     margin = env.margins.buckling_margin
     if math.isinf(n_cr):

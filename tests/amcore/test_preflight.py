@@ -73,7 +73,7 @@ def test_a_squeeze_that_buckles_the_grasp_is_refused_at_the_edge_both_ways(robus
     from amcore.envelope import buckling_squeeze_n
     small = with_(_with_pad(robust, crown_radius_m=0.05), squeeze_max_n=math.inf, mass_tolerance=0.0)
     edge_n = pf.team_check(small, 2).buckling_n
-    K = pf._side_stiffness(small.vehicle)
+    K = pf._envelope(small.vehicle, small.mission.thrust_fraction_max).pad_side_stiffness_n_per_m
     assert edge_n == pytest.approx(buckling_squeeze_n(0.1, 0.05, K) / Margins().buckling_margin)
     m, v = small.mission, small.vehicle
     edge_kg = edge_n * 2 * m.friction_assumed / (m.friction_margin * v.gravity_mps2)
