@@ -278,6 +278,14 @@ class FlightControllerParams:
       setpoints in a row from one companion, that vehicle goes to its failsafe (hold, then
       land; `simulator.failsafe`) for the rest of the run: its companion's setpoints are
       ignored from then on. Both modes; the simulator's --failsafe-after-rejected overrides it.
+    - actuation_delay_steps: d, physics steps between a control step's frames and the
+      moment their answers act. 0 (default): the answer to the frames of step k acts from
+      step k, as soon as it arrives (the lockstep waits for it). 1 <= d <= the control
+      period in physics steps: it acts from step k + d, a flight controller whose link and
+      scheduling add that latency; the simulator steps those d physics steps while the
+      companions compute, so a lockstep on few cores runs faster (docs/flight_controller.md,
+      "Actuation delay"). The first setpoint of a run acts at once, so that no vehicle
+      starts unpowered. Both modes.
 
     The upper-case keys are PX4 parameters under their PX4 names and in PX4's units (rad/s
     per rad, normalized torque per rad/s, deg/s, Hz); their defaults are PX4's, the vehicle
@@ -288,6 +296,7 @@ class FlightControllerParams:
     rate_hz: float = 1000.0
     body_rate_feedforward: bool = True
     failsafe_after_rejected: int = 10  # K refused setpoints in a row -> failsafe [control periods]
+    actuation_delay_steps: int = 0  # d: a setpoint acts d physics steps after its frame (0: on arrival)
     MC_ROLL_P: float = 6.5
     MC_PITCH_P: float = 6.5
     MC_YAW_P: float = 2.8
@@ -1100,6 +1109,9 @@ def _check_flight_controller(fc: FlightControllerParams, where: str) -> None:
     if fc.mode not in FC_MODES:
         raise ConfigError(f"{where}.mode: expected one of {', '.join(FC_MODES)}, got '{fc.mode}'")
     _positive(f"{where}.rate_hz", fc.rate_hz)
+    if isinstance(fc.actuation_delay_steps, bool) or not isinstance(fc.actuation_delay_steps, int) \
+            or fc.actuation_delay_steps < 0:
+        raise ConfigError(f"{where}.actuation_delay_steps: must be an integer >= 0, got {fc.actuation_delay_steps!r}")
     if not fc.failsafe_after_rejected >= 1:
         raise ConfigError(f"{where}.failsafe_after_rejected: must be >= 1, got {fc.failsafe_after_rejected!r}")
     for f in dataclasses.fields(fc):
@@ -1281,6 +1293,10 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
         spec = dataclasses.replace(spec, control_rate_hz=c)
         _check_divides(spec.rate_hz, c, f"{where}: [scenario].control_rate_hz")
     _check_divides(spec.rate_hz, vehicle.flight_controller.rate_hz, f"{where}: [flight_controller].rate_hz")
+    if vehicle.flight_controller.actuation_delay_steps > spec.control_every:
+        n = spec.control_every
+        raise ConfigError(f"{where}: [flight_controller].actuation_delay_steps: at most the control period, "
+                          f"{n} physics step{'s' if n > 1 else ''} here, got {vehicle.flight_controller.actuation_delay_steps}")
     check_duration(spec, spec.duration_s, f"{where}: [scenario].duration_s")
     _check_lift(spec, where)
     _check_grasp_geometry(spec, where)

@@ -137,6 +137,7 @@ class SimServer:
         self._next_hello = 0.0
         self._peers: dict[int, _Peer] = {}
         self._decoder: codec.Decoder | None = None
+        self._expected: dict[int, int] = {}  # sysid -> step of the frames sent and not yet collected
 
     # -- lifecycle -----------------------------------------------------------
     def open(self) -> tuple[str, int] | None:
@@ -347,8 +348,18 @@ class SimServer:
         once it shows life: any valid setpoint (even a late one), or an ARM
         command (a restarted companion: HEARTBEAT from a new address, then ARM).
         """
+        self.send_frames(frames, partial=partial)
+        if while_waiting is not None:
+            while_waiting()
+        return self.collect(timeout_s, partial=partial, on_setpoint=on_setpoint)
+
+    def send_frames(self, frames: Mapping[int, SensorFrame] | Iterable[tuple[int, SensorFrame]], *,
+                    partial: bool = False) -> None:
+        """The first half of :meth:`exchange`: send each companion its frame (``partial`` as
+        there) and return at once. :meth:`collect` later waits for the answers; in between the
+        caller may step physics while the companions compute (``[flight_controller].actuation
+        = "next_period"``, docs/flight_controller.md)."""
         link = self._require_open()
-        timeout = self.timeout_s if timeout_s is None else timeout_s
         expected: dict[int, int] = {}
         pairs = frames.items() if isinstance(frames, Mapping) else frames
         if not partial:  # every peer must be known and have said hello before anything is sent
@@ -363,8 +374,17 @@ class SimServer:
             if peer.addr is not None:
                 link.send(peer.addr, peer.encoder.pack_payloads(peer.batch))
             peer.last_step, peer.last_time_s = frame.step, frame.time_s
-        if while_waiting is not None:
-            while_waiting()
+        self._expected = expected
+
+    def collect(self, timeout_s: float | None = None, *, partial: bool = False,
+                on_setpoint: Callable[[int, TorqueSetpoint | AttitudeSetpoint], None] | None = None,
+                ) -> dict[int, TorqueSetpoint | AttitudeSetpoint]:  # fmt: skip
+        """The second half of :meth:`exchange`: wait for the setpoints answering the frames
+        of the last :meth:`send_frames` (re-sending, timing out and refusing as described
+        there) and return them."""
+        link = self._require_open()
+        timeout = self.timeout_s if timeout_s is None else timeout_s
+        expected, self._expected = self._expected, {}
         results: dict[int, TorqueSetpoint | AttitudeSetpoint] = {}
         refused: dict[int, str] = {}  # sysid -> why its answer to this step was rejected
         start = time.monotonic()

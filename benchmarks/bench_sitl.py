@@ -76,12 +76,16 @@ def devices_table() -> str:
     return out
 
 
-def scenario_with(n: int, folder: Path, base: Path = BASE, devices: bool = False) -> Path:
+def scenario_with(n: int, folder: Path, base: Path = BASE, devices: bool = False, delay_steps: int = 0) -> Path:
     text = base.read_text()
     head = text.split("[[am]]")[0].replace('vehicle = "../vehicles/am3dof.toml"',
                                            f'vehicle = "{ROOT / "configs" / "vehicles" / "am3dof.toml"}"')
     head = re.sub(r'name = "ten_am(_attitude)?"', f'name = "bench_{n}am"', head)
     head = re.sub(r"(?m)^mass_kg = .*$", "mass_kg = 1.0", head)  # liftable by any N (the approach is what runs)
+    if delay_steps:  # [flight_controller].actuation_delay_steps
+        line = f"actuation_delay_steps = {delay_steps}\n"
+        head = head.replace("[flight_controller]\n", "[flight_controller]\n" + line) if "[flight_controller]\n" in head \
+            else head + "\n[flight_controller]\n" + line
     ams = "".join(f"[[am]]\nsysid = {2 + i}\nazimuth_deg = {360.0 * i / n}\n" for i in range(n))
     path = folder / f"bench_{n}am.toml"
     path.write_text(head + (devices_table() if devices else "") + ams)
@@ -219,10 +223,14 @@ def main() -> None:
     ap.add_argument("--attitude", action="store_true", help="attitude mode (ten_am_attitude) instead of torque mode")
     ap.add_argument("--devices", action="store_true", help="[devices] on: sensors as devices and the estimator")
     ap.add_argument("--sitl-only", action="store_true", help="only the SITL column (and its CPU and memory)")
+    ap.add_argument("--actuation-delay", type=int, default=0, metavar="D",
+                    help="[flight_controller].actuation_delay_steps: setpoints act D physics steps after their "
+                         "frames, the simulator stepping meanwhile (default 0: on arrival)")
     ap.add_argument("--echo-spin-us", type=float, default=None,
                     help="also run echo companions that busy-wait this long per step (a controller's compute)")
     a = ap.parse_args()
     print(f"load average before: {os.getloadavg()[0]:.2f}; {os.cpu_count()} cores; {a.duration} s simulated per N; "
+          f"actuation delay {a.actuation_delay} steps; "
           f"{'attitude' if a.attitude else 'torque'} mode; [devices] {'on' if a.devices else 'off'}")
     print("x real time (simulated s / wall s), each column measured in this run:")
     spin = a.echo_spin_us
@@ -232,7 +240,7 @@ def main() -> None:
           f"{'pss':>6} {'uss':>6}")
     with tempfile.TemporaryDirectory() as tmp:
         for n in a.n:
-            path = scenario_with(n, Path(tmp), ATTITUDE if a.attitude else BASE, a.devices)
+            path = scenario_with(n, Path(tmp), ATTITUDE if a.attitude else BASE, a.devices, a.actuation_delay)
             nan = float("nan")
             bare = nan if a.sitl_only else bare_rtf(path, a.duration)
             rtf, wall, proc = sitl_rtf(path, a.duration, Path(tmp) / f"run{n}")

@@ -17,6 +17,21 @@ in-process runner (`simulator.inprocess`) both drive it, once per physics step k
         core.hold(k, lost)                   # flight controllers fly on what they hold
     core.step()
 
+With [flight_controller].actuation_delay_steps = d > 0 a setpoint acts d physics steps after
+its frame (the first control step's at once), and a runner steps those d steps while the
+companions compute:
+
+    if core.is_control_step(k):
+        frames = core.frames(k)
+        if k == 0 or d == 0: <as above>
+        else:
+            core.actuate(k, <the answers to step k - d's frames if core.due(k), else {}>, lost)
+            <send frames>                      # their answers act at step k + d
+    elif core.due(k):
+        core.hold(k, lost, <the answers to step k - d's frames>)
+    else:
+        core.hold(k, lost)
+
 A setpoint refused as implausible is answered at once, by one policy for every runner:
 the caller reports it with `core.note_rejected(sysid, why)` before `actuate`, and leaves it
 out of `setpoints`; the flight controller keeps flying its last valid command (zero-order
@@ -143,6 +158,9 @@ class SitlCore:
         self.offboard_loss_steps = round(v.flight_controller.COM_OF_LOSS_T * spec.rate_hz)
         self.offboard_lost: set[int] = set()  # in failsafe after the setpoint stream stopped, for good
         self.control_every = spec.control_every
+        # [flight_controller].actuation_delay_steps: the answer to step k's frames acts from step
+        # k + d (the first control step's at once); the runners step physics meanwhile
+        self.actuation_delay = v.flight_controller.actuation_delay_steps
         self.wrong_kind: dict[int, int] = {s: 0 for s in self.sysids}  # setpoints of the other mode, ignored
         self.events: list[dict] = []
         self.rejected: list[tuple[float, int, str]] = []  # (t, sysid, why) of setpoints refused as implausible
@@ -169,6 +187,12 @@ class SitlCore:
     def is_control_step(self, k: int) -> bool:
         """Whether physics step k exchanges frames and setpoints with the companions."""
         return k % self.control_every == 0
+
+    def due(self, k: int) -> bool:
+        """Whether the answers to an earlier control step's frames act at physics step k
+        (actuation_delay_steps d > 0: step k - d's, unless that was step 0, whose acted at once)."""
+        d = self.actuation_delay
+        return d > 0 and k - d > 0 and (k - d) % self.control_every == 0
 
     def frames(self, k: int) -> dict[int, SensorFrame]:
         """Step k's sensor frames (exact state, wrist F/T reading). Their bookkeeping (the
@@ -243,10 +267,10 @@ class SitlCore:
                                                   if s in self._reported else a for s, a in gt.ams.items()})
             self.on_truth(gt)
 
-    def hold(self, k: int, lost: Collection[int] = ()) -> None:
-        """Physics step k between control steps: no frames and no setpoints; each flight
-        controller flies on what it holds (its failsafe while its companion is lost), and
-        ground truth is sampled as on control steps."""
+    def hold(self, k: int, lost: Collection[int] = (), setpoints: Mapping[int, Setpoint] | None = None) -> None:
+        """Physics step k between control steps: no frames; each flight controller flies on
+        what it holds (its failsafe while its companion is lost), or on `setpoints` that act
+        now (an actuation delay, `due`), and ground truth is sampled as on control steps."""
         self.observe()
         if self.spec.devices.enabled:  # the devices and the estimator run at the IMU rate
             t, w = self.world.time_s, self.world
@@ -255,7 +279,7 @@ class SitlCore:
                 self._sense(s, w.sensor_values(s) if dev is None or dev.needs_reading(t) else w.base_values(s), t)
         if k % TRUTH_EVERY == 0:
             self._truth({s: self.world.wrench_ee(s) for s in self.sysids})
-        self.actuate(k, {}, lost)
+        self.actuate(k, setpoints or {}, lost)
 
     def on_setpoint(self, sysid: int, setpoint: Setpoint) -> None:
         """A setpoint answering the last frames, as it arrives: its flight controller applies

@@ -90,29 +90,54 @@ def run(spec: ScenarioSpec, duration_s: float | None = None,
     core.connect()
     t0 = time.perf_counter()
     gone: set[int] = set()
+    late = core.actuation_delay > 0  # [flight_controller].actuation_delay_steps: answers act d steps later
+    pending: dict[int, TorqueSetpoint | AttitudeSetpoint] = {}  # such answers, not yet acting
+    refused: list[tuple[int, str]] = []  # answers refused as implausible, noted when they would act
+
+    def answer(frames: dict[int, SensorFrame]) -> dict[int, TorqueSetpoint | AttitudeSetpoint]:
+        """Each companion's setpoint for its frame; a refused one goes to `refused`."""
+        setpoints = {}
+        for s, f in frames.items():
+            if s in gone:
+                continue
+            try:
+                sp = setpoint_as_on_the_wire(pilots[s].step(as_on_the_wire(f))[0])
+                why = limits.violation(sp)
+            except (ArithmeticError, ValueError) as exc:  # LinAlgError, non-finite setpoints
+                core.note_controller_error(s, f"{type(exc).__name__}: {exc}")
+                crashed.add(s)
+                continue
+            if why is None:
+                setpoints[s] = sp
+            else:
+                refused.append((s, why))
+        return setpoints
+
+    def acting() -> dict[int, TorqueSetpoint | AttitudeSetpoint]:
+        """The answers that act now, their refusals noted (as the UDP simulator's lockstep)."""
+        nonlocal pending
+        for s, why in refused:
+            core.note_rejected(s, why)
+        refused.clear()
+        out, pending = pending, {}
+        return out
+
     try:
         for k in range(n):
             if core.is_control_step(k):
                 frames = core.frames(k)
                 if on_frames is not None:
                     on_frames(core.time_s, core.exact_values, frames)
-                gone = lost(core.time_s) | crashed
-                setpoints = {}
-                for s, f in frames.items():
-                    if s in gone:
-                        continue
-                    try:
-                        sp = setpoint_as_on_the_wire(pilots[s].step(as_on_the_wire(f))[0])
-                        why = limits.violation(sp)
-                    except (ArithmeticError, ValueError) as exc:  # LinAlgError, non-finite setpoints
-                        core.note_controller_error(s, f"{type(exc).__name__}: {exc}")
-                        crashed.add(s)
-                        continue
-                    if why is None:
-                        setpoints[s] = sp
-                    else:
-                        core.note_rejected(s, why)
-                core.actuate(k, setpoints, gone | crashed)
+                if late and k > 0:  # what acts now, then this step's answers, which act d steps later
+                    core.actuate(k, acting() if core.due(k) else {}, gone | crashed)
+                    gone = lost(core.time_s) | crashed
+                    pending = answer(frames)
+                else:
+                    gone = lost(core.time_s) | crashed
+                    pending = answer(frames)
+                    core.actuate(k, acting(), gone | crashed)
+            elif core.due(k):
+                core.hold(k, gone | crashed, acting())
             else:  # as the UDP simulator: who was lost at the last exchange stays lost until the next
                 core.hold(k, gone | crashed)
             core.step()

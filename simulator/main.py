@@ -227,14 +227,37 @@ def main(argv: list[str] | None = None) -> int:
             core.observe()
             gcs.tick(k)  # every few steps: the GCS link's snapshot, STATUSTEXTs, GCS commands
 
+        def collected() -> dict:  # actuation delay: the answers to the frames sent d steps ago
+            setpoints = server.collect(partial=True)
+            for sysid, why in server.last_rejected:
+                core.note_rejected(sysid, why)
+            return setpoints
+
+        late = core.actuation_delay > 0  # [flight_controller].actuation_delay_steps
         for k in range(n_steps):
-            if core.is_control_step(k):
+            if core.is_control_step(k) and late and k > 0:
+                # the frames go out and physics steps on while the companions compute; their
+                # answers act d steps later (core.due)
+                frames = core.frames(k)
+                if core.due(k):  # d = the control period: the last frames' answers act now
+                    setpoints = collected()
+                    core.actuate(k, setpoints, server.lost_peers)
+                    server.send_frames(frames, partial=True)
+                else:
+                    server.send_frames(frames, partial=True)
+                    core.actuate(k, {}, server.lost_peers)
+                bookkeeping()
+            elif core.is_control_step(k):
                 # each frame leaves as soon as it is read; each setpoint is applied as it arrives
                 setpoints = server.exchange(core.iter_frames(k), partial=True, while_waiting=bookkeeping,
                                             on_setpoint=core.on_setpoint)
                 for sysid, why in server.last_rejected:  # answered at once: hold, count, failsafe after K
                     core.note_rejected(sysid, why)
                 core.actuate(k, setpoints, server.lost_peers)
+            elif core.due(k):
+                setpoints = collected()
+                core.hold(k, server.lost_peers, setpoints)
+                gcs.tick(k)
             else:  # between the companions' control steps the flight controllers fly on their own
                 core.hold(k, server.lost_peers)
                 gcs.tick(k)

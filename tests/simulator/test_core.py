@@ -292,3 +292,19 @@ def test_attitude_frames_report_the_flown_target_and_the_measured_joint_torques(
         assert f.attitude_target is None and f.joint_effort_nm is None
     finally:
         torque.close()
+
+
+def test_an_actuation_delay_makes_the_answers_act_d_steps_after_their_frames():
+    """[flight_controller].actuation_delay_steps = d: the answers to control step k's frames act
+    at step k + d (`due`), except step 0's, which act at once; d = 0: on arrival, never `due`."""
+    import dataclasses
+
+    from simulator.core import SitlCore
+
+    spec = load_scenario(SCENARIO.parent / "two_am_comp_attitude.toml")
+    assert spec.control_every == 4
+    for d, due in ((0, []), (1, [5, 9, 13]), (3, [7, 11, 15]), (4, [8, 12, 16])):
+        fc = dataclasses.replace(spec.vehicle.flight_controller, actuation_delay_steps=d)
+        core = SitlCore(dataclasses.replace(spec, vehicle=dataclasses.replace(spec.vehicle, flight_controller=fc)))
+        assert core.actuation_delay == d
+        assert [k for k in range(17) if core.due(k)] == due

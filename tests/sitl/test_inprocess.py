@@ -38,6 +38,33 @@ def test_impaired_link_is_deterministic_across_runs_and_transports(tmp_path):
     assert digests[0] == digests[1] == ours["state_digest"]
 
 
+@pytest.mark.parametrize("delay", [1, 4])
+def test_an_actuation_delay_is_bit_identical_in_process_and_through_the_processes(tmp_path, delay):
+    """[flight_controller].actuation_delay_steps: the UDP simulator steps physics while the
+    companions compute, and their setpoints act d steps after their frames; the in-process
+    runner applies them at the same steps, so the two agree bit for bit, and the run differs
+    from one without the delay (the delay acts)."""
+    text = (SCENARIOS / "two_am_comp_attitude.toml").read_text().replace(
+        'vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{SCENARIOS.parent / "vehicles" / "am3dof.toml"}"')
+    path = tmp_path / "delayed.toml"
+    path.write_text(text.replace('mode = "attitude"', f'mode = "attitude"\nactuation_delay_steps = {delay}', 1))
+    spec = load_scenario(path)
+    assert spec.vehicle.flight_controller.actuation_delay_steps == delay
+    ours = run(spec, duration_s=0.4)
+    plain = run(load_scenario(SCENARIOS / "two_am_comp_attitude.toml"), duration_s=0.4)
+    assert ours["state_digest"] != plain["state_digest"]
+    sitl = am_run(str(path), tmp_path / "r", "--duration", "0.4", "--no-telemetry", timeout_s=300)
+    # a whole period late the literal attitude-mode law's joint torques diverge (docs/flight_controller.md,
+    # "Actuation delay"): refusals, failsafes and the verdict must agree as well
+    assert sitl.code == (4 if ours["verdict"]["status"] == "failed" else 0), sitl.stderr
+    assert (ours["verdict"]["status"] == "failed") == (delay == 4)
+    assert ours["steps"] == sitl.outcome["steps"] == 400
+    assert ours["state_digest"] == sitl.outcome["state_digest"]
+    assert ours["verdict"] == sitl.outcome["verdict"]
+    assert ours["rejected_setpoints"] == sitl.outcome["rejected_setpoints"]
+    assert sitl.outcome["link"]["retransmits"] == 0
+
+
 @pytest.mark.parametrize("scenario,options", [
     ("two_am_comp.toml", {}),
     ("two_am_comp_attitude.toml", {"offboard_inputs": "reported", "offboard_torque_cutoff_hz": 40.0,
