@@ -1,6 +1,8 @@
 """SitlCore: per-AM link impairment from the scenario reaches that AM's flight controller only."""
 from __future__ import annotations
 
+import pytest
+
 from amcore.config import load_scenario
 from simulator.inprocess import run
 
@@ -308,3 +310,23 @@ def test_an_actuation_delay_makes_the_answers_act_d_steps_after_their_frames():
         core = SitlCore(dataclasses.replace(spec, vehicle=dataclasses.replace(spec.vehicle, flight_controller=fc)))
         assert core.actuation_delay == d
         assert [k for k in range(17) if core.due(k)] == due
+
+
+def test_with_an_actuation_delay_a_lost_companion_is_noticed_when_its_answer_is_due():
+    """A companion silent from t = 0.1 to 0.3 s: its flight controller goes to failsafe and
+    back as without the delay, each d physics steps later, when the answer it did not send
+    would have acted."""
+    import dataclasses
+
+    spec = load_scenario(SCENARIO.parent / "two_am_comp_attitude.toml")
+
+    def events(d: int) -> list[tuple[int, str, float]]:
+        fc = dataclasses.replace(spec.vehicle.flight_controller, actuation_delay_steps=d)
+        sp = dataclasses.replace(spec, vehicle=dataclasses.replace(spec.vehicle, flight_controller=fc))
+        o = run(sp, duration_s=0.5, lost=lambda t: {5} if 0.1 <= t < 0.3 else set())
+        return [(e["sysid"], e["event"], e["t"]) for e in o["events"]]
+
+    plain, late = events(0), events(1)
+    assert [e[:2] for e in plain] == [e[:2] for e in late] == [(5, "lost"), (5, "rejoined")]
+    for (_, _, t0), (_, _, t1) in zip(plain, late):
+        assert t1 - t0 == pytest.approx(spec.dt_s)
