@@ -357,8 +357,8 @@ class SimServer:
                     partial: bool = False) -> None:
         """The first half of :meth:`exchange`: send each companion its frame (``partial`` as
         there) and return at once. :meth:`collect` later waits for the answers; in between the
-        caller may step physics while the companions compute (``[flight_controller].actuation
-        = "next_period"``, docs/flight_controller.md)."""
+        caller may step physics while the companions compute
+        (``[flight_controller].actuation_delay_steps``, docs/flight_controller.md)."""
         link = self._require_open()
         expected: dict[int, int] = {}
         pairs = frames.items() if isinstance(frames, Mapping) else frames
