@@ -216,12 +216,12 @@ class Allocation:
         """Rotor thrusts for T [N] along +z_B and tau_B [N m] about the base origin, in B, with
         zero lateral force where the geometry allows; exact when feasible, else desaturated
         as the module docstring says. ValueError for a non-finite request."""
-        tx, ty, tz = (float(x) for x in tau_B_nm)
+        tx, ty, tz = np.asarray(tau_B_nm, dtype=float).tolist()
         thrust_n = float(thrust_n)
         if not (math.isfinite(thrust_n) and math.isfinite(tx + ty + tz)):
             raise ValueError(f"non-finite command: thrust_n = {thrust_n}, tau_B_nm = {[tx, ty, tz]}")
         a = self.allocate(*self.normalized(thrust_n, (tx, ty, tz)))
-        f = tuple(u * m for u, m in zip(a.outputs, self._f_max))
+        f = tuple([u * m for u, m in zip(a.outputs, self._f_max)])
         F, tau = self.wrench(f)
         return WrenchAllocation(f, F, tau, a)
 

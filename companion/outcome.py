@@ -34,7 +34,7 @@ class PhaseStats:
                 v = v.tolist() if isinstance(v, np.ndarray) else list(v)
                 self.final[k] = v
                 old = mx.get(k)
-                mx[k] = [abs(a) for a in v] if old is None else [max(o, abs(a)) for o, a in zip(old, v)]
+                mx[k] = list(map(abs, v)) if old is None else list(map(max, old, map(abs, v)))
 
     def to_dict(self) -> dict:
         def j(x):
@@ -58,8 +58,9 @@ class Outcome:
 
     def add(self, t: float, phase: str, d: Diagnostics) -> None:
         self.steps += 1
-        values = {"r_c_err": math.hypot(*d.r_c_err.tolist()), "e_R": math.hypot(*d.e_R.tolist()),
-                  "y_err": d.y_err, "r_c_err_vec": d.r_c_err, "sigma_min_J3": float(d.sigma_min_J3)}
+        r_c_err = d.r_c_err.tolist()
+        values = {"r_c_err": math.hypot(*r_c_err), "e_R": math.hypot(*d.e_R.tolist()),
+                  "y_err": d.y_err, "r_c_err_vec": r_c_err, "sigma_min_J3": float(d.sigma_min_J3)}
         self.phases[phase].add(t, values)
         if self.hover_window[0] <= t <= self.hover_window[1]:
             self._force_sum += d.F_rc
