@@ -165,10 +165,14 @@ class ImpairedChannel(Generic[T]):
         """Arrivals at ``step`` as ``(sent step, item)``, in arrival order; call once per step."""
         if step <= self._now:
             raise ValueError(f"deliver({step}) after deliver({self._now}): one call per step, in order")
-        due = [s for s in self._pending if s <= step]  # steps skipped by the caller deliver late, not never
-        out: list[tuple[int, T]] = []
-        for s in sorted(due):
-            out.extend(self._pending.pop(s))
+        pending = self._pending
+        if len(pending) == 1 and step in pending:  # the usual case: this step's arrivals alone
+            out = pending.pop(step)
+        else:
+            due = [s for s in pending if s <= step]  # steps skipped by the caller deliver late, not never
+            out = []
+            for s in sorted(due):
+                out.extend(pending.pop(s))
         self._now = step
         self.stats.delivered += len(out)
         return out

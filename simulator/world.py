@@ -156,6 +156,7 @@ class World:
         if sorted(initial) != expected:
             raise ValueError(f"initial states given for sysids {sorted(initial)}, scenario has {expected}")
         self.spec = spec
+        self._dt_s = spec.dt_s  # the physics step [s], read every step (time_s)
         self._initial = dict(initial)
         self._alloc = Allocation(spec.vehicle.rotors, compiled=True)
         # each rotor's least thrust and range [N], for the busiest/idlest rotor's share in the truth
@@ -253,7 +254,7 @@ class World:
 
     @property
     def time_s(self) -> float:
-        return self._step_index * self.spec.dt_s
+        return self._step_index * self._dt_s
 
     @property
     def sysids(self) -> tuple[int, ...]:
@@ -505,7 +506,8 @@ class World:
 def _friction_sign_on_A(pt) -> float:
     """+1 if a contact point's friction pair is the force on the query's body A, -1 if on B
     (see `_sum_contact`): the sign of (dir1 x dir2) . contactNormalOnB."""
-    n_manifold = np.cross(pt[11], pt[13])
+    (ax, ay, az), (bx, by, bz) = pt[11], pt[13]
+    n_manifold = np.array((ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx))  # np.cross's products, on floats
     return 1.0 if float(n_manifold @ np.asarray(pt[7])) >= 0.0 else -1.0
 
 

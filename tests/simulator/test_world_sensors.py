@@ -236,3 +236,14 @@ def test_sensor_values_are_state_and_wrench_on_floats(squeezed):
         np.testing.assert_allclose(v[13 + n:13 + 2 * n], st.qdot, rtol=0, atol=0)
         np.testing.assert_allclose(v[13 + 2 * n:], wrench, rtol=0, atol=0)
         assert np.linalg.norm(wrench[:3]) > 1.0 and np.linalg.norm(st.v_B) + np.linalg.norm(st.w_B) > 0.0
+
+
+def test_friction_sign_is_that_of_numpys_cross_product():
+    from simulator.world import _friction_sign_on_A
+
+    rng = np.random.default_rng(3)
+    for _ in range(2000):
+        d1, d2, n = (rng.normal(size=3) * 10.0 ** rng.integers(-6, 3) for _ in range(3))
+        pt = [None] * 14
+        pt[7], pt[11], pt[13] = tuple(n.tolist()), tuple(d1.tolist()), tuple(d2.tolist())
+        assert _friction_sign_on_A(pt) == (1.0 if float(np.cross(d1, d2) @ n) >= 0.0 else -1.0)
