@@ -84,7 +84,7 @@ class Pilot:
         self.trim = Trim(2.0 * math.pi * o.trim_hz) if o.trim_hz > 0.0 else None
         self.trim_dr = np.zeros(3)
         self._r_c_err: np.ndarray | None = None  # the law's CoM error of the last step (trim)
-        self._wrench_E_f = None  # the controller's filtered wrench of the last step (heading admittance)
+        self._wrench_E_f = None  # the controller's filtered wrench of the last step (the admittances' input)
         self._t_last: float | None = None
         self._started = False
         self._blend: JoinBlend | None = None  # set when the first frame comes after t = 0 (a rejoin)
@@ -154,7 +154,9 @@ class Pilot:
         else:
             res = self.law(*args) if task_frame is None else self.law(*args, task_frame)
             self.memory = res.memory
-        self._wrench_E_f, self._t_last = res.diagnostics.wrench_E_filtered, t
+        if self.heading is not None or self.lateral is not None:  # the admittances' input
+            self._wrench_E_f = res.diagnostics.wrench_E_filtered
+        self._t_last = t
         if self.trim is not None and self.mission.phase(t) == "approach":  # held from the grasp on
             self._r_c_err = np.array(res.diagnostics.r_c_err)
         if self.attitude_mode:

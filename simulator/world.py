@@ -528,15 +528,21 @@ def _sum_contact(points) -> PadContact:
     """
     if not points:
         return _NO_CONTACT
-    F_n = np.zeros(3)  # on the pad
-    F_t = np.zeros(3)
-    weighted_point = np.zeros(3)
+    # the sums element by element on Python floats (numpy's 3-vector operations would round
+    # each element alike, at ~1 us a call); norms and dot products below stay numpy's (BLAS)
+    F_n = [0.0, 0.0, 0.0]  # on the pad
+    F_t = [0.0, 0.0, 0.0]
+    weighted_point = [0.0, 0.0, 0.0]
     total_normal = 0.0
     for pt in points:
-        F_n -= pt[9] * np.array(pt[7])
-        F_t -= _friction_sign_on_A(pt) * (pt[10] * np.array(pt[11]) + pt[12] * np.array(pt[13]))
-        weighted_point += pt[9] * np.array(pt[5])
-        total_normal += pt[9]
+        f_n, n, f1, d1, f2, d2, p = pt[9], pt[7], pt[10], pt[11], pt[12], pt[13], pt[5]
+        sign = _friction_sign_on_A(pt)
+        for i in range(3):
+            F_n[i] -= f_n * n[i]
+            F_t[i] -= sign * (f1 * d1[i] + f2 * d2[i])
+            weighted_point[i] += f_n * p[i]
+        total_normal += f_n
+    F_n, F_t, weighted_point = np.array(F_n), np.array(F_t), np.array(weighted_point)
     magnitude = float(np.linalg.norm(F_n))
     normal = F_n / magnitude if magnitude > 0.0 else -np.array(points[0][7])
     F_t = F_t - (F_t @ normal) * normal
