@@ -183,7 +183,7 @@ class World:
         self._sensed_links: dict[int, list[int]] = {}
         self._sensed_joints: dict[int, list[int]] = {}  # the arm's joints, then the wrist sensor's
         self._last_limited: dict[int, tuple[np.ndarray, JointTorqueResult]] = {}  # `_limited`'s last, per AM
-        self._tool_weights: dict[int, tuple[float, ...]] = {}
+        self._tool_weights: dict[int, tuple[tuple[float, int], ...]] = {}  # per tool link: its mass share, its row
 
     # ------------------------------------------------------------------ lifecycle
     def connect(self) -> None:
@@ -215,8 +215,12 @@ class World:
                 self._joint_commands[a.sysid] = [0.0] * n
             self._arm_ids[a.sysid] = list(am.arm_joint_ids)
             self._sensed_joints[a.sysid] = [*am.arm_joint_ids, am.ft_joint_id]
-            self._sensed_links[a.sysid] = [am.pad_link_id, am.ee_link_id, *am.tool_link_ids]
-            self._tool_weights[a.sysid] = tuple(m / am.tool_mass_kg for m in am.tool_link_masses_kg)
+            # the pad and the ee marker, then the tool's other links (each link read once)
+            links = [am.pad_link_id, am.ee_link_id]
+            links += [i for i in am.tool_link_ids if i not in links]
+            self._sensed_links[a.sysid] = links
+            self._tool_weights[a.sysid] = tuple((m / am.tool_mass_kg, links.index(i))
+                                                for i, m in zip(am.tool_link_ids, am.tool_link_masses_kg))
         self._step_index = 0
 
     def close(self) -> None:
@@ -448,8 +452,8 @@ class World:
         cx, cy, cz = pad[0]
         ex, ey, ez = ee[4]
         tx = ty = tz = 0.0  # tool CoM: mass-weighted mean of the tool links' CoMs
-        for wgt, link in zip(self._tool_weights[sysid], links[2:]):
-            lx, ly, lz = link[0]
+        for wgt, i in self._tool_weights[sysid]:
+            lx, ly, lz = links[i][0]
             tx, ty, tz = tx + wgt * lx, ty + wgt * ly, tz + wgt * lz
         mg = am.tool_mass_kg * self.spec.vehicle.gravity_mps2  # F_grav = (0, 0, -mg)
         fx, fy, fz = _mv(RP, f_s[0:3])
