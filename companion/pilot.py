@@ -66,6 +66,7 @@ class Pilot:
                                                                       ms.hover_end_s))
         self._snaps = sorted([("approach_end", ms.approach_end_s), ("grasp_end", ms.grasp_end_s),
                               ("settle_check", spec.duration_s - 2.0)], key=lambda x: x[1])
+        self._snap_early_s = 0.5 * spec.control_dt_s  # a snapshot's step may come this much before its instant
         self.last: tuple[float, object] | None = None
         self.steps = 0
         o = spec.vehicle.options
@@ -174,7 +175,7 @@ class Pilot:
         """Adds the step answered at time t [s] to the per-phase error summary."""
         d = res.diagnostics
         self.outcome.add(t, self.mission.phase(t), d)
-        while self._snaps and t >= self._snaps[0][1] - 0.5 * self.spec.control_dt_s:
+        while self._snaps and t >= self._snaps[0][1] - self._snap_early_s:
             self.outcome.snapshot(self._snaps.pop(0)[0], t, d)
         self.last = (t, d)
         self.steps += 1
