@@ -51,6 +51,8 @@ _SMALL_MIX = 1e-3  # normalizeControlAllocationMatrix: entries counted as nonzer
 # ControlAllocator reports a setpoint achieved while |unallocated|^2 < 1e-6 (7 mN m of roll here)
 SATURATION_TOL = 1e-3
 AXES = ("roll", "pitch", "yaw", "thrust")
+_NO_AXES = (False, False, False, False)  # saturated_axes of an allocation that met every axis
+_NONE_UNALLOCATED = (0.0, 0.0, 0.0, 0.0)
 
 
 def effectiveness(rotors: "RotorParams") -> np.ndarray:
@@ -63,6 +65,15 @@ def effectiveness(rotors: "RotorParams") -> np.ndarray:
         p = np.asarray(r.position_m, dtype=float)
         cols.append(np.concatenate([a, np.cross(p, a) - r.km * a]))
     return np.array(cols).T
+
+
+def _built(cls, **fields):
+    """An instance of the frozen dataclass `cls` with the given fields, as its `__init__`
+    leaves it, without that method's per-field `object.__setattr__` (the per-step path,
+    whose fields are known to be what the annotations say)."""
+    obj = object.__new__(cls)
+    obj.__dict__.update(fields)
+    return obj
 
 
 @dataclass(frozen=True)
@@ -196,10 +207,12 @@ class Allocation:
         self._kernel(self._c, roll, pitch, yaw, thrust, self.out_max, _WEAK_EFFECTIVENESS, _YAW_MARGIN, self._result)
         v, n = self._result.tolist(), self.count
         if v[n + 8] == 0.0:
-            return AllocationResult(tuple(v[:n]), (roll, pitch, yaw, thrust), (0.0, 0.0, 0.0, 0.0), False)
+            return _built(AllocationResult, outputs=tuple(v[:n]), allocated=(roll, pitch, yaw, thrust),
+                          unallocated=_NONE_UNALLOCATED, saturated=False, saturated_axes=_NO_AXES)
         unallocated = tuple(v[n + 4:n + 8])
-        axes = tuple(bool(abs(u) > SATURATION_TOL) for u in unallocated)
-        return AllocationResult(tuple(v[:n]), tuple(v[n:n + 4]), unallocated, any(axes), axes)
+        axes = tuple([abs(u) > SATURATION_TOL for u in unallocated])
+        return _built(AllocationResult, outputs=tuple(v[:n]), allocated=tuple(v[n:n + 4]), unallocated=unallocated,
+                      saturated=any(axes), saturated_axes=axes)
 
     # ------------------------------------------------------------------ physical units
     def normalized(self, thrust_n: float, tau_B_nm) -> tuple[float, float, float, float]:
@@ -216,14 +229,14 @@ class Allocation:
         """Rotor thrusts for T [N] along +z_B and tau_B [N m] about the base origin, in B, with
         zero lateral force where the geometry allows; exact when feasible, else desaturated
         as the module docstring says. ValueError for a non-finite request."""
-        tx, ty, tz = (float(x) for x in tau_B_nm)
+        tx, ty, tz = np.asarray(tau_B_nm, dtype=float).tolist()
         thrust_n = float(thrust_n)
         if not (math.isfinite(thrust_n) and math.isfinite(tx + ty + tz)):
             raise ValueError(f"non-finite command: thrust_n = {thrust_n}, tau_B_nm = {[tx, ty, tz]}")
         a = self.allocate(*self.normalized(thrust_n, (tx, ty, tz)))
-        f = tuple(u * m for u, m in zip(a.outputs, self._f_max))
+        f = tuple([u * m for u, m in zip(a.outputs, self._f_max)])
         F, tau = self.wrench(f)
-        return WrenchAllocation(f, F, tau, a)
+        return _built(WrenchAllocation, rotor_thrusts_n=f, force_B_n=F, tau_B_nm=tau, allocation=a)
 
     # ------------------------------------------------------------------ authority
     def authority(self, thrust_n: float, tau_B_nm=(0.0, 0.0, 0.0)) -> dict[str, tuple[float, float]]:

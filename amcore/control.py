@@ -349,8 +349,9 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     at = packed_slices(n)
     tau = packed[at["tau"][0]].copy()  # the command does not share memory with the diagnostics
     diag = Diagnostics.from_packed(packed, n, r_c_d=ref.r_c, y_d=ref.y, R_WB=state.R_WB, Lambda_y_dot=Lambda_y_dot)
-    memory = ControllerMemory(t_s=t_s, wrench=FilterState(x=packed[at["memory_x"][0]], xdot=packed[at["memory_xdot"][0]]))
-    return StepResult(Command(thrust_n=float(tau[2]), tau_B_nm=tau[3:6], tau_q_nm=tau[6:]), diag, memory)
+    # the named tuples built positionally (keywords cost more than the rest of these lines)
+    memory = ControllerMemory(t_s, FilterState(packed[at["memory_x"][0]], packed[at["memory_xdot"][0]]))
+    return StepResult(Command(float(tau[2]), tau[3:6], tau[6:]), diag, memory)
 
 
 def _Lambda_y_dot_and_ydot(model: AmModel, data: pin.Data, state: AmState, frame: TaskFrame,

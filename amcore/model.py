@@ -229,10 +229,13 @@ def _crba_returns_symmetric() -> bool:
 
 
 def pin_configuration(state: AmState) -> tuple[np.ndarray, np.ndarray]:
-    """(state.pin_q(), state.pin_v()) as two views of one new array (amcore.law)."""
+    """(state.pin_q(), state.pin_v()) as two views of one new array: joined by numpy when the
+    state carries its quaternion, else by amcore.law (which recovers it from R_WB)."""
     if state.quat_xyzw is None:
         return law.free_flyer_configuration_of_R(state.p_WB, state.R_WB, state.q, state.v_B, state.w_B, state.qdot)
-    return law.free_flyer_configuration(state.p_WB, state.quat_xyzw, state.q, state.v_B, state.w_B, state.qdot)
+    qv = np.concatenate((state.p_WB, state.quat_xyzw, state.q, state.v_B, state.w_B, state.qdot))
+    nq = 7 + state.q.shape[0]
+    return qv[:nq], qv[nq:]
 
 
 def generalized_gravity(model: AmModel, data: pin.Data, state: AmState) -> np.ndarray:

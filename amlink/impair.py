@@ -37,6 +37,8 @@ import numpy as np
 
 T = TypeVar("T")
 
+_BLOCK = 256  # setpoints whose draws a channel takes from its stream at once
+
 
 @dataclass(frozen=True)
 class LinkImpairment:
@@ -118,9 +120,22 @@ class ImpairedChannel(Generic[T]):
         self.impairment = impairment
         self.stats = ChannelStats()
         self._rng = rng
+        self._draws: list[float] = []  # a block of the stream's uniform draws (`_draw5`), used up to _at
+        self._at = 0
         self._pending: dict[int, list[tuple[int, T]]] = {}  # arrival step -> [(sent step, item)]
         self._now = -1
         self._ideal = impairment.is_ideal
+        self._delay_steps, self._jitter_steps = impairment.delay_steps, impairment.jitter_steps
+
+    def _draw5(self) -> list[float]:
+        """The next five uniform draws of the channel's stream, as Python floats: the numbers
+        `rng.random(5)` would give, read from a block of _BLOCK setpoints' draws (one draw
+        per element, in order, so a block holds the same numbers as its calls one by one)."""
+        i = self._at
+        if i == len(self._draws):
+            self._draws, i = self._rng.random(5 * _BLOCK).tolist(), 0
+        self._at = i + 5
+        return self._draws[i:i + 5]
 
     def send(self, step: int, item: T) -> None:
         """The setpoint ``item`` for step ``step`` leaves the companion at that step."""
@@ -131,12 +146,12 @@ class ImpairedChannel(Generic[T]):
             st.sent += 1
             self._pending.setdefault(step, []).append((step, item))
             return
-        u_loss, u_jitter, u_reorder, u_hold, u_dup = self._rng.random(5)
+        u_loss, u_jitter, u_reorder, u_hold, u_dup = self._draw5()
         st.sent += 1
         if u_loss < imp.loss:
             st.lost += 1
             return
-        arrival = step + imp.delay_steps + int(u_jitter * (imp.jitter_steps + 1))
+        arrival = step + self._delay_steps + int(u_jitter * (self._jitter_steps + 1))
         if u_reorder < imp.reorder:
             arrival += 1 + int(u_hold * imp.reorder_max_steps)
             st.reordered += 1
@@ -150,10 +165,14 @@ class ImpairedChannel(Generic[T]):
         """Arrivals at ``step`` as ``(sent step, item)``, in arrival order; call once per step."""
         if step <= self._now:
             raise ValueError(f"deliver({step}) after deliver({self._now}): one call per step, in order")
-        due = [s for s in self._pending if s <= step]  # steps skipped by the caller deliver late, not never
-        out: list[tuple[int, T]] = []
-        for s in sorted(due):
-            out.extend(self._pending.pop(s))
+        pending = self._pending
+        if len(pending) == 1 and step in pending:  # the usual case: this step's arrivals alone
+            out = pending.pop(step)
+        else:
+            due = [s for s in pending if s <= step]  # steps skipped by the caller deliver late, not never
+            out = []
+            for s in sorted(due):
+                out.extend(pending.pop(s))
         self._now = step
         self.stats.delivered += len(out)
         return out

@@ -148,7 +148,7 @@ def _max_abs(arr) -> float:
     if not vals:
         return 0.0
     m = max(map(abs, vals))
-    return m if m == m and not any(v != v for v in vals) else math.nan
+    return m if m == m and not any(map(math.isnan, vals)) else math.nan
 
 
 DEFAULT_SETPOINT_LIMITS = SetpointLimits()

@@ -251,11 +251,26 @@ def sensor_frame_from_wire(step: int, time_s: float, values, n: int, flags: int)
     For decoders: the caller guarantees 0 <= step < 2**64, 0 <= n <= MAX_JOINTS,
     0 <= flags < 256 and ``len(values) == 19 + 2 n``.
     """
-    a = _frozen_f64(values)
+    return sensor_frame_of_array(step, time_s, np.array(values, dtype=np.float64), n, flags)
+
+
+def sensor_frame_of_array(step: int, time_s: float, a: np.ndarray, n: int, flags: int) -> SensorFrame:
+    """`sensor_frame_from_wire` of a float64 array of the values, which the frame takes over
+    (made read-only, not copied: the caller must hold no other reference that writes to it)."""
+    a.setflags(write=False)
     j = 13 + n
     return _assemble(SensorFrame, step=step, time_s=float(time_s), p_WB=a[0:3], quat_WB_wxyz=a[3:7],
                      v_B=a[7:10], w_B=a[10:13], q=a[13:j], qdot=a[j : j + n], wrench_E=a[j + n : j + n + 6],
                      flags=_STEP_FLAGS[flags], joint_effort_nm=None, attitude_target=None)  # fmt: skip
+
+
+def frame_values(frame: SensorFrame) -> np.ndarray:
+    """The frame's values in the order of `sensor_frame_from_wire` (p_WB, quat_WB_wxyz, v_B,
+    w_B, q, qdot, wrench_E), read-only: the one array a decoder's frame holds, else joined."""
+    a = frame.p_WB.base
+    if a is not None and a.shape == (19 + 2 * frame.q.shape[0],) and frame.wrench_E.base is a:
+        return a
+    return np.concatenate((frame.p_WB, frame.quat_WB_wxyz, frame.v_B, frame.w_B, frame.q, frame.qdot, frame.wrench_E))
 
 
 def with_autopilot_reports(frame: SensorFrame, joint_effort_nm, attitude_target: AttitudeTarget | None) -> SensorFrame:

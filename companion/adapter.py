@@ -13,21 +13,23 @@ from amcore.control import StepResult
 from amcore.model import AmState
 from amcore.so3 import quat_wxyz_to_R, quat_xyzw_of_R
 from amlink.types import (MAX_JOINTS, AttitudeSetpoint, AttitudeTarget, SensorFrame, TorqueSetpoint,
-                          attitude_setpoint_from_wire, attitude_target_from_wire, torque_setpoint_from_wire)
+                          attitude_setpoint_from_wire, frame_values, attitude_target_from_wire, torque_setpoint_from_wire)
 
 
 def state_from_frame(frame: SensorFrame) -> AmState:
     """Measured state of the AM: base pose in W, base twist in B, joint state.
 
     The frame's quaternion, renormalized, gives R_WB and is handed on to pinocchio as is
-    (AmState.quat_xyzw), so the controller need not recover it from R_WB.
+    (AmState.quat_xyzw), so the controller need not recover it from R_WB. The vectors are
+    views of one copy of the frame's values (`amlink.types.frame_values`).
     """
-    w, x, y, z = np.asarray(frame.quat_WB_wxyz, dtype=float).tolist()
+    a = np.array(frame_values(frame))  # one writable copy; the state's vectors are views of it
+    w, x, y, z = a[3:7].tolist()
     n = math.sqrt(w * w + x * x + y * y + z * z)
     w, x, y, z = w / n, x / n, y / n, z / n
+    j = 13 + frame.q.shape[0]
     # positional (p_WB, R_WB, v_B, w_B, q, qdot, quat_xyzw): matching keywords costs more than the rest
-    return AmState(np.array(frame.p_WB), quat_wxyz_to_R((w, x, y, z)), np.array(frame.v_B), np.array(frame.w_B),
-                   np.array(frame.q), np.array(frame.qdot), (x, y, z, w))
+    return AmState(a[0:3], quat_wxyz_to_R((w, x, y, z)), a[7:10], a[10:13], a[13:j], a[j:2 * j - 13], (x, y, z, w))
 
 
 def setpoint_from_result(step: int, res: StepResult, thrust_max_n: float) -> tuple[TorqueSetpoint, AttitudeTarget]:

@@ -14,34 +14,65 @@ from amcore.control import Diagnostics
 
 
 class PhaseStats:
+    """The steps of one phase: for each quantity its final value and its largest magnitude
+    (element by element for a vector; a float's from 0). A step's values are kept as one
+    flat list of floats, laid out by `layout`: (name, length, or None for a float), the same
+    at every step."""
+
     def __init__(self) -> None:
         self.n = 0
-        self.final: dict[str, object] = {}
-        self.max: dict[str, object] = {}
         self.t_first = self.t_last = None
+        self.layout: tuple[tuple[str, int | None], ...] | None = None
+        self._final: list[float] = []
+        self._max: list[float] = []
 
     def add(self, t: float, values: dict[str, np.ndarray | float]) -> None:
-        self.n += 1
-        if self.t_first is None:
-            self.t_first = t
-        self.t_last = t
-        mx = self.max
-        for k, v in values.items():  # plain floats and lists: this runs every control step
+        """One step's values by name: floats, and 1-D arrays or sequences of floats."""
+        layout, flat = [], []
+        for k, v in values.items():
             if isinstance(v, float):
-                self.final[k] = v
-                mx[k] = max(mx.get(k, 0.0), abs(v))
+                layout.append((k, None))
+                flat.append(v)
             else:
                 v = v.tolist() if isinstance(v, np.ndarray) else list(v)
-                self.final[k] = v
-                old = mx.get(k)
-                mx[k] = [abs(a) for a in v] if old is None else [max(o, abs(a)) for o, a in zip(old, v)]
+                layout.append((k, len(v)))
+                flat.extend(v)
+        self.add_flat(t, tuple(layout), flat)
+
+    def add_flat(self, t: float, layout: tuple[tuple[str, int | None], ...], flat: list[float]) -> None:
+        """`add` of the values laid out by `layout` in one list (which the stats keep as the final values)."""
+        self.n += 1
+        self.t_last = t
+        if self.t_first is None:
+            self.t_first = t
+            self.layout = layout
+            # a float's largest magnitude starts from 0 (max keeps its first argument on a NaN)
+            self._max = [abs(x) if size else max(0.0, abs(x)) for size, x in zip(_sizes(layout), flat)]
+        else:
+            if layout is not self.layout and layout != self.layout:
+                raise ValueError(f"phase values {layout} after {self.layout}")
+            self._max = list(map(max, self._max, map(abs, flat)))  # plain floats: this runs every control step
+        self._final = flat
 
     def to_dict(self) -> dict:
-        def j(x):
-            x = np.asarray(x)
-            return x.tolist() if x.ndim else float(x)
         return {"steps": self.n, "t_first": self.t_first, "t_last": self.t_last,
-                "final": {k: j(v) for k, v in self.final.items()}, "max": {k: j(v) for k, v in self.max.items()}}
+                "final": self._named(self._final), "max": self._named(self._max)}
+
+    def _named(self, flat: list[float]) -> dict[str, object]:
+        out, at = {}, 0
+        for name, size in self.layout or ():
+            if size is None:
+                out[name] = float(flat[at])
+                at += 1
+            else:
+                out[name] = [float(x) for x in flat[at:at + size]]
+                at += size
+        return out
+
+
+def _sizes(layout) -> list[int | None]:
+    """Per flat element of `layout`, its vector's length, or None for a float."""
+    return [size for _, size in layout for _ in range(size if size is not None else 1)]
 
 
 class Outcome:
@@ -55,12 +86,16 @@ class Outcome:
         self._force_n = 0
         self.at: dict[str, dict] = {}  # snapshots at named instants
         self.steps = 0
+        self._layout: tuple | None = None  # the phase values' (PhaseStats.layout), formed at the first step
 
     def add(self, t: float, phase: str, d: Diagnostics) -> None:
         self.steps += 1
-        values = {"r_c_err": math.hypot(*d.r_c_err.tolist()), "e_R": math.hypot(*d.e_R.tolist()),
-                  "y_err": d.y_err, "r_c_err_vec": d.r_c_err, "sigma_min_J3": float(d.sigma_min_J3)}
-        self.phases[phase].add(t, values)
+        r_c_err, y_err = d.r_c_err.tolist(), d.y_err.tolist()
+        if self._layout is None or self._layout[2][1] != len(y_err):
+            self._layout = (("r_c_err", None), ("e_R", None), ("y_err", len(y_err)), ("r_c_err_vec", 3),
+                            ("sigma_min_J3", None))
+        self.phases[phase].add_flat(t, self._layout, [math.hypot(*r_c_err), math.hypot(*d.e_R.tolist()), *y_err,
+                                                      *r_c_err, float(d.sigma_min_J3)])
         if self.hover_window[0] <= t <= self.hover_window[1]:
             self._force_sum += d.F_rc
             self._force_n += 1

@@ -66,6 +66,7 @@ class Pilot:
                                                                       ms.hover_end_s))
         self._snaps = sorted([("approach_end", ms.approach_end_s), ("grasp_end", ms.grasp_end_s),
                               ("settle_check", spec.duration_s - 2.0)], key=lambda x: x[1])
+        self._snap_early_s = 0.5 * spec.control_dt_s  # a snapshot's step may come this much before its instant
         self.last: tuple[float, object] | None = None
         self.steps = 0
         o = spec.vehicle.options
@@ -84,7 +85,7 @@ class Pilot:
         self.trim = Trim(2.0 * math.pi * o.trim_hz) if o.trim_hz > 0.0 else None
         self.trim_dr = np.zeros(3)
         self._r_c_err: np.ndarray | None = None  # the law's CoM error of the last step (trim)
-        self._wrench_E_f = None  # the controller's filtered wrench of the last step (heading admittance)
+        self._wrench_E_f = None  # the controller's filtered wrench of the last step (the admittances' input)
         self._t_last: float | None = None
         self._started = False
         self._blend: JoinBlend | None = None  # set when the first frame comes after t = 0 (a rejoin)
@@ -154,7 +155,9 @@ class Pilot:
         else:
             res = self.law(*args) if task_frame is None else self.law(*args, task_frame)
             self.memory = res.memory
-        self._wrench_E_f, self._t_last = res.diagnostics.wrench_E_filtered, t
+        if self.heading is not None or self.lateral is not None:  # the admittances' input
+            self._wrench_E_f = res.diagnostics.wrench_E_filtered
+        self._t_last = t
         if self.trim is not None and self.mission.phase(t) == "approach":  # held from the grasp on
             self._r_c_err = np.array(res.diagnostics.r_c_err)
         if self.attitude_mode:
@@ -172,7 +175,7 @@ class Pilot:
         """Adds the step answered at time t [s] to the per-phase error summary."""
         d = res.diagnostics
         self.outcome.add(t, self.mission.phase(t), d)
-        while self._snaps and t >= self._snaps[0][1] - 0.5 * self.spec.control_dt_s:
+        while self._snaps and t >= self._snaps[0][1] - self._snap_early_s:
             self.outcome.snapshot(self._snaps.pop(0)[0], t, d)
         self.last = (t, d)
         self.steps += 1

@@ -23,7 +23,8 @@ from amcore import cliargs, preflight
 from amcore.config import ConfigError, ScenarioSpec, check_duration, load_scenario
 from amlink import fastcodec
 from amlink.limits import SetpointLimits
-from amlink.types import AttitudeSetpoint, SensorFrame, TorqueSetpoint, sensor_frame_from_wire, with_autopilot_reports
+from amlink.types import (AttitudeSetpoint, SensorFrame, TorqueSetpoint, frame_values, sensor_frame_of_array,
+                          with_autopilot_reports)
 from companion import jitcache
 from companion.pilot import Pilot
 
@@ -33,13 +34,12 @@ from .verdict import MISSION_FAILED
 
 def as_on_the_wire(f: SensorFrame) -> SensorFrame:
     """The frame a companion decodes: base state through float32 (MAVLink ODOMETRY), time
-    in microseconds, built as the companion's decoder builds it (`sensor_frame_from_wire`);
+    in microseconds, built as the companion's decoder builds it (one array, `sensor_frame_from_wire`);
     in attitude mode the flown target through ATTITUDE_TARGET (float32) and the measured
     joint torques (float64, exact)."""
-    base = np.concatenate((f.p_WB, f.quat_WB_wxyz, f.v_B, f.w_B)).astype(np.float32).tolist()
-    out = sensor_frame_from_wire(f.step, round(f.time_s * 1e6) / 1e6,
-                                 base + f.q.tolist() + f.qdot.tolist() + f.wrench_E.tolist(), f.q.shape[0],
-                                 int(f.flags))
+    values = np.array(frame_values(f))  # a copy, which the new frame takes over
+    values[:13] = values[:13].astype(np.float32)  # the base state: to float32 and back, exactly
+    out = sensor_frame_of_array(f.step, round(f.time_s * 1e6) / 1e6, values, f.q.shape[0], int(f.flags))
     if f.joint_effort_nm is None and f.attitude_target is None:
         return out
     target = f.attitude_target

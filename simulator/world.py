@@ -156,6 +156,7 @@ class World:
         if sorted(initial) != expected:
             raise ValueError(f"initial states given for sysids {sorted(initial)}, scenario has {expected}")
         self.spec = spec
+        self._dt_s = spec.dt_s  # the physics step [s], read every step (time_s)
         self._initial = dict(initial)
         self._alloc = Allocation(spec.vehicle.rotors, compiled=True)
         # each rotor's least thrust and range [N], for the busiest/idlest rotor's share in the truth
@@ -182,7 +183,7 @@ class World:
         self._sensed_links: dict[int, list[int]] = {}
         self._sensed_joints: dict[int, list[int]] = {}  # the arm's joints, then the wrist sensor's
         self._last_limited: dict[int, tuple[np.ndarray, JointTorqueResult]] = {}  # `_limited`'s last, per AM
-        self._tool_weights: dict[int, tuple[float, ...]] = {}
+        self._tool_weights: dict[int, tuple[tuple[float, int], ...]] = {}  # per tool link: its mass share, its row
 
     # ------------------------------------------------------------------ lifecycle
     def connect(self) -> None:
@@ -214,8 +215,12 @@ class World:
                 self._joint_commands[a.sysid] = [0.0] * n
             self._arm_ids[a.sysid] = list(am.arm_joint_ids)
             self._sensed_joints[a.sysid] = [*am.arm_joint_ids, am.ft_joint_id]
-            self._sensed_links[a.sysid] = [am.pad_link_id, am.ee_link_id, *am.tool_link_ids]
-            self._tool_weights[a.sysid] = tuple(m / am.tool_mass_kg for m in am.tool_link_masses_kg)
+            # the pad and the ee marker, then the tool's other links (each link read once)
+            links = [am.pad_link_id, am.ee_link_id]
+            links += [i for i in am.tool_link_ids if i not in links]
+            self._sensed_links[a.sysid] = links
+            self._tool_weights[a.sysid] = tuple((m / am.tool_mass_kg, links.index(i))
+                                                for i, m in zip(am.tool_link_ids, am.tool_link_masses_kg))
         self._step_index = 0
 
     def close(self) -> None:
@@ -253,7 +258,7 @@ class World:
 
     @property
     def time_s(self) -> float:
-        return self._step_index * self.spec.dt_s
+        return self._step_index * self._dt_s
 
     @property
     def sysids(self) -> tuple[int, ...]:
@@ -447,8 +452,8 @@ class World:
         cx, cy, cz = pad[0]
         ex, ey, ez = ee[4]
         tx = ty = tz = 0.0  # tool CoM: mass-weighted mean of the tool links' CoMs
-        for wgt, link in zip(self._tool_weights[sysid], links[2:]):
-            lx, ly, lz = link[0]
+        for wgt, i in self._tool_weights[sysid]:
+            lx, ly, lz = links[i][0]
             tx, ty, tz = tx + wgt * lx, ty + wgt * ly, tz + wgt * lz
         mg = am.tool_mass_kg * self.spec.vehicle.gravity_mps2  # F_grav = (0, 0, -mg)
         fx, fy, fz = _mv(RP, f_s[0:3])
@@ -505,7 +510,8 @@ class World:
 def _friction_sign_on_A(pt) -> float:
     """+1 if a contact point's friction pair is the force on the query's body A, -1 if on B
     (see `_sum_contact`): the sign of (dir1 x dir2) . contactNormalOnB."""
-    n_manifold = np.cross(pt[11], pt[13])
+    (ax, ay, az), (bx, by, bz) = pt[11], pt[13]
+    n_manifold = np.array((ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx))  # np.cross's products, on floats
     return 1.0 if float(n_manifold @ np.asarray(pt[7])) >= 0.0 else -1.0
 
 
@@ -526,15 +532,21 @@ def _sum_contact(points) -> PadContact:
     """
     if not points:
         return _NO_CONTACT
-    F_n = np.zeros(3)  # on the pad
-    F_t = np.zeros(3)
-    weighted_point = np.zeros(3)
+    # the sums element by element on Python floats (numpy's 3-vector operations would round
+    # each element alike, at ~1 us a call); norms and dot products below stay numpy's (BLAS)
+    F_n = [0.0, 0.0, 0.0]  # on the pad
+    F_t = [0.0, 0.0, 0.0]
+    weighted_point = [0.0, 0.0, 0.0]
     total_normal = 0.0
     for pt in points:
-        F_n -= pt[9] * np.array(pt[7])
-        F_t -= _friction_sign_on_A(pt) * (pt[10] * np.array(pt[11]) + pt[12] * np.array(pt[13]))
-        weighted_point += pt[9] * np.array(pt[5])
-        total_normal += pt[9]
+        f_n, n, f1, d1, f2, d2, p = pt[9], pt[7], pt[10], pt[11], pt[12], pt[13], pt[5]
+        sign = _friction_sign_on_A(pt)
+        for i in range(3):
+            F_n[i] -= f_n * n[i]
+            F_t[i] -= sign * (f1 * d1[i] + f2 * d2[i])
+            weighted_point[i] += f_n * p[i]
+        total_normal += f_n
+    F_n, F_t, weighted_point = np.array(F_n), np.array(F_t), np.array(weighted_point)
     magnitude = float(np.linalg.norm(F_n))
     normal = F_n / magnitude if magnitude > 0.0 else -np.array(points[0][7])
     F_t = F_t - (F_t @ normal) * normal

@@ -155,3 +155,22 @@ def test_pin_q_quaternion_is_pinocchios(model):
         q_pin = AmState(st.p_WB, R, st.v_B, st.w_B, st.q, st.qdot).pin_q()
         assert np.abs(q_pin[3:7] - quat.coeffs()).max() <= 4.5e-16
         assert np.array_equal(q_pin[0:3], st.p_WB) and np.array_equal(q_pin[7:], st.q)
+
+
+def test_pin_configuration_is_the_states_configuration_and_velocity_in_one_array():
+    from amcore import law
+    from amcore.model import pin_configuration
+    from amcore.so3 import quat_xyzw_of_R
+
+    rng = np.random.default_rng(2)
+    R = exp_so3(rng.normal(size=3))
+    quat = tuple(quat_xyzw_of_R(R))
+    for with_quat in (True, False):
+        s = AmState(rng.normal(size=3), R, rng.normal(size=3), rng.normal(size=3), rng.normal(size=3),
+                    rng.normal(size=3), quat if with_quat else None)
+        q_pin, V = pin_configuration(s)
+        assert q_pin.tobytes() == s.pin_q().tobytes() and V.tobytes() == s.pin_v().tobytes()
+        assert q_pin.flags.c_contiguous and V.flags.c_contiguous and q_pin.flags.writeable
+        if with_quat:  # as the compiled joiner gives them
+            a, b = law.free_flyer_configuration(s.p_WB, quat, s.q, s.v_B, s.w_B, s.qdot)
+            assert a.tobytes() == q_pin.tobytes() and b.tobytes() == V.tobytes()

@@ -115,3 +115,10 @@ def test_skipped_steps_deliver_late_and_time_only_goes_forward():
 def test_parameters_are_validated(kw):
     with pytest.raises(ValueError):
         LinkImpairment(**kw)
+
+
+def test_draws_taken_in_blocks_are_the_streams_draws_five_at_a_time():
+    imp = LinkImpairment(loss=0.3, jitter_s=0.002, reorder=0.2, duplicate=0.1, seed=9)
+    ch, rng = ImpairedChannel(imp, imp.rng(4)), imp.rng(4)
+    for _ in range(600):  # more than one block
+        assert ch._draw5() == rng.random(5).tolist()

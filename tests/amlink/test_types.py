@@ -15,7 +15,9 @@ from amlink.types import (
     StepFlag,
     TorqueSetpoint,
     attitude_target_from_wire,
+    frame_values,
     sensor_frame_from_wire,
+    sensor_frame_of_array,
     torque_setpoint_from_wire,
 )
 
@@ -100,3 +102,22 @@ def test_wire_constructors_build_what_the_validating_constructors_build(n):
           SensorFrame(2**64 - 1, 1.5, v[0:3], v[3:7], v[7:10], v[10:13], v[13:j], v[j : j + n], v[j + n :], 3))
     _same(torque_setpoint_from_wire(7, 2.5, v[: 3 + n], n, 2), TorqueSetpoint(7, 2.5, v[:3], v[3 : 3 + n], 2))
     _same(attitude_target_from_wire(7, v[:8]), AttitudeTarget(7, v[:4], v[4:7], v[7]))
+
+
+@pytest.mark.parametrize("n", [0, 3, 8])
+def test_frame_values_are_the_decoders_array_or_the_fields_joined(n):
+    v = np.random.default_rng(n).normal(size=19 + 2 * n)
+    f = sensor_frame_from_wire(5, 0.005, v.tolist(), n, 0)
+    a = frame_values(f)
+    assert a.tobytes() == v.tobytes() and a is f.p_WB.base and not a.flags.writeable
+    j = 13 + n
+    g = SensorFrame(5, 0.005, v[0:3], v[3:7], v[7:10], v[10:13], v[13:j], v[j : j + n], v[j + n :])
+    assert frame_values(g).tobytes() == v.tobytes()
+
+
+def test_sensor_frame_of_array_takes_the_array_over():
+    n = 2
+    v = np.arange(19.0 + 2 * n)
+    f = sensor_frame_of_array(1, 0.001, v, n, 0)
+    _same(f, sensor_frame_from_wire(1, 0.001, v.tolist(), n, 0))
+    assert f.p_WB.base is v and not v.flags.writeable

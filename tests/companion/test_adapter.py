@@ -73,3 +73,16 @@ def test_state_from_frame_carries_the_quaternion():
     np.testing.assert_allclose(s.quat_xyzw, [x, y, z, w], atol=1e-15)
     np.testing.assert_allclose(s.R_WB, quat_wxyz_to_R(q), atol=1e-15)
     np.testing.assert_allclose(s.pin_q()[3:7], [x, y, z, w], atol=1e-15)
+
+
+def test_state_from_frame_copies_a_decoded_frame_once():
+    from amlink.types import sensor_frame_from_wire
+
+    v = [0.1, 0.2, 1.0, 0.9, 0.1, 0.0, 0.1, 1.0, 2.0, 3.0, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0, *range(6)]
+    f = sensor_frame_from_wire(1, 0.001, v, 2, 0)
+    s = state_from_frame(f)
+    for name, x in (("p_WB", s.p_WB), ("v_B", s.v_B), ("w_B", s.w_B), ("q", s.q), ("qdot", s.qdot)):
+        assert np.array_equal(x, getattr(f, name)) and x.flags.writeable and x.flags.c_contiguous
+        assert not np.shares_memory(x, f.p_WB.base)
+    s.p_WB[0] = 5.0  # the state's own copy
+    assert f.p_WB[0] == 0.1 and s.v_B.tolist() == [1.0, 2.0, 3.0]

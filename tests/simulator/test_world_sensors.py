@@ -236,3 +236,43 @@ def test_sensor_values_are_state_and_wrench_on_floats(squeezed):
         np.testing.assert_allclose(v[13 + n:13 + 2 * n], st.qdot, rtol=0, atol=0)
         np.testing.assert_allclose(v[13 + 2 * n:], wrench, rtol=0, atol=0)
         assert np.linalg.norm(wrench[:3]) > 1.0 and np.linalg.norm(st.v_B) + np.linalg.norm(st.w_B) > 0.0
+
+
+def test_friction_sign_is_that_of_numpys_cross_product():
+    from simulator.world import _friction_sign_on_A
+
+    rng = np.random.default_rng(3)
+    for _ in range(2000):
+        d1, d2, n = (rng.normal(size=3) * 10.0 ** rng.integers(-6, 3) for _ in range(3))
+        pt = [None] * 14
+        pt[7], pt[11], pt[13] = tuple(n.tolist()), tuple(d1.tolist()), tuple(d2.tolist())
+        assert _friction_sign_on_A(pt) == (1.0 if float(np.cross(d1, d2) @ n) >= 0.0 else -1.0)
+
+
+def test_contact_sum_on_floats_is_numpys_element_by_element():
+    from simulator.world import _friction_sign_on_A, _sum_contact
+
+    def with_numpy(points):  # the sums as 3-vector numpy operations
+        F_n, F_t, wp, total = np.zeros(3), np.zeros(3), np.zeros(3), 0.0
+        for pt in points:
+            F_n -= pt[9] * np.array(pt[7])
+            F_t -= _friction_sign_on_A(pt) * (pt[10] * np.array(pt[11]) + pt[12] * np.array(pt[13]))
+            wp += pt[9] * np.array(pt[5])
+            total += pt[9]
+        magnitude = float(np.linalg.norm(F_n))
+        normal = F_n / magnitude if magnitude > 0.0 else -np.array(points[0][7])
+        return magnitude, normal, F_t - (F_t @ normal) * normal, wp / total if total > 0.0 else None
+
+    rng = np.random.default_rng(5)
+    for _ in range(500):
+        points = []
+        for _ in range(rng.integers(1, 9)):
+            pt = [None] * 14
+            pt[5], pt[7], pt[11], pt[13] = (tuple(rng.normal(size=3).tolist()) for _ in range(4))
+            pt[9], pt[10], pt[12] = float(abs(rng.normal())) * int(rng.integers(0, 2)), float(rng.normal()), float(rng.normal())
+            points.append(pt)
+        m, normal, F_t, point = with_numpy(points)
+        c = _sum_contact(points)
+        assert c.normal_force_n == m and c.normal_W.tobytes() == normal.tobytes()
+        assert c.tangential_force_W.tobytes() == F_t.tobytes()
+        assert point is None or c.point_W.tobytes() == point.tobytes()

@@ -1,0 +1,116 @@
+"""Where a campaign trial's physics step goes: CPU time per step of `simulator.inprocess.run`
+for one trial of `am-trials` (default randomization, seed 1, trial 0), whole and by part.
+
+    python benchmarks/bench_trial_step.py [--scenario configs/scenarios/two_am_comp.toml] [--duration 20]
+
+First the trial runs as it is (after a short warm-up run that loads the compiled kernels):
+CPU time of this thread per physics step. Then it runs again with each part below wrapped
+in a timer (the thread's CPU time around the call, less the wrapped parts it calls): us per
+physics step for all AMs together. The wrappers cost ~0.5 us per call, so the parts sum to
+more than the unwrapped step; "other" is what no part holds (the run loop, the link's
+zero-order hold, the flight controllers' bookkeeping, the digest's inputs). For
+`benchmarks/ab.py`: every name wrapped exists in the trees compared (it is skipped if not).
+"""
+from __future__ import annotations
+
+import argparse
+import functools
+import importlib
+import tempfile
+import time
+from collections import defaultdict
+from pathlib import Path
+
+from amcore.config import _read_toml, scenario_from_dict
+from trials.cli import DEFAULT_RANDOMIZE, build_tasks
+from trials.randomize import load_randomize
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# (label, module, attribute path): the parts, in the order of a control step
+PARTS = (
+    ("sense (World.sensor_values)", "simulator.world", "World.sensor_values"),
+    ("devices and estimator (DeviceSuite.step)", "simulator.devices", "DeviceSuite.step"),
+    ("frame (sensor_frame_from_wire, in core)", "simulator.core", "sensor_frame_from_wire"),
+    ("as_on_the_wire", "simulator.inprocess", "as_on_the_wire"),
+    ("state_from_frame", "companion.pilot", "state_from_frame"),
+    ("mission reference", "amcore.mission", "AmMission.reference"),
+    ("control.step without the law", "amcore.control", "step"),
+    ("the compiled law (law.control_law)", "amcore.law", "control_law"),
+    ("setpoint_from_result", "companion.pilot", "setpoint_from_result"),
+    ("Pilot.command, the rest", "companion.pilot", "Pilot.command"),
+    ("record (companion.outcome)", "companion.pilot", "Pilot.record"),
+    ("setpoint limits", "amlink.limits", "SetpointLimits.violation"),
+    ("apply (allocation, joint limits)", "simulator.world", "World.apply"),
+    ("link (ImpairedLink.step)", "amlink.impair", "ImpairedLink.step"),
+    ("ground truth and digest (observe)", "simulator.core", "SitlCore.observe"),
+    ("PyBullet step (World.step)", "simulator.world", "World.step"),
+)
+
+
+def _trial_spec(scenario: Path, tmp: Path):
+    tasks = build_tasks(_read_toml(scenario), scenario.resolve(), load_randomize(DEFAULT_RANDOMIZE), 1, 1, tmp, None)
+    return scenario_from_dict(tasks[0].data, Path(tasks[0].path))
+
+
+def _wrap_parts(excl: dict, calls: dict) -> None:
+    clock = time.thread_time_ns
+    inner = [0]  # wrapped time spent in the current call's wrapped callees
+
+    def wrap(label, owner, name):
+        f = getattr(owner, name)
+
+        @functools.wraps(f)
+        def timed(*a, **k):
+            outer, inner[0] = inner[0], 0
+            t0 = clock()
+            try:
+                return f(*a, **k)
+            finally:
+                dt = clock() - t0
+                excl[label] += dt - inner[0]
+                calls[label] += 1
+                inner[0] = outer + dt
+        setattr(owner, name, timed)
+
+    for label, module, path in PARTS:
+        owner = importlib.import_module(module)
+        *outer, name = path.split(".")
+        for o in outer:
+            owner = getattr(owner, o, None)
+        if owner is not None and hasattr(owner, name):
+            wrap(label, owner, name)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scenario", type=Path, default=ROOT / "configs" / "scenarios" / "two_am_comp.toml")
+    ap.add_argument("--duration", type=float, default=None, help="simulated seconds (default: the trial's)")
+    a = ap.parse_args()
+    import simulator.inprocess as ip
+
+    with tempfile.TemporaryDirectory() as tmp:
+        spec = _trial_spec(a.scenario, Path(tmp))
+        ip.run(spec, 0.2)  # the kernels loaded, the caches warm
+        c0 = time.thread_time()
+        r = ip.run(spec, a.duration)
+        cpu = time.thread_time() - c0
+        n = r["steps"]
+        print(f"{spec.name}: {n} steps, {len(spec.ams)} AMs, digest {r['state_digest'][:16]}, verdict {r['verdict']['status']}")
+        print(f"CPU per physics step: {1e6 * cpu / n:.1f} us (real-time factor {r['real_time_factor']:.2f})")
+        excl, calls = defaultdict(int), defaultdict(int)
+        _wrap_parts(excl, calls)
+        c0 = time.thread_time_ns()
+        r2 = ip.run(spec, a.duration)
+        total = time.thread_time_ns() - c0
+    assert r2["state_digest"] == r["state_digest"]
+    print(f"wrapped run: {1e-3 * total / n:.1f} us per step")
+    print(f"{'part':44s} {'us/step':>8s} {'calls/step':>11s}")
+    for label, _, _ in PARTS:
+        if label in calls:
+            print(f"{label:44s} {1e-3 * excl[label] / n:8.1f} {calls[label] / n:11.2f}")
+    print(f"{'other':44s} {1e-3 * (total - sum(excl.values())) / n:8.1f}")
+
+
+if __name__ == "__main__":
+    main()
