@@ -57,7 +57,7 @@ def main() -> None:
             raise SystemExit(f"am-run exited {code}")
         outcome = json.loads((tmp / "run" / "outcome.json").read_text())
         steps = outcome["steps"]
-        print(f"load average before/after: {os.getloadavg()[0]:.2f}; {a.n} AMs, {'attitude' if a.attitude else 'torque'} "
+        print(f"load average after: {os.getloadavg()[0]:.2f}; {a.n} AMs, {'attitude' if a.attitude else 'torque'} "
               f"mode, [devices] {'on' if a.devices else 'off'}, actuation delay {a.actuation_delay}; "
               f"{outcome['real_time_factor']:.2f}x real time, {steps} physics steps, control every "
               f"{spec.control_every}")

@@ -27,9 +27,10 @@ def state_from_frame(frame: SensorFrame) -> AmState:
     w, x, y, z = a[3:7].tolist()
     n = math.sqrt(w * w + x * x + y * y + z * z)
     w, x, y, z = w / n, x / n, y / n, z / n
-    j = 13 + frame.q.shape[0]
+    n_q = frame.q.shape[0]
+    j = 13 + n_q
     # positional (p_WB, R_WB, v_B, w_B, q, qdot, quat_xyzw): matching keywords costs more than the rest
-    return AmState(a[0:3], quat_wxyz_to_R((w, x, y, z)), a[7:10], a[10:13], a[13:j], a[j:2 * j - 13], (x, y, z, w))
+    return AmState(a[0:3], quat_wxyz_to_R((w, x, y, z)), a[7:10], a[10:13], a[13:j], a[j:j + n_q], (x, y, z, w))
 
 
 def setpoint_from_result(step: int, res: StepResult, thrust_max_n: float) -> tuple[TorqueSetpoint, AttitudeTarget]:

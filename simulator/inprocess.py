@@ -136,10 +136,8 @@ def run(spec: ScenarioSpec, duration_s: float | None = None,
                     gone = lost(core.time_s) | crashed
                     pending = answer(frames)
                     core.actuate(k, acting(), gone | crashed)
-            elif core.due(k):
-                core.hold(k, gone | crashed, acting())
             else:  # as the UDP simulator: who was lost at the last exchange stays lost until the next
-                core.hold(k, gone | crashed)
+                core.hold(k, gone | crashed, acting() if core.due(k) else None)
             core.step()
             if progress is not None and k % every == 0:
                 progress(core.time_s)

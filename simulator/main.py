@@ -239,13 +239,9 @@ def main(argv: list[str] | None = None) -> int:
                 # the frames go out and physics steps on while the companions compute; their
                 # answers act d steps later (core.due)
                 frames = core.frames(k)
-                if core.due(k):  # d = the control period: the last frames' answers act now
-                    setpoints = collected()
-                    core.actuate(k, setpoints, server.lost_peers)
-                    server.send_frames(frames, partial=True)
-                else:
-                    server.send_frames(frames, partial=True)
-                    core.actuate(k, {}, server.lost_peers)
+                setpoints = collected() if core.due(k) else {}  # due here when d is the control period
+                core.actuate(k, setpoints, server.lost_peers)
+                server.send_frames(frames, partial=True)
                 bookkeeping()
             elif core.is_control_step(k):
                 # each frame leaves as soon as it is read; each setpoint is applied as it arrives
@@ -254,12 +250,9 @@ def main(argv: list[str] | None = None) -> int:
                 for sysid, why in server.last_rejected:  # answered at once: hold, count, failsafe after K
                     core.note_rejected(sysid, why)
                 core.actuate(k, setpoints, server.lost_peers)
-            elif core.due(k):
-                setpoints = collected()
-                core.hold(k, server.lost_peers, setpoints)
-                gcs.tick(k)
             else:  # between the companions' control steps the flight controllers fly on their own
-                core.hold(k, server.lost_peers)
+                setpoints = collected() if core.due(k) else None  # (before reading who is lost)
+                core.hold(k, server.lost_peers, setpoints)
                 gcs.tick(k)
             core.step()
             progress.update(core.time_s)
