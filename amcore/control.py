@@ -144,8 +144,7 @@ class Command(NamedTuple):
     tau_q_nm: np.ndarray
 
 
-@dataclass(frozen=True)
-class StepTerms:
+class StepTerms(NamedTuple):
     """The model and task terms a step evaluated, for laws built on it (amcore.offboard)."""
 
     M_inv: np.ndarray  # M^-1 (eq. dynamics)
@@ -290,14 +289,14 @@ def _readers(n: int) -> dict:
         "ydot", "F_y", "wrench_W_filtered", "wrench_E_filtered", "u", "Lambda_y")}
     g = at["guard"][0].start
     f = at["wrench_W_filtered"][0].start
+    terms = tuple(_view(*at[k]) for k in StepTerms._fields)  # in StepTerms' order
     r.update(
         F_rc=lambda a: a[f:f + 3],
         sigma_min_J3=lambda a: float(a[g]),
         damping=lambda a: float(a[g + 1]),
         com_err_saturated=lambda a: bool(a[g + 2]),
         y_err_saturated=lambda a: bool(a[g + 3]),
-        terms=lambda a: StepTerms(**{k: _view(*at[k])(a) for k in (
-            "M_inv", "T_inv", "Lambda_w", "Gamma_xi_xi", "J_y", "J_e_xi")}),
+        terms=lambda a: StepTerms(*[view(a) for view in terms]),
     )
     return r
 

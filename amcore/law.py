@@ -13,6 +13,7 @@ the functions below turn them into the decoupled dynamics and the control law.
     orientation_law       eq. ori_error, ori_vel_error, ori_controller: u_2
     impedance_law         eq. u3: u_3, with the singularity guard
     control_law           all of them, in order, for one step; its results packed in one array
+    attitude_mode_torques attitude mode's body torque estimate and joint torques (amcore.offboard)
 
 This module imports numpy and numba only (no I/O). Small dense linear algebra is written
 out as loops (numba compiles them; at these sizes a call into BLAS or LAPACK costs more
@@ -692,3 +693,70 @@ def control_law(m, g, R, p_WB, w_B, V, Jcom, M_inv, C, H_WE, J_e, Jdot_e,
         tau, r_c, rdot_c, e, e_R, e_w, R_d.ravel(), q_d, w_bd, wdot_bd, Omega_d, f_d,
         y, y_err, ydot, F_y, x_W, wrench_E_f, x_W, xdot_W, u, Lambda_y.ravel(), flags,
         Lambda_w.ravel(), G, T_inv.ravel(), M_inv.ravel(), J_y.ravel(), J_e_xi.ravel()))
+
+
+# ----------------------------------------------------------------------------- attitude mode
+# amcore.offboard's item 1 (its module doc has the derivation): the body torque of the last
+# control period from row 2 of eq. new_dynamics, and eq. u_bar's joint torques for it.
+@kernel
+def offboard_rest(G_w, F_wb, K, thrust, tau_q):
+    """r = Gamma_wb w_b + Gamma_wb,rho rho - s F_wb^ - K_f f^- - K_q tau_q^-, with K = T^-T's
+    middle block row (u_2 = K tau: K_f its thrust column, K_q its joint columns) and F_wb^ zero
+    where the wrench is not compensated."""
+    return G_w - F_wb - K[:, 2] * thrust - mv(K[:, 6:], tau_q)
+
+
+@kernel
+def body_torque_from_rate(Lambda_w, w, w_prev, dt, r):
+    """tau_b^ = Lambda_wb (w_b - w_b^-) / dt + r: row 2 of eq. new_dynamics with the angular
+    acceleration as the backward difference of the measured (or low-passed) body rate."""
+    return mv(Lambda_w, (w - w_prev) / dt) + r
+
+
+@kernel
+def joint_torques_for_body_torque(J_y, M_inv, Lambda_y, damping, tau_b_p, tau_q_p, tau_b):
+    """tau_q solving eq. u_bar with the body torque tau_b in place of torque mode's tau_b^p:
+    tau_q^p - (J_y M^-1)_q^-1 (J_y M^-1)_w (tau_b - tau_b^p), by the damped least squares of
+    eq. u3 in Lambda_y's metric where the step damped (damping > 0)."""
+    JyMi = mm(J_y, M_inv)
+    A = JyMi[:, 6:]
+    rhs = mv(JyMi[:, 3:6], tau_b - tau_b_p)
+    if damping > 0.0:
+        A = mm(Lambda_y, A)
+        rhs = mv(Lambda_y, rhs)
+        return tau_q_p - mtv(A, solve(mmt(A, A) + damping * np.eye(A.shape[0]), rhs))
+    return tau_q_p - solve(A, rhs)
+
+
+@kernel
+def attitude_mode_torques(Lambda_w, G, T_inv, J_e_xi, wrench_E_f, s, J_y, M_inv, Lambda_y, damping, thrust,
+                          tau_b_p, tau_q_p, thrust_prev, tau_q_prev, w, w_prev, dt, Phi, w_filter, r_filter):
+    """amcore.offboard's item 1 on a control step with a measurement before it (dt > 0):
+    tau_b^, then the joint torques for it. f, tau_b^p, tau_q^p: torque mode's answer (eq. u3,
+    the thrust sent as it is); s = 1 with force compensation (F_wb^ = ((J_e T^-1)^T F_e)_w from the
+    filtered F/T reading), else 0; f^-, tau_q^-: the last thrust and joint torques (sent or
+    reported); w, w_prev: the body rate now and at the last step.
+
+    Phi: the low-pass's transition over dt (offboard_torque_cutoff_hz > 0; a 0x0 array for
+    the plain backward difference); w_filter, r_filter: the filters' states, rows (x, xdot),
+    of w_b and of r (r_filter with no rows until the filter starts, on its input).
+    Returns (tau, u = T^-T tau, w_filter, r_filter) with tau = [0, 0, f, tau_b^, tau_q]."""
+    K = T_inv[:, 3:6].T
+    r = offboard_rest(G[3:6], s * mtv(J_e_xi[:, 3:6], wrench_E_f), K, thrust_prev, tau_q_prev)
+    if Phi.shape[0] == 0:
+        tau_b = body_torque_from_rate(Lambda_w, w, w_prev, dt, r)
+        w_new, r_new = w_filter, r_filter
+    else:
+        w_new = np.empty((2, 3))
+        w_new[0], w_new[1] = lowpass_step(w_filter[0], w_filter[1], w, Phi)
+        r_new = np.zeros((2, 3))
+        if r_filter.shape[0] == 0:
+            r_new[0] = r
+        else:
+            r_new[0], r_new[1] = lowpass_step(r_filter[0], r_filter[1], r, Phi)
+        tau_b = body_torque_from_rate(Lambda_w, w_new[0], w_filter[0], dt, r_new[0])
+    tau = np.zeros(T_inv.shape[0])
+    tau[2] = thrust
+    tau[3:6] = tau_b
+    tau[6:] = joint_torques_for_body_torque(J_y, M_inv, Lambda_y, damping, tau_b_p, tau_q_p, tau_b)
+    return tau, mtv(T_inv, tau), w_new, r_new

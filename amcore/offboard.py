@@ -64,12 +64,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
 
-from . import linalg3
+from . import law, linalg3
 from .config import VehicleParams
 from .control import Command, ControllerMemory, ControllerParams, Reference, StepResult, step
 from .filters import FilterState, LowPass2, lowpass_update
@@ -91,7 +92,7 @@ class OffboardParams:
     def from_vehicle(v: VehicleParams) -> "OffboardParams":
         return OffboardParams(v.options.offboard_inputs, v.options.offboard_torque_cutoff_hz)
 
-    @property
+    @cached_property
     def torque_filter(self) -> LowPass2 | None:
         return LowPass2(self.torque_cutoff_hz, BUTTERWORTH_ZETA) if self.torque_cutoff_hz > 0.0 else None
 
@@ -202,25 +203,68 @@ def joint_torques_for_body_torque(res: StepResult, tau_b: np.ndarray) -> np.ndar
 def offboard_step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmState, ref: Reference,
                   wrench_E: np.ndarray, memory: OffboardMemory, t_s: float,
                   task_frame: TaskFrame | None = None, oparams: OffboardParams = OffboardParams(),
-                  applied: Applied | None = None) -> OffboardResult:
+                  applied: Applied | None = None, compiled: bool = True) -> OffboardResult:
     """One attitude-mode control step: torque mode's step (with `task_frame` as there), then
     the joint torques for the estimated body torque (module doc). The command's thrust, R_d and w_b,d (diagnostics)
     go to the autopilot, its joint torques to the arm. `oparams` and `applied`: the options
-    and, with offboard_inputs = "reported", what the vehicle reports it applied."""
+    and, with offboard_inputs = "reported", what the vehicle reports it applied.
+
+    compiled: the estimate and the joint torques as `amcore.law.attitude_mode_torques` (one
+    compiled call), else as the numpy functions above (the form the tests compare it with;
+    the two agree to rounding)."""
     res = step(model, data, params, state, ref, wrench_E, memory.controller, t_s, task_frame)
     c, d = res.command, res.diagnostics
     reported = applied if oparams.inputs == "reported" else None
-    w_f = r_f = None
-    if oparams.torque_cutoff_hz > 0.0:
-        tau_b, w_f, r_f = filtered_body_torque_estimate(params, oparams, res, memory, state, t_s, reported)
+    if compiled:
+        tau, d.u, w_f, r_f, estimated = _estimate_compiled(params, oparams, res, memory, state, t_s, reported)
     else:
-        tau_b = body_torque_estimate(params, res, memory, state, t_s, reported)
-    if tau_b is None:
-        tau_b, tau_q = c.tau_B_nm, c.tau_q_nm
-    else:
-        tau_q = joint_torques_for_body_torque(res, tau_b)
-    tau = np.concatenate(([0.0, 0.0, c.thrust_n], tau_b, tau_q))
-    d.tau, d.u = tau, d.terms.T_inv.T.dot(tau)  # the bookkeeping: what the vehicle received
+        w_f = r_f = None
+        if oparams.torque_cutoff_hz > 0.0:
+            tau_b, w_f, r_f = filtered_body_torque_estimate(params, oparams, res, memory, state, t_s, reported)
+        else:
+            tau_b = body_torque_estimate(params, res, memory, state, t_s, reported)
+        estimated = tau_b is not None
+        if tau_b is None:
+            tau_b, tau_q = c.tau_B_nm, c.tau_q_nm
+        else:
+            tau_q = joint_torques_for_body_torque(res, tau_b)
+        tau = np.concatenate(([0.0, 0.0, c.thrust_n], tau_b, tau_q))
+        d.u = d.terms.T_inv.T.dot(tau)
+    d.tau = tau  # the bookkeeping: what the vehicle received (u = T^-T tau above)
     cmd = Command(c.thrust_n, tau[3:6], tau[6:])
     mem = OffboardMemory(res.memory, t_s, tuple(state.w_B.tolist()), c.thrust_n, cmd.tau_q_nm, w_f, r_f)
-    return OffboardResult(StepResult(cmd, d, res.memory), mem, None if tau_b is c.tau_B_nm else tau_b)
+    return OffboardResult(StepResult(cmd, d, res.memory), mem, cmd.tau_B_nm if estimated else None)
+
+
+_NO_ROWS = np.zeros((0, 3))  # a filter not started yet (amcore.law.attitude_mode_torques)
+_NO_PHI = np.zeros((0, 0))  # no filter: the plain backward difference
+
+
+def _estimate_compiled(params: ControllerParams, oparams: OffboardParams, res: StepResult, memory: OffboardMemory,
+                       state: AmState, t_s: float, applied: Applied | None):
+    """(tau, u = T^-T tau, LP(w_b)'s state, LP(r)'s state, whether tau_b^ was estimated) of
+    `offboard_step` by amcore.law.attitude_mode_torques; on the first step (nothing measured
+    yet) torque mode's answer, and the filter of w_b started."""
+    c, d = res.command, res.diagnostics
+    filtered = oparams.torque_cutoff_hz > 0.0
+    measured = memory.w_filter is not None if filtered else memory.w_B is not None
+    if memory.t_s is None or not measured or memory.tau_q_nm is None or not t_s > memory.t_s:
+        tau = np.concatenate(([0.0, 0.0, c.thrust_n], c.tau_B_nm, c.tau_q_nm))
+        w_f = lowpass_update(oparams.torque_filter, None, state.w_B, 0.0) if filtered else None
+        return tau, d.terms.T_inv.T.dot(tau), w_f, None, False
+    dt, w = t_s - memory.t_s, np.array(state.w_B, dtype=float)
+    if filtered:
+        Phi, w_prev = oparams.torque_filter.transition(dt), w  # w_prev unused: the filter's state has it
+        w_filter = np.array(memory.w_filter)
+        r_filter = _NO_ROWS if memory.r_filter is None else np.array(memory.r_filter)
+    else:
+        Phi, w_prev, w_filter, r_filter = _NO_PHI, np.array(memory.w_B), _NO_ROWS, _NO_ROWS
+    thrust, tau_q = _last_inputs(memory, applied)
+    tm = d.terms
+    tau, u, w_filter, r_filter = law.attitude_mode_torques(
+        tm.Lambda_w, tm.Gamma_xi_xi, tm.T_inv, tm.J_e_xi, d.wrench_E_filtered, 1.0 if params.force_compensation else 0.0,
+        tm.J_y, tm.M_inv, d.Lambda_y, d.damping, c.thrust_n, c.tau_B_nm, c.tau_q_nm, float(thrust),
+        np.array(tau_q, dtype=float), w, w_prev, dt, Phi, w_filter, r_filter)
+    if not filtered:
+        return tau, u, None, None, True
+    return tau, u, FilterState(w_filter[0], w_filter[1]), FilterState(r_filter[0], r_filter[1]), True

@@ -190,3 +190,32 @@ def test_the_filtered_estimate_attenuates_gyro_noise_as_its_bandwidth_says(model
     raw = np.array(raw)
     ratio = (est - est.mean(axis=0)).std() / (raw - raw.mean(axis=0)).std()
     assert ratio < 0.5
+
+
+@pytest.mark.parametrize("inputs,cutoff_hz", [("sent", 0.0), ("reported", 0.0), ("sent", 40.0), ("reported", 40.0)])
+@pytest.mark.parametrize("comp,damped", [(True, False), (False, False), (True, True)])
+def test_the_compiled_step_is_the_numpy_functions_to_rounding(model, mission, params, inputs, cutoff_hz, comp, damped):
+    """offboard_step through amcore.law.attitude_mode_torques and through the numpy functions
+    of amcore.offboard, fed the same sequence (reports missing on some steps, the arm's
+    inversion damped or not): the same tau, u = T^-T tau, estimate and filter states."""
+    params = dataclasses.replace(params, force_compensation=comp, **({"sigma_damping": 1e3} if damped else {}))
+    oparams = OffboardParams(inputs, cutoff_hz)
+    rng = np.random.default_rng(61)
+    mems = [OffboardMemory(), OffboardMemory()]
+    for k in range(12):
+        t = 4.0 + 4e-3 * k
+        st, F_e = near_reference(mission, model, t, rng, scale=0.5), _wrench(rng)
+        applied = Applied(20.0 + rng.normal(), rng.normal(size=model.n)) if k % 3 else Applied()
+        out = [offboard_step(model, create_data(model), params, st, mission.reference(t), F_e, mem, t,
+                             oparams=oparams, applied=applied, compiled=c) for mem, c in zip(mems, (True, False))]
+        fast, slow = (o.result.diagnostics for o in out)
+        assert (fast.damping > 0.0) == damped
+        assert (out[0].tau_b_hat is None) == (out[1].tau_b_hat is None) == (k == 0)
+        np.testing.assert_allclose(fast.tau, slow.tau, rtol=1e-12, atol=1e-12 * np.abs(slow.tau).max())
+        np.testing.assert_allclose(fast.u, slow.u, rtol=1e-12, atol=1e-12 * np.abs(slow.u).max())
+        np.testing.assert_array_equal(out[0].result.command.tau_q_nm, fast.tau[6:])
+        for a, b in ((out[0].memory.w_filter, out[1].memory.w_filter), (out[0].memory.r_filter, out[1].memory.r_filter)):
+            assert (a is None) == (b is None)
+            if a is not None:
+                np.testing.assert_allclose(np.array(a), np.array(b), rtol=1e-12, atol=1e-12)
+        mems = [o.memory for o in out]
