@@ -150,8 +150,8 @@ class Allocation:
             from . import allocation_kernels
             self._kernel = allocation_kernels.allocate
             self._c = allocation_kernels.constants((self._roll, self._pitch, self._yaw, self._thrust), self.out_min,
-                                                   self._eff)
-            self._result = np.zeros(self.count + 9)
+                                                   self._eff, self._f_max)
+            self._result = np.zeros(2 * self.count + 9)
 
     # ------------------------------------------------------------------ desaturation
     def _gain(self, v, out, hi: float) -> float:
@@ -181,7 +181,7 @@ class Allocation:
     def allocate(self, roll: float, pitch: float, yaw: float, thrust: float) -> AllocationResult:
         """Outputs for normalized (roll, pitch, yaw) torque and thrust (mixAirmodeDisabled)."""
         if self.compiled:
-            return self._allocate_compiled(roll, pitch, yaw, thrust)
+            return self.allocate_thrusts(roll, pitch, yaw, thrust)[0]
         r, p, y, t = self._roll, self._pitch, self._yaw, self._thrust
         lo, hi = self.out_min, self.out_max
         out = [roll * a + pitch * b + thrust * c for a, b, c in zip(r, p, t)]
@@ -202,17 +202,23 @@ class Allocation:
         axes = tuple(bool(abs(u) > SATURATION_TOL) for u in unallocated)
         return AllocationResult(out, allocated, unallocated, any(axes), axes)
 
-    def _allocate_compiled(self, roll: float, pitch: float, yaw: float, thrust: float) -> AllocationResult:
-        """`allocate` by `amcore.allocation_kernels.allocate`."""
+    def allocate_thrusts(self, roll: float, pitch: float, yaw: float,
+                         thrust: float) -> tuple[AllocationResult, tuple[float, ...]]:
+        """`allocate`, and the rotor thrusts [N] its outputs command (each output times its
+        rotor's most thrust); compiled: by `amcore.allocation_kernels.allocate`."""
+        if not self.compiled:
+            a = self.allocate(roll, pitch, yaw, thrust)
+            return a, tuple([u * m for u, m in zip(a.outputs, self._f_max)])
         self._kernel(self._c, roll, pitch, yaw, thrust, self.out_max, _WEAK_EFFECTIVENESS, _YAW_MARGIN, self._result)
         v, n = self._result.tolist(), self.count
+        thrusts = tuple(v[n + 9:])
         if v[n + 8] == 0.0:
             return _built(AllocationResult, outputs=tuple(v[:n]), allocated=(roll, pitch, yaw, thrust),
-                          unallocated=_NONE_UNALLOCATED, saturated=False, saturated_axes=_NO_AXES)
+                          unallocated=_NONE_UNALLOCATED, saturated=False, saturated_axes=_NO_AXES), thrusts
         unallocated = tuple(v[n + 4:n + 8])
         axes = tuple([abs(u) > SATURATION_TOL for u in unallocated])
         return _built(AllocationResult, outputs=tuple(v[:n]), allocated=tuple(v[n:n + 4]), unallocated=unallocated,
-                      saturated=any(axes), saturated_axes=axes)
+                      saturated=any(axes), saturated_axes=axes), thrusts
 
     # ------------------------------------------------------------------ physical units
     def normalized(self, thrust_n: float, tau_B_nm) -> tuple[float, float, float, float]:
@@ -233,8 +239,7 @@ class Allocation:
         thrust_n = float(thrust_n)
         if not (math.isfinite(thrust_n) and math.isfinite(tx + ty + tz)):
             raise ValueError(f"non-finite command: thrust_n = {thrust_n}, tau_B_nm = {[tx, ty, tz]}")
-        a = self.allocate(*self.normalized(thrust_n, (tx, ty, tz)))
-        f = tuple([u * m for u, m in zip(a.outputs, self._f_max)])
+        a, f = self.allocate_thrusts(*self.normalized(thrust_n, (tx, ty, tz)))
         F, tau = self.wrench(f)
         return _built(WrenchAllocation, rotor_thrusts_n=f, force_B_n=F, tau_B_nm=tau, allocation=a)
 

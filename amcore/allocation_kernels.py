@@ -4,12 +4,13 @@ method, one small kernel each, in the same order on IEEE doubles, so that the co
 allocation gives bit for bit what the Python one gives (tests/amcore/test_allocation_kernels.py).
 
 The rotor table's constants travel in one array (`constants`: the mix's roll, pitch, yaw and
-thrust columns, each rotor's least output, the normalized effectiveness rows); `allocate`
-writes the outputs, the allocated and the unallocated control and whether it desaturated
-into one array. Python's `min` and `max` keep their first argument on ties (`_min`, `_max`).
-Imported only by an `Allocation(compiled=True)` (the simulator's): the pure modules that
-check rotor tables do not load numba. Kernels here call only kernels of this file (numba's
-cache is keyed per source file; see amcore.jit).
+thrust columns, each rotor's least output, the normalized effectiveness rows, each rotor's
+most thrust); `allocate` writes the outputs, the allocated and the unallocated control,
+whether it desaturated and the rotor thrusts into one array. Python's `min` and `max` keep
+their first argument on ties (`_min`, `_max`). Imported only by an
+`Allocation(compiled=True)` (the simulator's): the pure modules that check rotor tables do
+not load numba. Kernels here call only kernels of this file (numba's cache is keyed per
+source file; see amcore.jit).
 """
 from __future__ import annotations
 
@@ -17,10 +18,10 @@ import numpy as np
 
 from .jit import kernel
 
-# rows of the constants array (each `count` long): the mix's columns, the least outputs, and
-# the normalized effectiveness rows of roll, pitch, yaw and thrust
-ROLL, PITCH, YAW, THRUST, OUT_MIN, EFF = 0, 1, 2, 3, 4, 5
-N_ROWS = 9
+# rows of the constants array (each `count` long): the mix's columns, the least outputs, the
+# normalized effectiveness rows of roll, pitch, yaw and thrust, each rotor's most thrust [N]
+ROLL, PITCH, YAW, THRUST, OUT_MIN, EFF, F_MAX = 0, 1, 2, 3, 4, 5, 9
+N_ROWS = 10
 
 
 @kernel
@@ -64,10 +65,9 @@ def desaturate(out, v, out_min, hi, weak, thrust_down_only):
 
 
 @kernel
-def allocate(c, roll, pitch, yaw, thrust, hi, weak, yaw_margin, result):
-    """Outputs for normalized (roll, pitch, yaw) torque and thrust (mixAirmodeDisabled) into
-    result: the outputs (count), the allocated and the unallocated control (4 each), then 1.0
-    if it desaturated (else the request is met exactly and the two middle parts are unset)."""
+def mix_and_desaturate(c, roll, pitch, yaw, thrust, hi, weak, yaw_margin, result):
+    """`allocate` up to the rotor thrusts: the outputs, the allocated and the unallocated
+    control, whether it desaturated."""
     n = c.shape[1]
     r, p, y, t, lo = c[ROLL], c[PITCH], c[YAW], c[THRUST], c[OUT_MIN]
     out = np.empty(n)
@@ -103,7 +103,25 @@ def allocate(c, roll, pitch, yaw, thrust, hi, weak, yaw_margin, result):
     result[n + 8] = 1.0
 
 
-def constants(mix_columns, out_min, effectiveness_rows) -> np.ndarray:
+@kernel
+def rotor_thrusts(c, result):
+    """Each rotor's thrust [N]: its output times its most thrust, after the outputs."""
+    n = c.shape[1]
+    for i in range(n):
+        result[n + 9 + i] = result[i] * c[F_MAX, i]
+
+
+@kernel
+def allocate(c, roll, pitch, yaw, thrust, hi, weak, yaw_margin, result):
+    """Outputs for normalized (roll, pitch, yaw) torque and thrust (mixAirmodeDisabled) into
+    result: the outputs (count), the allocated and the unallocated control (4 each), 1.0 if it
+    desaturated (else the request is met exactly and the two middle parts are unset), then
+    the rotor thrusts [N] the outputs command (count; `rotor_thrusts`)."""
+    mix_and_desaturate(c, roll, pitch, yaw, thrust, hi, weak, yaw_margin, result)
+    rotor_thrusts(c, result)
+
+
+def constants(mix_columns, out_min, effectiveness_rows, thrust_max_n) -> np.ndarray:
     """The (N_ROWS, count) constants array of `allocate`."""
     return np.vstack([np.array(mix_columns, dtype=float), np.array(out_min, dtype=float)[None, :],
-                      np.array(effectiveness_rows, dtype=float)])
+                      np.array(effectiveness_rows, dtype=float), np.array(thrust_max_n, dtype=float)[None, :]])

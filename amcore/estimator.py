@@ -214,14 +214,22 @@ def odometry(x, lpf, coef, omega_m, out):
 
 
 @kernel
-def estimator_step(x, hist, lpf, coef, k, omega_m, f_m, dt, g, has_pose, lag, p_m, q_m, gains, out):
+def estimator_update(x, hist, lpf, coef, k, omega_m, f_m, dt, g, has_pose, lag, p_m, q_m, gains, out, nu):
     """One IMU step: `predict`, then `fuse_pose` if a pose arrived this step, then the
-    odometry frame into out. Returns the innovations (zero without a pose)."""
+    odometry frame into out; the innovations into nu (6,) (zero without a pose)."""
     predict(x, hist, k, omega_m, f_m, dt, g)
-    nu = np.zeros(6)
     if has_pose:
-        nu = fuse_pose(x, hist, k, lag, p_m, q_m, gains, dt)
+        nu[:] = fuse_pose(x, hist, k, lag, p_m, q_m, gains, dt)
+    else:
+        nu[:] = 0.0
     odometry(x, lpf, coef, omega_m, out)
+
+
+@kernel
+def estimator_step(x, hist, lpf, coef, k, omega_m, f_m, dt, g, has_pose, lag, p_m, q_m, gains, out):
+    """`estimator_update` returning the innovations as a new array."""
+    nu = np.zeros(6)
+    estimator_update(x, hist, lpf, coef, k, omega_m, f_m, dt, g, has_pose, lag, p_m, q_m, gains, out, nu)
     return nu
 
 
@@ -234,11 +242,14 @@ def loop_gains(attitude_bandwidth_radps: float, position_bandwidth_radps: float,
 
 class Estimator:
     """One vehicle's filter: the state, its history and the gyro low-pass, and `step` once per
-    IMU sample. Construct it at the vehicle's first pose (at rest: v = 0, biases 0)."""
+    IMU sample. Construct it at the vehicle's first pose (at rest: v = 0, biases 0). `out` and
+    `innovation` (r [m], e [rad]) hold the last step's odometry and innovations, updated in place."""
 
     def __init__(self, p_WB, quat_WB_wxyz, dt_s: float, frame_period_s: float, g: float,
                  attitude_bandwidth_radps: float, position_bandwidth_radps: float,
-                 gyro_cutoff_hz: float, history_steps: int) -> None:
+                 gyro_cutoff_hz: float, history_steps: int, out: np.ndarray | None = None) -> None:
+        """out: where `step` writes the odometry (N_OUT,), e.g. the head of a caller's larger
+        array (a view); None: an array of its own."""
         self.x = np.zeros(N_STATE)
         self.x[P:P + 3] = p_WB
         self.x[Q:Q + 4] = quat_WB_wxyz
@@ -247,7 +258,7 @@ class Estimator:
         self.lpf = np.zeros((2, 3))
         self.gains = loop_gains(attitude_bandwidth_radps, position_bandwidth_radps, frame_period_s)
         self.dt, self.g = dt_s, g
-        self.out = np.zeros(N_OUT)
+        self.out = np.zeros(N_OUT) if out is None else out
         self.innovation = np.zeros(6)
         self._started = False
         self._none = np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
@@ -268,8 +279,8 @@ class Estimator:
             has = True
             if not 0 <= lag < self.hist.shape[0]:
                 raise ValueError(f"pose lag {lag} steps outside the estimator's history ({self.hist.shape[0]})")
-        self.innovation = estimator_step(self.x, self.hist, self.lpf, self.coef, k, omega_m, f_m, dt, self.g,
-                                         has, lag, p_m, q_m, self.gains, self.out)
+        estimator_update(self.x, self.hist, self.lpf, self.coef, k, omega_m, f_m, dt, self.g, has, lag, p_m, q_m,
+                         self.gains, self.out, self.innovation)
         return self.out
 
     @property

@@ -347,7 +347,8 @@ class SitlCore:
             return
         if self.fcs:
             odo = self._odometry.get(s)  # [devices]: the autopilot flies on its estimator's attitude
-            quat, w_B = self.world.attitude_and_rate(s) if odo is None else (odo[3:7], self.devices[s].autopilot_rate)
+            quat, w_B = self.world.attitude_and_rate(s) if odo is None else (odo[3:7],
+                                                                             self.devices[s].autopilot_rate.tolist())
             out = self.fcs[s].step(quat, w_B, sp.attitude)
             axes = out.allocation.saturated_axes
             joints = self.world.apply_rotors(s, out.rotor_thrusts_n, sp.tau_q_nm, axes)

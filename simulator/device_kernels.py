@@ -1,22 +1,33 @@
-"""The devices' per-step arithmetic compiled (numba, as amcore.law): the IMU's biases and
-noise, the F/T sensor's drift, noise and tare, the encoders' quantization. The same
-equations as the Python classes of `simulator.devices`, element by element in the same
-order on IEEE doubles, so that `DeviceSuite(compiled=True)` reports bit for bit what the
-Python devices report (tests/simulator/test_device_kernels.py).
+"""The devices' per-step arithmetic compiled (numba, as amcore.law): the base's truth as the
+IMU sees it, the IMU's biases and noise, the F/T sensor's drift, noise and tare, the encoders'
+quantization. The same equations as the Python classes of `simulator.devices`, element by
+element in the same order on IEEE doubles, so that `DeviceSuite(compiled=True)` reports bit
+for bit what the Python devices report (tests/simulator/test_device_kernels.py).
 
-What stays in numpy, before the kernel: the two 3x3 products of `DeviceSuite` (R_WB v_B and
-R_WB^T (a_W + g e_3)), which numpy hands to BLAS, whose fused multiply-adds round otherwise
-than a plain loop; the random draws (`NoiseBlock`: a block of a device's stream at once,
+The truth's two 3x3 products (R_WB v_B and R_WB^T (a_W + g e_3)) are numpy's in the Python
+devices, and numpy hands them to BLAS, whose fused multiply-adds round otherwise than a plain
+loop. `mat_vec` and `mat_t_vec` make them with fused multiply-adds in the order OpenBLAS's
+dgemv kernels use (what numpy calls on this machine); `products_match_numpy` checks that
+they agree with numpy here, and `DeviceSuite` runs its Python devices where they do not.
+
+What stays in Python: the random draws (`NoiseBlock`: a block of a device's stream at once,
 the same numbers in the same order); the motion capture (one frame in ten steps) and the
-estimator (`amcore.estimator`, compiled there).
+estimator (`amcore.estimator`, compiled there: a kernel of another file, which these may
+not call).
 
-State and constants travel in small arrays, named by the `IMU_*` and `FT_*` offsets.
-Kernels here call only kernels of this file (numba's cache is keyed per source file; see
-amcore.jit).
+State and constants travel in small arrays, named by the `IMU_*`, `FT_*`, `TRUTH_*`, `C_*`
+and `S_*` offsets. Kernels here call only kernels of this file (numba's cache is keyed per
+source file; see amcore.jit).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from amcore.jit import kernel
 
@@ -32,6 +43,71 @@ FT_OFFSET, FT_TARE, FT_SUM, FT_COUNT, FT_TARED = 0, 6, 12, 18, 19
 N_FT_STATE = 20
 FT_DRIFT, FT_SIGMA, FT_LO, FT_HI = 0, 6, 12, 13
 N_FT = 14
+# the truth's state: the base's world velocity at the last step, whether there was one
+TRUTH_V_W, TRUTH_STARTED = 0, 3
+N_TRUTH = 4
+# `suite_step`'s constants and state, one array each (a call's cost grows with its arguments):
+# constants: the IMU's, the F/T sensor's, the physics step [s], g [m/s^2], the encoders' steps;
+# state: the truth's, the IMU's biases (the Gauss-Markov parts), its last sample, the F/T sensor's
+C_IMU, C_FT, C_DT, C_G, C_DQ, C_DQDOT = 0, N_IMU, N_IMU + N_FT, N_IMU + N_FT + 1, N_IMU + N_FT + 2, N_IMU + N_FT + 3
+N_C = N_IMU + N_FT + 4
+S_TRUTH, S_B_G, S_B_A, S_OMEGA_M, S_F_M, S_FT = 0, N_TRUTH, N_TRUTH + 3, N_TRUTH + 6, N_TRUTH + 9, N_TRUTH + 12
+N_S = N_TRUTH + 12 + N_FT_STATE
+
+
+# ----------------------------------------------------------------------------- the truth
+@intrinsic
+def _fma(typingctx, a, b, c):
+    """a b + c rounded once (LLVM's llvm.fma.f64, in hardware or not): the fused
+    multiply-add of OpenBLAS's kernels."""
+    def codegen(context, builder, signature, args):
+        d = ir.DoubleType()
+        fma = cgutils.get_or_insert_function(builder.module, ir.FunctionType(d, [d, d, d]), "llvm.fma.f64")
+        return builder.call(fma, args)
+    return types.float64(types.float64, types.float64, types.float64), codegen
+
+
+@kernel
+def mat_vec(R, v, out):
+    """numpy's R @ v for a C-ordered (3, 3) R, rounded as OpenBLAS's dgemv_t computes it (a
+    row's three products summed by its compiler's fused multiply-adds, added to y = 0)."""
+    for i in range(3):
+        out[i] = 0.0 + _fma(R[i, 2], v[2], _fma(R[i, 0], v[0], R[i, 1] * v[1]))
+
+
+@kernel
+def mat_t_vec(R, u, out):
+    """numpy's R.T @ u for a C-ordered (3, 3) R (R.T Fortran-ordered), rounded as OpenBLAS's
+    dgemv_n computes it: y = 0, then y += R[j] u_j row after row by fused multiply-adds."""
+    for i in range(3):
+        out[i] = _fma(R[2, i], u[2], _fma(R[1, i], u[1], _fma(R[0, i], u[0], 0.0)))
+
+
+@kernel
+def rotation(q):
+    """R_WB of unit quaternion q_WB (amcore.estimator.rotation, term for term: a kernel of
+    another file, which these may not call)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return np.array([[1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
+                     [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
+                     [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)]])
+
+
+@kernel
+def specific_force(x, dt, g, s, f_B):
+    """`DeviceSuite._truth` and `Imu.sample`'s f_B = R_WB^T (a_W + g e_3) [m/s^2] from the
+    base's exact values x (p_WB, quat_WB, v_B, w_B, ...): v_W = R_WB v_B, a_W = (v_W - v_W,prev)
+    / dt (0 at the first step); s: the truth's state (`TRUTH_*`), updated."""
+    R = rotation(x[3:7])
+    v_W = np.empty(3)
+    mat_vec(R, x[7:10], v_W)
+    u = np.empty(3)
+    for i in range(3):
+        a_W = 0.0 if s[TRUTH_STARTED] == 0.0 else (v_W[i] - s[TRUTH_V_W + i]) / dt
+        u[i] = a_W + (g if i == 2 else 0.0)
+        s[TRUTH_V_W + i] = v_W[i]
+    s[TRUTH_STARTED] = 1.0
+    mat_t_vec(R, u, f_B)
 
 
 @kernel
@@ -101,3 +177,46 @@ def devices_advance(values, f_B, imu_c, b_g, b_a, imu_n, omega_m, f_m, ft_c, ft_
     quat_WB, v_B, w_B) and the F/T sensor's drift; nothing read of the arm or the wrist."""
     imu_sample(imu_c, b_g, b_a, f_B, values[10:13], imu_n, omega_m, f_m)
     ft_drift(ft_c, ft_s, ft_n)
+
+
+@kernel
+def suite_step(x, t, c, s, imu_n, ft_n, out):
+    """One physics step of `DeviceSuite`'s devices from the AM's exact values x: the truth
+    (`specific_force`), then `devices_sample` if x holds the arm's and the wrist's values
+    (the order of `World.sensor_values`; out (2 n_joints + 6,) the frame's tail), else
+    `devices_advance` (the base's 13 alone). c, s: the `C_*` constants and `S_*` state; the
+    IMU's sample (omega_m, f_m) is left in s; imu_n, ft_n: the step's draws of each."""
+    f_B = np.empty(3)
+    specific_force(x, c[C_DT], c[C_G], s[S_TRUTH:S_TRUTH + N_TRUTH], f_B)
+    imu_c, ft_c, ft_s = c[C_IMU:C_IMU + N_IMU], c[C_FT:C_FT + N_FT], s[S_FT:S_FT + N_FT_STATE]
+    b_g, b_a, omega_m, f_m = s[S_B_G:S_B_G + 3], s[S_B_A:S_B_A + 3], s[S_OMEGA_M:S_OMEGA_M + 3], s[S_F_M:S_F_M + 3]
+    if x.shape[0] > 13:
+        devices_sample(x, (out.shape[0] - 6) // 2, f_B, imu_c, b_g, b_a, imu_n, omega_m, f_m, c[C_DQ], c[C_DQDOT],
+                       ft_c, ft_s, t, ft_n, out)
+    else:
+        devices_advance(x, f_B, imu_c, b_g, b_a, imu_n, omega_m, f_m, ft_c, ft_s, ft_n)
+
+
+def products_match_numpy(cases: int = 256) -> bool:
+    """Whether `mat_vec` and `mat_t_vec` give numpy's products bit for bit (sign of zero
+    included) on rotations and vectors of every scale, zeros among them: true where numpy's
+    BLAS is the OpenBLAS whose kernels they follow."""
+    rng = np.random.default_rng(0xB1A5)
+    y = np.empty(3)
+    for i in range(cases):
+        q = rng.standard_normal(4)
+        if i % 3 == 0:
+            q[i % 4] = 0.0
+        q /= math.sqrt(float(q @ q))
+        R = rotation(q)
+        v = rng.standard_normal(3) * 10.0 ** rng.uniform(-3.0, 3.0)
+        if i % 4 == 0:
+            v[(i // 4) % 3] = 0.0
+        if i % 8 == 1:  # at rest: zero products, whose sum's sign the order decides
+            v = (-0.0 if i % 16 == 1 else 0.0) * v
+        for product, expected in ((mat_vec, R @ v), (mat_t_vec, R.T @ v)):
+            product(R, v, y)
+            if not all(a == b and math.copysign(1.0, a) == math.copysign(1.0, b) for a, b in zip(y.tolist(),
+                                                                                             expected.tolist())):
+                return False
+    return True

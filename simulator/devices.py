@@ -16,9 +16,9 @@ parameters under the names of its reference model ([devices] in a scenario,
   random walk, and a tare (the driver's bias command) at a set time.
 - `Encoders`: joint positions quantized to whole counts, velocities to the servo's unit.
 
-The per-step arithmetic of the IMU, the encoders and the F/T sensor also runs compiled
-(`simulator.device_kernels`, numba), bit for bit as these classes compute it; `DeviceSuite`
-uses it unless built with compiled=False.
+The per-step arithmetic of the truth, the IMU, the encoders and the F/T sensor also runs
+compiled (`simulator.device_kernels`, numba; one call a step), bit for bit as these classes
+compute it; `DeviceSuite` uses it unless built with compiled=False.
 
 `DeviceSuite` holds one AM's devices and its `amcore.estimator.Estimator` (it runs where PX4
 runs EKF2, in the flight controller, and its output is the frame's odometry, as PX4 streams
@@ -27,6 +27,7 @@ ODOMETRY). `step(values, k)` takes the AM's exact values (the order of
 """
 from __future__ import annotations
 
+import functools
 import math
 from collections import deque
 from typing import NamedTuple
@@ -34,12 +35,19 @@ from typing import NamedTuple
 import numpy as np
 
 from amcore.config import DevicesSpec, EncoderSpec, ForceTorqueSpec, ImuSpec, MocapSpec
-from amcore.estimator import BG, Estimator, quat_exp, quat_mul, rotation
+from amcore.estimator import BG, N_OUT, Estimator, quat_exp, quat_mul, rotation
 
 from . import device_kernels as dk
 
 _STREAM = 0xDE71  # distinguishes the devices' streams from the other seeded streams of an AM
 IMU, MOCAP, FT = 1, 2, 3  # each device's sub-stream
+
+
+@functools.cache
+def _products_match_numpy() -> bool:
+    """Whether the compiled truth's products round as numpy's here (checked once a process;
+    `simulator.device_kernels.products_match_numpy`): else the Python devices run."""
+    return dk.products_match_numpy()
 
 
 class BodyTruth(NamedTuple):
@@ -112,6 +120,11 @@ class Mocap:
         return self.every
 
     def sample(self, truth: BodyTruth, t: float):
+        return self.sample_values(np.concatenate([truth.p_WB, truth.quat_WB]))
+
+    def sample_values(self, x: np.ndarray):
+        """`sample` from the base's exact values x (p_WB, quat_WB first, as `World.sensor_values`:
+        all a motion capture sees), read on the steps that capture a frame."""
         self._k = k = self._k + 1
         if k % self.every == 0:
             n = self.rng.standard_normal(6)
@@ -120,8 +133,8 @@ class Mocap:
             if lost:
                 self.dropped += 1
             else:
-                p = truth.p_WB + self.bias_p + self.sigma_p * n[0:3]
-                q = quat_mul(truth.quat_WB, quat_exp(self.bias_R + self.sigma_R * n[3:6]))
+                p = x[0:3] + self.bias_p + self.sigma_p * n[0:3]
+                q = quat_mul(x[3:7], quat_exp(self.bias_R + self.sigma_R * n[3:6]))
                 self._in_flight.append((k + self.lag, p, q))
         if self._in_flight and self._in_flight[0][0] == k:
             _, p, q = self._in_flight.popleft()
@@ -180,10 +193,12 @@ class DeviceSuite:
     device draws from its own stream, so changing one device's levels leaves the others'
     draws alone.
 
-    compiled: the IMU's, the encoders' and the F/T sensor's per-step arithmetic runs as
-    `simulator.device_kernels.devices_sample` (numba; the same numbers bit for bit, their
+    compiled: the truth's, the IMU's, the encoders' and the F/T sensor's per-step arithmetic
+    runs as `simulator.device_kernels.suite_step` (numba; the same numbers bit for bit, their
     draws taken in blocks), else through the device objects' `sample` (the Python form the
-    tests compare it with). The device objects hold the draws made at construction either way."""
+    tests compare it with; also where the kernels' products would not round as numpy's,
+    `device_kernels.products_match_numpy`). The device objects hold the draws made at
+    construction either way."""
 
     def __init__(self, spec: DevicesSpec, n_joints: int, dt_s: float, g: float, seed: int, sysid: int,
                  initial_values: list[float], compiled: bool = True) -> None:
@@ -201,30 +216,39 @@ class DeviceSuite:
         truth = self._truth(initial_values, None)
         p0 = truth.p_WB + self.mocap.bias_p
         q0 = quat_mul(truth.quat_WB, quat_exp(self.mocap.bias_R))
+        self._frame = np.empty(N_OUT + 2 * n_joints + 6)  # a frame's values (compiled: written in place)
         self.estimator = Estimator(p0, q0, dt_s, self.mocap.every * dt_s, g, e.attitude_bandwidth_radps,
-                                   e.position_bandwidth_radps, e.gyro_cutoff_hz, e.history_steps)
+                                   e.position_bandwidth_radps, e.gyro_cutoff_hz, e.history_steps,
+                                   out=self._frame[:N_OUT])
         self._v_W_prev: np.ndarray | None = None
+        self._b_g_estimate = self.estimator.x[BG:BG + 3]  # a view: the estimator updates it in place
         self._k = -1
-        self.compiled = compiled
-        if compiled:
+        self.compiled = compiled and _products_match_numpy()
+        if self.compiled:
             self._compiled_state()
 
     def _compiled_state(self) -> None:
-        """The device objects' constants and state as `simulator.device_kernels` takes them."""
+        """The device objects' constants and state as `simulator.device_kernels.suite_step`
+        takes them (one array each; the parts named here are views of them)."""
         imu, ft = self.imu, self.ft
-        c = np.zeros(dk.N_IMU)
-        c[[dk.IMU_PHI_G, dk.IMU_SIGMA_BG, dk.IMU_PHI_A, dk.IMU_SIGMA_BA, dk.IMU_SIGMA_G, dk.IMU_SIGMA_A]] = (
+        self._c, self._s = c, s = np.zeros(dk.N_C), np.zeros(dk.N_S)
+        self._imu_c = c[dk.C_IMU:dk.C_IMU + dk.N_IMU]
+        self._imu_c[[dk.IMU_PHI_G, dk.IMU_SIGMA_BG, dk.IMU_PHI_A, dk.IMU_SIGMA_BA, dk.IMU_SIGMA_G, dk.IMU_SIGMA_A]] = (
             imu.phi_g, imu.sigma_bg, imu.phi_a, imu.sigma_ba, imu.sigma_g, imu.sigma_a)
-        c[dk.IMU_TURN_ON_G:dk.IMU_TURN_ON_G + 3], c[dk.IMU_TURN_ON_A:dk.IMU_TURN_ON_A + 3] = imu.turn_on_g, imu.turn_on_a
-        self._imu_c, self._b_g, self._b_a = c, imu.b_g.copy(), imu.b_a.copy()
-        self._imu_noise, self._ft_noise = dk.NoiseBlock(imu.rng, 12), dk.NoiseBlock(ft.rng, 12)
-        self._ft_c = np.zeros(dk.N_FT)
+        self._imu_c[dk.IMU_TURN_ON_G:dk.IMU_TURN_ON_G + 3] = imu.turn_on_g
+        self._imu_c[dk.IMU_TURN_ON_A:dk.IMU_TURN_ON_A + 3] = imu.turn_on_a
+        self._ft_c = c[dk.C_FT:dk.C_FT + dk.N_FT]
         self._ft_c[dk.FT_DRIFT:dk.FT_DRIFT + 6], self._ft_c[dk.FT_SIGMA:dk.FT_SIGMA + 6] = ft.drift, ft.sigma
         self._ft_c[dk.FT_LO], self._ft_c[dk.FT_HI] = ft._window
-        self._ft_s = np.zeros(dk.N_FT_STATE)
+        self._tare_from = ft._window[0]  # `needs_reading`'s, on Python values
+        self._tare_pending = not ft.tared
+        c[dk.C_DT], c[dk.C_G], c[dk.C_DQ], c[dk.C_DQDOT] = self.dt, imu.g, self.encoders.dq, self.encoders.dqdot
+        s[dk.S_B_G:dk.S_B_G + 3], s[dk.S_B_A:dk.S_B_A + 3] = imu.b_g, imu.b_a
+        self._omega_m, self._f_m = s[dk.S_OMEGA_M:dk.S_OMEGA_M + 3], s[dk.S_F_M:dk.S_F_M + 3]
+        self._ft_s = s[dk.S_FT:dk.S_FT + dk.N_FT_STATE]
         self._ft_s[dk.FT_OFFSET:dk.FT_OFFSET + 6], self._ft_s[dk.FT_TARED] = ft.offset, 1.0 if ft.tared else 0.0
-        self._g_e3 = np.array([0.0, 0.0, self.imu.g])
-        self._omega_m, self._f_m, self._tail = np.empty(3), np.empty(3), np.empty(2 * self.n + 6)
+        self._imu_noise, self._ft_noise = dk.NoiseBlock(imu.rng, 12), dk.NoiseBlock(ft.rng, 12)
+        self._tail = self._frame[N_OUT:]
 
     def _truth(self, v: list[float], v_W_prev) -> BodyTruth:
         p = np.array(v[0:3])
@@ -258,41 +282,31 @@ class DeviceSuite:
         with the estimator's bias removed, which the loop filters once itself (IMU_GYRO_CUTOFF),
         as PX4's VehicleAngularVelocity takes EKF2's bias; the odometry's rate, already
         low-passed for the law, would be filtered twice. Formed when read (attitude mode only)."""
-        return self._omega_m - self.estimator.x[BG:BG + 3]
+        return self._omega_m - self._b_g_estimate
 
     def needs_reading(self, t: float) -> bool:
         """Whether a step at t needs the arm's and the wrist's values although no frame is sent:
         the F/T tare averages its readings until it is done."""
-        if self.compiled:
-            return self._ft_s[dk.FT_TARED] == 0.0 and t >= self._ft_c[dk.FT_LO]
-        return True
+        if not self.compiled:
+            return True
+        if self._tare_pending and self._ft_s[dk.FT_TARED] != 0.0:  # done by the last step's kernel
+            self._tare_pending = False
+        return self._tare_pending and t >= self._tare_from
 
     def _step_compiled(self, values: list[float], t: float) -> list[float]:
-        """`step` with the devices' arithmetic compiled (class doc); the truth's two products
-        as `_truth` and `Imu.sample` make them (numpy's). `values` may be the base's alone (the
-        first 13, `World.base_values`) on a step that sends no frame and reads no F/T
-        (`needs_reading` False): then only the odometry (the first 13 of a frame) is returned,
-        and the encoders are not read; the devices' draws and drift advance as on any step."""
+        """`step` with the devices' arithmetic compiled (class doc): one call of
+        `simulator.device_kernels.suite_step`, the motion capture, one of the estimator's.
+        `values` may be the base's alone (the first 13, `World.base_values`) on a step that
+        sends no frame and reads no F/T (`needs_reading` False): then only the odometry (the
+        first 13 of a frame) is returned, and the encoders are not read; the devices' draws
+        and drift advance as on any step."""
         self._k = k = self._k + 1
         x = np.array(values)
-        quat = x[3:7]
-        R = rotation(quat)
-        v_W = R @ np.array(values[7:10])  # as `_truth`: the product of a fresh array, numpy's
-        a_W = np.zeros(3) if self._v_W_prev is None else (v_W - self._v_W_prev) / self.dt
-        truth = BodyTruth(x[0:3], quat, R, v_W, x[10:13], a_W)
-        self._v_W_prev = v_W
-        f_B = R.T @ (a_W + self._g_e3)
-        full = len(values) > 13
-        if full:
-            dk.devices_sample(x, self.n, f_B, self._imu_c, self._b_g, self._b_a, self._imu_noise.next(),
-                              self._omega_m, self._f_m, self.encoders.dq, self.encoders.dqdot, self._ft_c, self._ft_s,
-                              t, self._ft_noise.next(), self._tail)
-        else:
-            if self.needs_reading(t):
-                raise ValueError(f"t = {t} s: the F/T tare needs this step's reading; give the full values")
-            dk.devices_advance(x, f_B, self._imu_c, self._b_g, self._b_a, self._imu_noise.next(),
-                               self._omega_m, self._f_m, self._ft_c, self._ft_s, self._ft_noise.next())
-        arrived = self.mocap.sample(truth, t)
+        full = x.shape[0] > N_OUT
+        if not full and self.needs_reading(t):
+            raise ValueError(f"t = {t} s: the F/T tare needs this step's reading; give the full values")
+        dk.suite_step(x, t, self._c, self._s, self._imu_noise.next(), self._ft_noise.next(), self._tail)
+        arrived = self.mocap.sample_values(x)
         pose, lag = arrived if arrived is not None else (None, 0)
-        odo = self.estimator.step(k, self._omega_m, self._f_m, pose, lag)
-        return [*odo.tolist(), *self._tail.tolist()] if full else odo.tolist()
+        odo = self.estimator.step(k, self._omega_m, self._f_m, pose, lag)  # into self._frame's head
+        return self._frame.tolist() if full else odo.tolist()

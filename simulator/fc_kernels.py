@@ -140,12 +140,25 @@ def lowpass2p_apply(p, at, s, d1, d2, i, x):
 
 # ----------------------------------------------------------------------------- the loops
 @kernel
-def rate_loops(p, s, quat_WB, w, quat_d, ff, out):
+def allocator_status(s, unallocated, saturated):
+    """The saturation per axis and direction that the last allocation left (PX4's
+    control_allocator_status), into s: an axis whose unallocated command is above (below)
+    +-1.2e-7 in an allocation that fell short may not integrate further up (down)."""
+    for ax in range(3):
+        s[S_SAT_POS + ax] = 1.0 if saturated and unallocated[ax] > 1.2e-7 else 0.0
+        s[S_SAT_NEG + ax] = 1.0 if saturated and unallocated[ax] < -1.2e-7 else 0.0
+
+
+@kernel
+def rate_loops(p, s, quat_WB, w, quat_d, ff, thrust, unallocated, saturated, out):
     """Steps 1 and 2 (attitude P loop, rate PID) of one loop period: quat_WB the vehicle's
     attitude and quat_d the target's ((w, x, y, z), normalized here), w the body rates
-    [rad/s], ff the target's body rates [rad/s]. Writes (rates_sp [rad/s], torque
-    [normalized]) into out (6,); updates the integral with the saturation the last
-    allocation left in s."""
+    [rad/s], ff the target's body rates [rad/s], thrust its normalized thrust. Writes
+    (rates_sp [rad/s], torque [normalized], the thrust within [0, 1] for step 3) into out (7,);
+    updates the integral with the saturation of the last allocation (its unallocated control
+    (4,) and whether it fell short: `allocator_status`)."""
+    allocator_status(s, unallocated, saturated)
+    out[6] = _min(_max(thrust, 0.0), 1.0)  # `_update`'s min(max(thrust, 0), 1)
     dt = p[P_DT]
     q = quat_normalized(quat_WB)
     q_d = quat_normalized((quat_d[0], quat_d[1], quat_d[2], quat_d[3]))

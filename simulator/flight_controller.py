@@ -46,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from amcore.allocation import Allocation, AllocationResult
+from amcore.allocation import Allocation, AllocationResult, _built
 from amcore.config import FlightControllerParams, RotorParams
 
 from . import fc_kernels
@@ -167,14 +167,19 @@ class FcOutput:
     thrust_sp: float
 
 
+# what the rate loop takes for the allocation before the first (nothing unallocated)
+_NOT_SATURATED = AllocationResult(outputs=(), allocated=(0.0, 0.0, 0.0, 0.0), unallocated=(0.0, 0.0, 0.0, 0.0),
+                                  saturated=False)
+
+
 class FlightController:
     """One vehicle's emulated PX4 (see module doc). `step(quat_WB_wxyz, w_B, target)` once per
     physics step; it runs its loops every `physics rate / rate_hz` steps and holds its output
     between. `target` is the held SET_ATTITUDE_TARGET (`amlink.types.AttitudeTarget`, ENU/FLU).
 
-    compiled: steps 1 and 2 run as `simulator.fc_kernels.rate_loops` (numba; the same numbers
-    bit for bit), else as the Python below (`_update`, the literal form the tests compare it
-    with)."""
+    compiled: steps 1 and 2 run as `simulator.fc_kernels.rate_loops` and step 3 as
+    `amcore.allocation_kernels.allocate` (numba; the same numbers bit for bit), else as the
+    Python below (`_update`, the literal form the tests compare it with)."""
 
     def __init__(self, fc: FlightControllerParams, rotors: RotorParams, physics_dt_s: float,
                  compiled: bool = True) -> None:
@@ -204,7 +209,7 @@ class FlightController:
         self.output: FcOutput | None = None
         self.compiled = compiled
         if compiled:
-            self._p, self._s, self._out = fc_kernels.constants(self), np.zeros(fc_kernels.N_S), np.zeros(6)
+            self._p, self._s, self._out = fc_kernels.constants(self), np.zeros(fc_kernels.N_S), np.zeros(7)
             self._rate_loops = fc_kernels.rate_loops
 
     def step(self, quat_WB_wxyz, w_B, target) -> FcOutput | None:
@@ -228,19 +233,16 @@ class FlightController:
         return self._rate_int
 
     def _update_compiled(self, q, w, target) -> FcOutput:
-        """`_update` with steps 1 and 2 compiled (simulator.fc_kernels), step 3 as there."""
-        out, s = self._out, self._s
-        self._rate_loops(self._p, s, q, w, target.quat_wxyz, target.rates_rad_s, out)
+        """`_update` with steps 1 and 2 compiled (simulator.fc_kernels), taking the last
+        allocation's saturation there; step 3 compiled in `amcore.allocation_kernels`."""
+        last = _NOT_SATURATED if self.output is None else self.output.allocation
+        out = self._out
+        self._rate_loops(self._p, self._s, q, w, target.quat_wxyz, target.rates_rad_s, float(target.thrust_normalized),
+                         last.unallocated, last.saturated, out)
         v = out.tolist()
-        rates_sp, torque = v[0:3], v[3:6]
-        thrust = min(max(float(target.thrust_normalized), 0.0), 1.0)
-        a = self.allocation.allocate(*torque, thrust)
-        achieved = not a.saturated
-        for ax, u in enumerate(a.unallocated[:3]):
-            s[fc_kernels.S_SAT_POS + ax] = not achieved and u > 1.2e-7
-            s[fc_kernels.S_SAT_NEG + ax] = not achieved and u < -1.2e-7
-        return FcOutput(tuple(f * x for f, x in zip(self.allocation.rotor_thrust_max_n, a.outputs)), a,
-                        tuple(rates_sp), tuple(torque), thrust)
+        a, thrusts = self.allocation.allocate_thrusts(v[3], v[4], v[5], v[6])
+        return _built(FcOutput, rotor_thrusts_n=thrusts, allocation=a, rates_sp=tuple(v[0:3]), torque_sp=tuple(v[3:6]),
+                      thrust_sp=v[6])
 
     def _update(self, q: Quat, w, target) -> FcOutput:
         # gyro and its derivative (VehicleAngularVelocity): differentiate the raw rate, then filter

@@ -1,6 +1,6 @@
 """The compiled allocation (amcore.allocation_kernels, Allocation(compiled=True)) against the
-Python allocation it transcribes: the same result bit for bit, inside the limits and
-desaturated, for the quad and the canted hexarotor."""
+Python allocation it transcribes: the same result and rotor thrusts bit for bit, inside the
+limits and desaturated, for the quad and the canted hexarotor."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -26,6 +26,9 @@ def test_compiled_allocation_equals_the_python_one(vehicle):
             thrust = float(rng.uniform(-0.2, 1.3))
             a, b = fast.allocate(roll, pitch, yaw, thrust), slow.allocate(roll, pitch, yaw, thrust)
             assert a == b, (roll, pitch, yaw, thrust)
+            (a, f), (b, e) = fast.allocate_thrusts(roll, pitch, yaw, thrust), slow.allocate_thrusts(roll, pitch, yaw,
+                                                                                                  thrust)
+            assert a == b and f == e and f == tuple(u * m for u, m in zip(b.outputs, rotors.thrust_max()))
             saturated += b.saturated
         tau = (scale * rng.normal(size=3)).tolist()
         assert fast.allocate_wrench(20.0 * scale, tau) == slow.allocate_wrench(20.0 * scale, tau)

@@ -119,3 +119,32 @@ def test_a_lag_beyond_the_history_is_refused():
     est = Estimator(np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), DT, 0.01, G, 4.0, 8.0, 0.0, 16)
     with pytest.raises(ValueError, match="history"):
         est.step(0, np.zeros(3), np.array([0.0, 0.0, G]), (np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])), 16)
+
+
+def test_the_step_in_place_is_the_step_returning_its_innovations():
+    """`Estimator.step` (`estimator_update`: odometry and innovations into the filter's arrays,
+    the odometry into a caller's view) gives what `estimator_step` gives, bit for bit."""
+    from amcore.estimator import estimator_step
+
+    rng = np.random.default_rng(4)
+    p0, q0, _, _ = truth(0.0)
+    frame = np.zeros(20)
+    est = Estimator(p0, q0, DT, 10 * DT, G, 4.0, 8.0, 30.0, 64, out=frame[:13])
+    ref = Estimator(p0, q0, DT, 10 * DT, G, 4.0, 8.0, 30.0, 64)
+    poses = 0
+    for k in range(600):
+        p, q, v, a = truth(k * DT)
+        omega, f = W_B + 0.01 * rng.normal(size=3), rotation(q).T @ (a + np.array([0.0, 0.0, G]))
+        pose = (p + 0.001 * rng.normal(size=3), quat_mul(q, quat_exp(0.002 * rng.normal(size=3)))) \
+            if k % 10 == 3 else None
+        out = est.step(k, omega, f, pose, 3 if pose else 0)
+        assert out.base is frame and np.array_equal(frame[:13], out)
+        dt = DT if k else 0.0
+        if k == 0:
+            biquad_reset(ref.lpf, ref.coef, omega)
+        p_m, q_m = pose if pose else (np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]))
+        nu = estimator_step(ref.x, ref.hist, ref.lpf, ref.coef, k, omega, f, dt, G, pose is not None, 3 if pose else 0,
+                            p_m, q_m, ref.gains, ref.out)
+        assert ref.out.tolist() == out.tolist() and nu.tolist() == est.innovation.tolist(), f"step {k}"
+        poses += pose is not None and bool(np.all(nu != 0.0))
+    assert poses == 60

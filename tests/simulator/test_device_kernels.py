@@ -51,6 +51,7 @@ def test_compiled_devices_give_the_python_devices_frames_bit_for_bit(spec):
     values = moving_values(np.random.default_rng(5), 1500)
     fast = DeviceSuite(spec, 3, DT, G, 7, 4, values[0], compiled=True)
     slow = DeviceSuite(spec, 3, DT, G, 7, 4, values[0], compiled=False)
+    assert fast.compiled and not slow.compiled
     for k, v in enumerate(values):
         assert fast.step(v, k * DT) == slow.step(v, k * DT), f"step {k}"
     assert fast.mocap.captured == slow.mocap.captured and fast.mocap.dropped == slow.mocap.dropped
@@ -75,3 +76,72 @@ def test_steps_without_a_frame_read_the_base_alone_and_keep_the_draws_in_step():
     with pytest.raises(ValueError, match="tare"):
         early = DeviceSuite(FULL, 3, DT, G, 3, 5, values[0], compiled=True)
         early.step(values[0][:13], 0.45)
+
+
+def test_the_kernels_products_round_as_numpys():
+    """`mat_vec` and `mat_t_vec` are numpy's R @ v and R.T @ u bit for bit (the sign of a zero
+    included), on rotations and vectors of every scale and on the zeros of a vehicle at rest;
+    where they would not be, `DeviceSuite` runs its Python devices (and this fails)."""
+    assert dk.products_match_numpy()
+    rng = np.random.default_rng(12)
+    y = np.empty(3)
+
+    def same(a, b):
+        return all(x == e and np.copysign(1.0, x) == np.copysign(1.0, e) for x, e in zip(a.tolist(), b.tolist()))
+    cases = []
+    for i in range(20000):
+        q = rng.normal(size=4)
+        q[rng.integers(0, 4, size=i % 3)] = 0.0  # none, one or two zeros: level, about one axis ...
+        R = dk.rotation(q / np.linalg.norm(q)) if q.any() else np.eye(3)
+        v = rng.normal(size=3) * 10.0 ** rng.uniform(-6.0, 6.0)
+        v[rng.integers(0, 3, size=i % 4)] = 0.0
+        cases.append((R, v if i % 7 else -0.0 * v))
+    upside_down = dk.rotation(np.array([0.0, 1.0, 0.0, 0.0]))
+    cases += [(np.eye(3), np.zeros(3)), (np.eye(3), np.array([0.0, 0.0, G])), (upside_down, np.array([-0.0, 0.0, G]))]
+    for R, v in cases:
+        dk.mat_vec(R, v, y)
+        assert same(y, R @ v), (R, v)
+        dk.mat_t_vec(R, v, y)
+        assert same(y, R.T @ v), (R, v)
+
+
+def test_the_kernels_rotation_is_the_estimators():
+    from amcore.estimator import rotation
+    rng = np.random.default_rng(13)
+    for _ in range(2000):
+        q = rng.normal(size=4) * rng.uniform(0.9, 1.1)
+        assert np.array_equal(dk.rotation(q), rotation(q))
+
+
+def test_the_specific_force_is_the_python_truths():
+    """`specific_force` gives the f_B that `DeviceSuite._truth` and `Imu.sample` make in numpy,
+    bit for bit, from the first step (a_W = 0) on."""
+    values = moving_values(np.random.default_rng(14), 300)
+    suite = DeviceSuite(FULL, 3, DT, G, 1, 2, values[0], compiled=False)
+    s, f_B = np.zeros(dk.N_TRUTH), np.empty(3)
+    v_W_prev = None
+    for v in values:
+        truth = suite._truth(v, v_W_prev)
+        v_W_prev = truth.v_W
+        dk.specific_force(np.array(v), DT, G, s, f_B)
+        expected = truth.R_WB.T @ (truth.a_W + np.array([0.0, 0.0, G]))
+        assert f_B.tolist() == expected.tolist()
+        assert s[dk.TRUTH_V_W:dk.TRUTH_V_W + 3].tolist() == truth.v_W.tolist()
+
+
+def test_a_run_with_compiled_devices_is_the_run_with_the_python_devices(monkeypatch):
+    """A whole in-process run with [devices] at full levels (attitude mode: the autopilot flies
+    on the estimate) gives the same state digest with the compiled devices as with the Python
+    devices (`DeviceSuite` falls back to them where the kernels' products would not match)."""
+    from pathlib import Path
+
+    from amcore.config import load_scenario
+    from simulator import devices
+    from simulator.inprocess import run
+
+    spec = load_scenario(Path(__file__).resolve().parents[2] / "configs" / "scenarios" / "two_am_comp_attitude.toml")
+    spec = dataclasses.replace(spec, devices=FULL)
+    fast = run(spec, 0.6)
+    monkeypatch.setattr(devices, "_products_match_numpy", lambda: False)
+    slow = run(spec, 0.6)
+    assert fast["state_digest"] == slow["state_digest"]

@@ -52,6 +52,7 @@ def test_compiled_flight_controller_flies_bit_for_bit_as_the_python_one(spec, sc
         slow = FlightController(params, v.rotors, spec.dt_s, compiled=False)
         rng = np.random.default_rng(11)
         q, w = random_quat(rng), (0.0, 0.0, 0.0)
+        steered = 0  # updates whose integral the last allocation's saturation held back
         for k in range(600):
             if k % 4 == 0:  # a new target at the control rate
                 target = AttitudeTarget(k, quat_wxyz=np.array(random_quat(rng)),
@@ -61,7 +62,25 @@ def test_compiled_flight_controller_flies_bit_for_bit_as_the_python_one(spec, sc
             a, b = fast.step(q, w, target), slow.step(q, w, target)
             assert a == b, f"step {k}"
             assert fast.rate_int == slow.rate_int
-        assert any(fast.output.allocation.saturated_axes) or scale < 1.0
+            steered += bool(np.any(fast._s[fk.S_SAT_POS:fk.S_SAT_NEG + 3]))
+        assert (any(fast.output.allocation.saturated_axes) and steered > 50) or scale < 1.0
+
+
+def test_allocator_status_is_the_python_loops_saturation():
+    """The compiled loops take the last allocation's saturation as the Python loops keep it
+    (`_sat_pos`, `_sat_neg`): per axis, the allocation fell short and its unallocated command
+    is above (below) +-1.2e-7; NaN on neither side."""
+    s = np.zeros(fk.N_S)
+    values = [0.0, -0.0, 1.2e-7, -1.2e-7, np.nextafter(1.2e-7, 1.0), np.nextafter(-1.2e-7, -1.0), 0.3, -2.0, math.nan]
+    rng = np.random.default_rng(5)
+    for _ in range(400):
+        unallocated = tuple(float(rng.choice(values)) for _ in range(4))
+        for saturated in (False, True):
+            fk.allocator_status(s, unallocated, saturated)
+            pos = tuple(saturated and u > 1.2e-7 for u in unallocated[:3])
+            neg = tuple(saturated and u < -1.2e-7 for u in unallocated[:3])
+            assert tuple((s[fk.S_SAT_POS:fk.S_SAT_POS + 3] != 0.0).tolist()) == pos
+            assert tuple((s[fk.S_SAT_NEG:fk.S_SAT_NEG + 3] != 0.0).tolist()) == neg
 
 
 @pytest.mark.parametrize("name", ["two_am_comp_attitude", "two_am_comp"])
