@@ -14,7 +14,10 @@ call), pinocchio's six calls (M^-1, C, CoM Jacobian, {e}'s placement, Jacobian a
 rate), the compiled law (amcore.law.control_law, called alone on the same inputs), and the
 rest of `step` (argument passing, naming the results). The companion calls, every step
 besides, mission.reference and the wire conversions of companion/adapter.py; each has its
-own line. Rows are timed in interleaved rounds so that a change in machine load hits all
+own line. In attitude mode the companion calls amcore.offboard.offboard_step instead of
+`step` (every 4 ms): its row, and the same with the numpy functions that the compiled
+estimate is tested against, show what the body torque estimate and the arm's torques add.
+Rows are timed in interleaved rounds so that a change in machine load hits all
 of them alike. The literal transcription (finite differences, generic inverses) is timed
 on fewer calls: it takes milliseconds.
 """
@@ -34,6 +37,7 @@ from amcore.allocation import Allocation
 from amcore.config import load_scenario
 from amcore.control import ControllerMemory, ControllerParams, step
 from amcore.mission import am_mission
+from amcore.offboard import Applied, OffboardMemory, OffboardParams, offboard_step
 from amcore.model import AmState, build_model, create_data, pin_configuration
 from amcore.so3 import R_to_quat_wxyz, exp_so3
 from amlink.types import SensorFrame
@@ -65,6 +69,10 @@ def main() -> None:
                           v_B=s.v_B, w_B=s.w_B, q=s.q, qdot=s.qdot, wrench_E=F) for k, s in enumerate(sts)]
     thrust_max = Allocation(spec.vehicle.rotors).thrust_scale_n
     mem = [ControllerMemory(), ControllerMemory()]
+    # attitude mode's companion law with the options of the attitude scenario's vehicle
+    oparams = OffboardParams.from_vehicle(load_scenario(ROOT / "configs" / "scenarios" / "two_am_comp_attitude.toml").vehicle)
+    off_mem = [OffboardMemory(), OffboardMemory()]
+    applied = Applied(20.0, np.zeros(model.n)) if oparams.inputs == "reported" else None
     pm, fid = model.pin_model, model.ee_frame_id
     clock = time.perf_counter_ns
 
@@ -93,6 +101,11 @@ def main() -> None:
     def run_step(i):
         mem[0] = step(model, data, params, sts[i % 64], refs[i % 64], F, mem[0], 1e-3 * i).memory
 
+    def run_offboard(i, compiled):
+        c = int(not compiled)
+        off_mem[c] = offboard_step(model, data, params, sts[i % 64], refs[i % 64], F, off_mem[c], 4e-3 * i,
+                                   oparams=oparams, applied=applied, compiled=compiled).memory
+
     def run_companion(i):  # companion.pilot's per-frame work, without its outcome bookkeeping
         frame, t = frames[i % 64], 0.0067 * i
         res = step(model, data, params, state_from_frame(frame), mission.reference(t), frame.wrench_E, mem[1], t)
@@ -108,6 +121,8 @@ def main() -> None:
         "state_from_frame": lambda i: state_from_frame(frames[i % 64]),
         "setpoint_from_result": lambda i: setpoint_from_result(i, res0, thrust_max),
         "companion": run_companion,
+        "offboard": lambda i: run_offboard(i, True),
+        "offboard_numpy": lambda i: run_offboard(i, False),
     }
     for i in range(300):
         for fn in parts.values():
@@ -156,6 +171,9 @@ def main() -> None:
     row("    adapter.state_from_frame", samples["state_from_frame"], "state_from_frame")
     row("    adapter.setpoint_from_result", samples["setpoint_from_result"], "setpoint_from_result")
     row("companion step: frame -> state, reference, step, setpoint", samples["companion"], "companion")
+    print(f"  attitude mode (amcore.offboard, inputs {oparams.inputs!r}, torque cutoff {oparams.torque_cutoff_hz:g} Hz):")
+    row("    offboard_step: step, then tau_b^ and the arm's torques", samples["offboard"], "offboard")
+    row("    the same with the numpy functions (compiled=False)", samples["offboard_numpy"], "offboard_numpy")
     step_us, comp_us, ratio = med(samples["step"]), med(samples["companion"]), med(samples["step"]) / med(literal)
     print(f"step / literal transcription, same run: {ratio:.4f}x")
     print(f"controller step, CPU time: {med(cpu['step']):.1f} us per call (median of {len(cpu['step'])} rounds)")

@@ -81,8 +81,11 @@ def test_steps_without_a_frame_read_the_base_alone_and_keep_the_draws_in_step():
 def test_the_kernels_products_round_as_numpys():
     """`mat_vec` and `mat_t_vec` are numpy's R @ v and R.T @ u bit for bit (the sign of a zero
     included), on rotations and vectors of every scale and on the zeros of a vehicle at rest;
-    where they would not be, `DeviceSuite` runs its Python devices (and this fails)."""
-    assert dk.products_match_numpy()
+    where they would not be (numpy's BLAS summing in another order: another OpenBLAS kernel, or
+    another BLAS), `DeviceSuite` runs its Python devices and this test is skipped, saying so;
+    the test below checks that fallback."""
+    if not dk.products_match_numpy():
+        pytest.skip("numpy's BLAS rounds R @ v otherwise on this machine: DeviceSuite runs its Python devices")
     rng = np.random.default_rng(12)
     y = np.empty(3)
 
