@@ -2,12 +2,15 @@
 MAVLink over loopback UDP, lockstep) for N = 2, 5, 10, 20 AMs, next to bare PyBullet stepping
 of the same world measured in the same run, and how the processes' CPU and memory grow with N.
 
-    python benchmarks/bench_sitl.py [--duration 3] [--n 2 5 10 20] [--attitude] [--devices] [--sitl-only]
+    python benchmarks/bench_sitl.py [--duration 3] [--n 2 5 10 20] [--attitude] [--robust] [--devices]
+                                    [--actuation-delay D] [--sitl-only]
 
 --attitude runs ten_am_attitude (SET_ATTITUDE_TARGET at 250 Hz, the emulated autopilot at
 1 kHz) instead of ten_am (torque setpoints at 1 kHz); --devices turns [devices] on (the
 sensors as devices and the flight controller's estimator, configs/randomize/default.toml's
-levels); --sitl-only leaves out the echo, UDP and bare PyBullet columns.
+levels); --robust starts from ten_am_robust(_attitude) instead (the hexarotor and the law's
+options, with which the grasp takes an actuation delay of up to 3 ms: docs/flight_controller.md);
+--sitl-only leaves out the echo, UDP and bare PyBullet columns.
 
 Each N runs the ten_am scenario's object (a cylinder, r = 0.6 m, 1 kg here) with N AMs evenly spaced
 around it, for --duration simulated seconds of the approach phase. The SITL figure is the
@@ -28,7 +31,7 @@ the processes are scheduled, so a target above it needs less CPU per step, not b
 
 More columns take the whole apart, measured in the same run:
 - "echo": the same simulator and lockstep with `echo_companion.py` in place of each
-  companion (same client, codec and signing; it answers every frame at once with a fixed
+  companion (same client, codec and signing; it answers every frame at once with a hover
   setpoint, no controller, no telemetry). What the simulator, MAVLink and the processes
   cost when the controller costs nothing: an upper bound on the SITL's real-time factor.
 - "echo+Xus" (with --echo-spin-us X): the same, each echo busy-waiting X us per step: a
@@ -62,6 +65,8 @@ from simulator.world import World  # noqa: E402
 
 BASE = ROOT / "configs" / "scenarios" / "ten_am.toml"
 ATTITUDE = ROOT / "configs" / "scenarios" / "ten_am_attitude.toml"
+ROBUST = ROOT / "configs" / "scenarios" / "ten_am_robust.toml"
+ROBUST_ATTITUDE = ROOT / "configs" / "scenarios" / "ten_am_robust_attitude.toml"
 DEVICES = ROOT / "configs" / "randomize" / "default.toml"
 
 
@@ -76,11 +81,16 @@ def devices_table() -> str:
     return out
 
 
+def base_scenario(attitude: bool, robust: bool = False) -> Path:
+    """The scenario the N-AM runs start from."""
+    return (ROBUST_ATTITUDE if attitude else ROBUST) if robust else (ATTITUDE if attitude else BASE)
+
+
 def scenario_with(n: int, folder: Path, base: Path = BASE, devices: bool = False, delay_steps: int = 0) -> Path:
     text = base.read_text()
-    head = text.split("[[am]]")[0].replace('vehicle = "../vehicles/am3dof.toml"',
-                                           f'vehicle = "{ROOT / "configs" / "vehicles" / "am3dof.toml"}"')
-    head = re.sub(r'name = "ten_am(_attitude)?"', f'name = "bench_{n}am"', head)
+    head = re.sub(r'(?m)^vehicle = "\.\./vehicles/(\w+\.toml)"',
+                  lambda m: f'vehicle = "{ROOT / "configs" / "vehicles" / m.group(1)}"', text.split("[[am]]")[0])
+    head = re.sub(r'name = "ten_am\w*"', f'name = "bench_{n}am"', head)
     head = re.sub(r"(?m)^mass_kg = .*$", "mass_kg = 1.0", head)  # liftable by any N (the approach is what runs)
     if delay_steps:  # [flight_controller].actuation_delay_steps
         line = f"actuation_delay_steps = {delay_steps}\n"
@@ -164,7 +174,11 @@ def echo_rtf(path: Path, duration: float, run_dir: Path, spin_us: float = 0.0) -
             if p.poll() is None:
                 p.kill()
                 p.wait()
-    return json.loads((run_dir / "outcome.json").read_text())["real_time_factor"]
+    outcome = json.loads((run_dir / "outcome.json").read_text())
+    ignored = {s: link["other_mode"] for s, link in outcome["fc_link"].items() if link["other_mode"]}
+    if ignored:  # the echo answered in the wrong mode: the autopilot's work would be left out
+        raise RuntimeError(f"echo SITL run: setpoints of the other mode ignored {ignored}")
+    return outcome["real_time_factor"]
 
 
 def udp_rtf(n: int, steps: int = 3000) -> float:
@@ -221,6 +235,8 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=3.0)
     ap.add_argument("--n", type=int, nargs="+", default=[2, 5, 10, 20])
     ap.add_argument("--attitude", action="store_true", help="attitude mode (ten_am_attitude) instead of torque mode")
+    ap.add_argument("--robust", action="store_true",
+                    help="start from ten_am_robust(_attitude): the hexarotor and the law's options")
     ap.add_argument("--devices", action="store_true", help="[devices] on: sensors as devices and the estimator")
     ap.add_argument("--sitl-only", action="store_true", help="only the SITL column (and its CPU and memory)")
     ap.add_argument("--actuation-delay", type=int, default=0, metavar="D",
@@ -231,7 +247,8 @@ def main() -> None:
     a = ap.parse_args()
     print(f"load average before: {os.getloadavg()[0]:.2f}; {os.cpu_count()} cores; {a.duration} s simulated per N; "
           f"actuation delay {a.actuation_delay} steps; "
-          f"{'attitude' if a.attitude else 'torque'} mode; [devices] {'on' if a.devices else 'off'}")
+          f"{'attitude' if a.attitude else 'torque'} mode{', ten_am_robust' if a.robust else ''}; "
+          f"[devices] {'on' if a.devices else 'off'}")
     print("x real time (simulated s / wall s), each column measured in this run:")
     spin = a.echo_spin_us
     spin_head = f" {'echo+' + format(spin, 'g') + 'us':>12}" if spin is not None else ""
@@ -240,7 +257,7 @@ def main() -> None:
           f"{'pss':>6} {'uss':>6}")
     with tempfile.TemporaryDirectory() as tmp:
         for n in a.n:
-            path = scenario_with(n, Path(tmp), ATTITUDE if a.attitude else BASE, a.devices, a.actuation_delay)
+            path = scenario_with(n, Path(tmp), base_scenario(a.attitude, a.robust), a.devices, a.actuation_delay)
             nan = float("nan")
             bare = nan if a.sitl_only else bare_rtf(path, a.duration)
             rtf, wall, proc = sitl_rtf(path, a.duration, Path(tmp) / f"run{n}")

@@ -2,9 +2,12 @@
 
     python benchmarks/echo_companion.py --sysid 2 --sim udp:127.0.0.1:PORT --config scenario.toml [--spin-us 175]
 
-It connects, arms and answers every sensor frame at once with the same torque setpoint
-(the vehicle's hover thrust, zero torques), through the same `amlink` client, codec and
-signing as the real companion. `bench_sitl.py` runs it in place of `companion` to report
+It connects, arms and answers every sensor frame at once, through the same `amlink` client,
+codec and signing as the real companion: in torque mode with the same torque setpoint (the
+vehicle's hover thrust, zero torques); in attitude mode with an attitude setpoint that holds
+the frame's attitude at hover thrust, zero rates and zero joint torques, so that the
+simulator's autopilot flies it as it flies a companion's (a torque setpoint would be ignored
+there, and the autopilot's work left out). `bench_sitl.py` runs it in place of `companion` to report
 what the simulator, MAVLink and the processes cost when the controller costs nothing.
 With --spin-us it busy-waits that long before each answer: a controller's compute time
 without its memory traffic (`bench_controller.py`'s companion step is ~175 us).
@@ -25,7 +28,7 @@ from amcore.config import load_scenario  # noqa: E402
 from amcore.model import build_model  # noqa: E402
 from amlink import signing  # noqa: E402
 from amlink.lockstep import CompanionClient  # noqa: E402
-from amlink.types import TorqueSetpoint  # noqa: E402
+from amlink.types import AttitudeSetpoint, AttitudeTarget, TorqueSetpoint  # noqa: E402
 
 
 def main() -> int:
@@ -41,6 +44,8 @@ def main() -> int:
     model = build_model(spec.vehicle)
     hover_n = model.mass_kg * model.gravity_mps2
     zero3, zero_q = np.zeros(3), np.zeros(model.n)
+    attitude = spec.vehicle.flight_controller.mode == "attitude"
+    hover = hover_n / spec.vehicle.rotors.thrust_max_total_n  # normalized collective thrust
     with CompanionClient(a.sysid, a.sim, signing_key=None if keys is None else keys[a.sysid]) as client:
         client.connect(timeout_s=60.0)
         client.arm(timeout_s=5.0)
@@ -49,7 +54,11 @@ def main() -> int:
                 until = time.perf_counter() + spin_s
                 while time.perf_counter() < until:
                     pass
-            client.send_setpoint(TorqueSetpoint(frame.step, hover_n, zero3, zero_q))
+            if attitude:
+                target = AttitudeTarget(frame.step, frame.quat_WB_wxyz, zero3, hover)
+                client.send_setpoint(AttitudeSetpoint(frame.step, target, zero_q))
+            else:
+                client.send_setpoint(TorqueSetpoint(frame.step, hover_n, zero3, zero_q))
     return 0
 
 
