@@ -67,10 +67,11 @@ def effectiveness(rotors: "RotorParams") -> np.ndarray:
     return np.array(cols).T
 
 
-def _built(cls, **fields):
+def frozen_instance(cls, **fields):
     """An instance of the frozen dataclass `cls` with the given fields, as its `__init__`
     leaves it, without that method's per-field `object.__setattr__` (the per-step path,
-    whose fields are known to be what the annotations say)."""
+    whose fields are known to be what the annotations say: here and in the simulator's
+    flight controller)."""
     obj = object.__new__(cls)
     obj.__dict__.update(fields)
     return obj
@@ -213,12 +214,12 @@ class Allocation:
         v, n = self._result.tolist(), self.count
         thrusts = tuple(v[n + 9:])
         if v[n + 8] == 0.0:
-            return _built(AllocationResult, outputs=tuple(v[:n]), allocated=(roll, pitch, yaw, thrust),
-                          unallocated=_NONE_UNALLOCATED, saturated=False, saturated_axes=_NO_AXES), thrusts
+            return frozen_instance(AllocationResult, outputs=tuple(v[:n]), allocated=(roll, pitch, yaw, thrust),
+                                   unallocated=_NONE_UNALLOCATED, saturated=False, saturated_axes=_NO_AXES), thrusts
         unallocated = tuple(v[n + 4:n + 8])
         axes = tuple([abs(u) > SATURATION_TOL for u in unallocated])
-        return _built(AllocationResult, outputs=tuple(v[:n]), allocated=tuple(v[n:n + 4]), unallocated=unallocated,
-                      saturated=any(axes), saturated_axes=axes), thrusts
+        return frozen_instance(AllocationResult, outputs=tuple(v[:n]), allocated=tuple(v[n:n + 4]),
+                               unallocated=unallocated, saturated=any(axes), saturated_axes=axes), thrusts
 
     # ------------------------------------------------------------------ physical units
     def normalized(self, thrust_n: float, tau_B_nm) -> tuple[float, float, float, float]:
@@ -241,7 +242,7 @@ class Allocation:
             raise ValueError(f"non-finite command: thrust_n = {thrust_n}, tau_B_nm = {[tx, ty, tz]}")
         a, f = self.allocate_thrusts(*self.normalized(thrust_n, (tx, ty, tz)))
         F, tau = self.wrench(f)
-        return _built(WrenchAllocation, rotor_thrusts_n=f, force_B_n=F, tau_B_nm=tau, allocation=a)
+        return frozen_instance(WrenchAllocation, rotor_thrusts_n=f, force_B_n=F, tau_B_nm=tau, allocation=a)
 
     # ------------------------------------------------------------------ authority
     def authority(self, thrust_n: float, tau_B_nm=(0.0, 0.0, 0.0)) -> dict[str, tuple[float, float]]:

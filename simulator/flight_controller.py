@@ -46,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from amcore.allocation import Allocation, AllocationResult, _built
+from amcore.allocation import Allocation, AllocationResult, frozen_instance
 from amcore.config import FlightControllerParams, RotorParams
 
 from . import fc_kernels
@@ -241,8 +241,8 @@ class FlightController:
                          last.unallocated, last.saturated, out)
         v = out.tolist()
         a, thrusts = self.allocation.allocate_thrusts(v[3], v[4], v[5], v[6])
-        return _built(FcOutput, rotor_thrusts_n=thrusts, allocation=a, rates_sp=tuple(v[0:3]), torque_sp=tuple(v[3:6]),
-                      thrust_sp=v[6])
+        return frozen_instance(FcOutput, rotor_thrusts_n=thrusts, allocation=a, rates_sp=tuple(v[0:3]),
+                               torque_sp=tuple(v[3:6]), thrust_sp=v[6])
 
     def _update(self, q: Quat, w, target) -> FcOutput:
         # gyro and its derivative (VehicleAngularVelocity): differentiate the raw rate, then filter
