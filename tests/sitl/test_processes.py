@@ -129,12 +129,21 @@ def test_sigterm_stops_a_companion_cleanly_and_its_vehicle_goes_to_failsafe(tmp_
         sim.kill()
 
 
+def _wait_for_sim_time(stream, t_s: float) -> float:
+    """Read the simulator's JSON progress lines until one reports simulated time >= t_s."""
+    while True:
+        line = _wait_for(stream, '"progress"')
+        t = json.loads(line)["t"]
+        if t >= t_s:
+            return t
+
+
 @contextlib.contextmanager
-def _two_am_run_that_loses_companion_5(tmp_path):
-    """two_am_comp for 6 s; companion 5 SIGKILLed once the run is under way. Yields (sim,
+def _two_am_run_that_loses_companion_5(tmp_path, duration_s: float = 6.0):
+    """two_am_comp for duration_s; companion 5 SIGKILLed once the run is under way. Yields (sim,
     seconds from the kill to the simulator's failsafe message, restart), restart() starting a
     new companion 5 that writes am5.json; every process is killed on leaving."""
-    sim = Sim("two_am_comp.toml", tmp_path, "--step-timeout", "2", "--peer-timeout", "30", "--duration", "6")
+    sim = Sim("two_am_comp.toml", tmp_path, "--step-timeout", "2", "--peer-timeout", "30", "--duration", str(duration_s))
     procs = [companion(4, sim.bind), companion(5, sim.bind)]
 
     def restart():
@@ -158,9 +167,16 @@ def test_companion_restarted_seconds_later_takes_its_vehicle_back_from_where_it_
     """Restarted while its vehicle has been held by the failsafe for seconds and the mission
     has moved on: it starts from the vehicle's state (companion.pilot, amcore.mission.JoinBlend)
     and takes over for good. Before, its first ~2500 setpoints exceeded the simulator's
-    plausibility bounds and were rejected, and the vehicle ended the run in failsafe."""
-    with _two_am_run_that_loses_companion_5(tmp_path) as (sim, _, restart):
-        time.sleep(3.0)  # the run goes on without it
+    plausibility bounds and were rejected, and the vehicle ended the run in failsafe.
+
+    The restart waits for simulated time, not wall time: the simulator runs on while the new
+    companion starts (seconds of wall time, more on a loaded machine), so a restart timed by
+    the wall clock rejoined anywhere from 5 s to the end of a 6 s run, and the error at the end
+    then caught the first tenth of a second after the rejoin (up to 12 mm) instead of its
+    vehicle taken over."""
+    duration_s = 9.0
+    with _two_am_run_that_loses_companion_5(tmp_path, duration_s) as (sim, _, restart):
+        _wait_for_sim_time(sim.proc.stdout, 1.5)  # the run goes on without it
         c5b = restart()
         code, err = sim.wait(timeout_s=180)
         assert code == 0, err
@@ -168,6 +184,8 @@ def test_companion_restarted_seconds_later_takes_its_vehicle_back_from_where_it_
         events = o["events"]
         assert [e["event"] for e in events] == ["lost", "rejoined"], events
         assert events[1]["t"] - events[0]["t"] > 1.0  # a late rejoin
+        # the check below judges the vehicle taken over, seconds after the rejoin
+        assert events[1]["t"] < duration_s - 2.0, f"rejoined at t = {events[1]['t']} s of {duration_s}: too late to judge"
         assert o["failsafe_at_end"] == [] and o["link"]["rejected_setpoints"] == 0
         c5b.communicate(timeout=30)
         assert c5b.returncode == 0
