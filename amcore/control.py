@@ -321,9 +321,11 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     frame = p.task_frame if task_frame is None else task_frame
     pm, fid = model.pin_model, model.ee_frame_id
     q_pin, V = pin_configuration(state)
-    Jcom = pin.jacobianCenterOfMass(pm, data, q_pin, False)  # R [I, -hat(r_b), J_b]
     M_inv = pin.computeMinverse(pm, data, q_pin)
     C = pin.computeCoriolisMatrix(pm, data, q_pin, V)  # its pass also fills the joint placements, data.J, data.dJ
+    # R [I, -hat(r_b), J_b] from the joint placements just computed: the overload without q
+    # skips a forward-kinematics pass and gives the same numbers (tests/amcore/test_control.py)
+    Jcom = pin.jacobianCenterOfMass(pm, data, False)
     H_WE = pin.updateFramePlacement(pm, data, fid).homogeneous
     J_e = pin.getFrameJacobian(pm, data, fid, pin.LOCAL)
     Jdot_e = pin.getFrameJacobianTimeVariation(pm, data, fid, pin.LOCAL)

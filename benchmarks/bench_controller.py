@@ -76,12 +76,11 @@ def main() -> None:
     pm, fid = model.pin_model, model.ee_frame_id
     clock = time.perf_counter_ns
 
-    def pinocchio_terms(st, q_pin, V):
-        out = (pin.jacobianCenterOfMass(pm, data, q_pin, False), pin.computeMinverse(pm, data, q_pin),
-               pin.computeCoriolisMatrix(pm, data, q_pin, V), pin.updateFramePlacement(pm, data, fid).homogeneous,
-               pin.getFrameJacobian(pm, data, fid, pin.LOCAL),
-               pin.getFrameJacobianTimeVariation(pm, data, fid, pin.LOCAL))
-        return out
+    def pinocchio_terms(st, q_pin, V):  # as amcore.control.step calls them
+        M_inv, C = pin.computeMinverse(pm, data, q_pin), pin.computeCoriolisMatrix(pm, data, q_pin, V)
+        return (pin.jacobianCenterOfMass(pm, data, False), M_inv, C, pin.updateFramePlacement(pm, data, fid).homogeneous,
+                pin.getFrameJacobian(pm, data, fid, pin.LOCAL),
+                pin.getFrameJacobianTimeVariation(pm, data, fid, pin.LOCAL))
 
     p, wf = params, params.wrench_filter
     res0 = step(model, data, params, sts[0], refs[0], F, ControllerMemory(), 0.0)

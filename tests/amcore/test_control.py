@@ -295,3 +295,27 @@ def test_diagnostics_keep_their_field_names(model, mission, params):
     for name, shape in (("r_c", (3,)), ("R_d", (3, 3)), ("y", (n,)), ("u", (n + 6,)), ("tau", (n + 6,)),
                         ("Lambda_y", (n, n)), ("wrench_W_filtered", (6,)), ("q_d", (4,))):
         assert np.shape(getattr(d, name)) == shape, name
+
+
+def test_com_jacobian_from_the_coriolis_pass_equals_a_fresh_one(model):
+    """`step` reads the CoM Jacobian after computeMinverse and computeCoriolisMatrix, with
+    pinocchio's overload that takes the joint placements of the last pass instead of running
+    forward kinematics again: the same numbers, bit for bit, as from q (and the other terms
+    are untouched by the order)."""
+    pm, fid = model.pin_model, model.ee_frame_id
+    rng = np.random.default_rng(26)
+    fresh, reused = pm.createData(), pm.createData()
+    for _ in range(300):
+        q = np.concatenate([rng.normal(size=3), rng.normal(size=4), rng.uniform(-3.0, 3.0, model.n)])
+        q[3:7] /= np.linalg.norm(q[3:7])
+        v = rng.normal(size=pm.nv) * rng.choice([1e-3, 1.0, 10.0])
+        a = [pin.jacobianCenterOfMass(pm, fresh, q, False).copy(), pin.computeMinverse(pm, fresh, q).copy(),
+             pin.computeCoriolisMatrix(pm, fresh, q, v).copy()]
+        b = [None, pin.computeMinverse(pm, reused, q).copy(), pin.computeCoriolisMatrix(pm, reused, q, v).copy()]
+        b[0] = pin.jacobianCenterOfMass(pm, reused, False).copy()
+        for d, r in ((fresh, a), (reused, b)):
+            r += [pin.updateFramePlacement(pm, d, fid).homogeneous.copy(),
+                  pin.getFrameJacobian(pm, d, fid, pin.LOCAL).copy(),
+                  pin.getFrameJacobianTimeVariation(pm, d, fid, pin.LOCAL).copy()]
+        for x, y in zip(a, b):
+            assert np.array_equal(x, y)

@@ -194,7 +194,9 @@ def test_companion_restarted_seconds_later_takes_its_vehicle_back_from_where_it_
 
 
 def test_sigkilled_companion_is_detected_and_a_restarted_one_rejoins(tmp_path):
-    with _two_am_run_that_loses_companion_5(tmp_path) as (sim, detected_after_s, restart):
+    # 9 s: the simulator runs on while the new companion starts (seconds of wall time), so
+    # the rejoin comes seconds into the run; the end must leave it time to fly its reference
+    with _two_am_run_that_loses_companion_5(tmp_path, 9.0) as (sim, detected_after_s, restart):
         assert detected_after_s < 10  # detected within the step timeout (+ load)
         c5b = restart()
         line = _wait_for(sim.proc.stderr, "companion back")
@@ -203,6 +205,7 @@ def test_sigkilled_companion_is_detected_and_a_restarted_one_rejoins(tmp_path):
         assert code == 0, err
         o = json.loads((tmp_path / "outcome.json").read_text())
         assert [e["event"] for e in o["events"]] == ["lost", "rejoined"]
+        assert o["events"][1]["t"] < 7.0, o["events"]  # seconds before the end, to judge the flight after it
         assert o["failsafe_at_end"] == []
         c5b.communicate(timeout=30)
         assert c5b.returncode == 0
