@@ -12,6 +12,11 @@ levels); --robust starts from ten_am_robust(_attitude) instead (the hexarotor an
 options, with which the grasp takes an actuation delay of up to 3 ms: docs/flight_controller.md);
 --sitl-only leaves out the echo, UDP and bare PyBullet columns.
 
+A SITL run whose verdict is a failure is named under its row. With --attitude --devices
+without --robust that is the rule: the paper's quadrotor, flown by the law as written on
+sensors at the default levels, saturates its rotors from the first step (the figures are
+those of that run; --robust flies the same approach without failing).
+
 Each N runs the ten_am scenario's object (a cylinder, r = 0.6 m, 1 kg here) with N AMs evenly spaced
 around it, for --duration simulated seconds of the approach phase. The SITL figure is the
 simulator's own (simulated time / wall time from the first lockstep step, start-up
@@ -133,7 +138,8 @@ def sitl_rtf(path: Path, duration: float, run_dir: Path) -> tuple[float, float, 
     comps = [json.loads(f.read_text()).get("process", {}) for f in sorted(run_dir.glob("am*.json"))]
     proc = {"sim_cpu_us": (outcome.get("process") or {}).get("cpu_us_per_step"),
             "comp_cpu_us": _median([c.get("cpu_us_per_step") for c in comps]),
-            **{k: _median([c.get("memory_mib", {}).get(k) for c in comps]) for k in ("rss", "pss", "uss")}}
+            **{k: _median([c.get("memory_mib", {}).get(k) for c in comps]) for k in ("rss", "pss", "uss")},
+            "verdict": outcome.get("verdict") or {}}
     return outcome["real_time_factor"], wall, proc
 
 
@@ -270,6 +276,8 @@ def main() -> None:
                   f"{proc['sim_cpu_us']:10.0f}us {proc['comp_cpu_us']:11.0f}us {cap:7.2f}x {proc['rss']:6.0f}MiB "
                   f"{proc['pss']:6.0f} "
                   f"{proc['uss']:6.0f}", flush=True)
+            if proc["verdict"].get("status") == "failed":  # the figures are those of a run that failed its mission
+                print(f"    N = {n}: the SITL run's {proc['verdict'].get('text', 'mission FAILED')}", flush=True)
     print("SITL: the product (am-run, telemetry on). echo: same lockstep, companions without a controller"
           + (f" (echo+{spin:g}us: each busy-waits {spin:g} us per step)" if spin is not None else "") + ".\n"
           "UDP: the message pattern alone. Targets: 2 AMs >= 3x, 10 AMs >= 0.7x (goals 5x, 1x); companion memory\n"
