@@ -305,6 +305,21 @@ _NO_FILTER_STATE = np.zeros(0)
 _ZERO3 = np.zeros(3)  # no axis: F_rc is the whole measured force (the paper's)
 
 
+def pinocchio_terms(pm: pin.Model, data: pin.Data, fid: int, q_pin: np.ndarray, V: np.ndarray) -> tuple:
+    """(Jcom, M^-1, C, H_WE, J_e, Jdot_e): the model terms `step` takes from pinocchio at
+    (q_pin, V), {e} being frame `fid`, its Jacobians in {e} (LOCAL).
+
+    computeCoriolisMatrix's pass also fills the joint placements, data.J and data.dJ; the CoM
+    Jacobian R [I, -hat(r_b), J_b] is read from those placements (pinocchio's overload without
+    q), which skips a forward-kinematics pass and gives the same numbers bit for bit
+    (tests/amcore/test_control.py)."""
+    M_inv = pin.computeMinverse(pm, data, q_pin)
+    C = pin.computeCoriolisMatrix(pm, data, q_pin, V)
+    Jcom = pin.jacobianCenterOfMass(pm, data, False)
+    return (Jcom, M_inv, C, pin.updateFramePlacement(pm, data, fid).homogeneous,
+            pin.getFrameJacobian(pm, data, fid, pin.LOCAL), pin.getFrameJacobianTimeVariation(pm, data, fid, pin.LOCAL))
+
+
 def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmState,
          ref: Reference, wrench_E: np.ndarray, memory: ControllerMemory, t_s: float,
          task_frame: TaskFrame | None = None) -> StepResult:
@@ -321,14 +336,7 @@ def step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmStat
     frame = p.task_frame if task_frame is None else task_frame
     pm, fid = model.pin_model, model.ee_frame_id
     q_pin, V = pin_configuration(state)
-    M_inv = pin.computeMinverse(pm, data, q_pin)
-    C = pin.computeCoriolisMatrix(pm, data, q_pin, V)  # its pass also fills the joint placements, data.J, data.dJ
-    # R [I, -hat(r_b), J_b] from the joint placements just computed: the overload without q
-    # skips a forward-kinematics pass and gives the same numbers (tests/amcore/test_control.py)
-    Jcom = pin.jacobianCenterOfMass(pm, data, False)
-    H_WE = pin.updateFramePlacement(pm, data, fid).homogeneous
-    J_e = pin.getFrameJacobian(pm, data, fid, pin.LOCAL)
-    Jdot_e = pin.getFrameJacobianTimeVariation(pm, data, fid, pin.LOCAL)
+    Jcom, M_inv, C, H_WE, J_e, Jdot_e = pinocchio_terms(pm, data, fid, q_pin, V)
 
     dt = 0.0 if memory.t_s is None else t_s - memory.t_s
     filt = memory.wrench

@@ -35,7 +35,7 @@ import pinocchio as pin
 from amcore import law
 from amcore.allocation import Allocation
 from amcore.config import load_scenario
-from amcore.control import ControllerMemory, ControllerParams, step
+from amcore.control import ControllerMemory, ControllerParams, pinocchio_terms, step
 from amcore.mission import am_mission
 from amcore.offboard import Applied, OffboardMemory, OffboardParams, offboard_step
 from amcore.model import AmState, build_model, create_data, pin_configuration
@@ -76,12 +76,6 @@ def main() -> None:
     pm, fid = model.pin_model, model.ee_frame_id
     clock = time.perf_counter_ns
 
-    def pinocchio_terms(st, q_pin, V):  # as amcore.control.step calls them
-        M_inv, C = pin.computeMinverse(pm, data, q_pin), pin.computeCoriolisMatrix(pm, data, q_pin, V)
-        return (pin.jacobianCenterOfMass(pm, data, False), M_inv, C, pin.updateFramePlacement(pm, data, fid).homogeneous,
-                pin.getFrameJacobian(pm, data, fid, pin.LOCAL),
-                pin.getFrameJacobianTimeVariation(pm, data, fid, pin.LOCAL))
-
     p, wf = params, params.wrench_filter
     res0 = step(model, data, params, sts[0], refs[0], F, ControllerMemory(), 0.0)
     x0, xd0 = res0.memory.wrench.x.copy(), res0.memory.wrench.xdot.copy()
@@ -89,7 +83,7 @@ def main() -> None:
     configurations = [pin_configuration(st) for st in sts]
     law_inputs = []
     for st, ref, (q_pin, V) in zip(sts, refs, configurations):
-        Jcom, M_inv, C, H_WE, J_e, Jd_e = pinocchio_terms(st, q_pin, V)
+        Jcom, M_inv, C, H_WE, J_e, Jd_e = pinocchio_terms(pm, data, fid, q_pin, V)
         law_inputs.append((model.mass_kg, model.gravity_mps2, st.R_WB, st.p_WB, st.w_B, V, Jcom.copy(), M_inv.copy(),
                            C.copy(), H_WE.copy(), J_e.copy(), Jd_e.copy(), p.task_frame.H_TW, p.axes, *ref,
                            F, x0, xd0, Phi, wf.omega, wf.zeta, p.gains_K_t, p.gains_D_t, p.k_R, p.k_w,
@@ -114,7 +108,7 @@ def main() -> None:
     parts = {
         "step": run_step,
         "configuration": lambda i: pin_configuration(sts[i % 64]),
-        "pinocchio": lambda i: pinocchio_terms(sts[i % 64], *configurations[i % 64]),
+        "pinocchio": lambda i: pinocchio_terms(pm, data, fid, *configurations[i % 64]),
         "law": lambda i: law.control_law(*law_inputs[i % 64]),
         "reference": lambda i: mission.reference(0.0067 * i),
         "state_from_frame": lambda i: state_from_frame(frames[i % 64]),

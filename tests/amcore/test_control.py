@@ -7,7 +7,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from amcore.control import ControllerMemory, step
+from amcore.control import ControllerMemory, pinocchio_terms, step
 from amcore.filters import FilterState
 from amcore.ideal import forward_dynamics, full_tau
 from amcore.model import AmState, create_data, decoupled_terms
@@ -297,25 +297,22 @@ def test_diagnostics_keep_their_field_names(model, mission, params):
         assert np.shape(getattr(d, name)) == shape, name
 
 
-def test_com_jacobian_from_the_coriolis_pass_equals_a_fresh_one(model):
-    """`step` reads the CoM Jacobian after computeMinverse and computeCoriolisMatrix, with
-    pinocchio's overload that takes the joint placements of the last pass instead of running
-    forward kinematics again: the same numbers, bit for bit, as from q (and the other terms
-    are untouched by the order)."""
+def test_pinocchio_terms_equal_those_of_a_fresh_forward_kinematics(model):
+    """`pinocchio_terms` reads the CoM Jacobian from the Coriolis pass's joint placements
+    (pinocchio's overload without q) instead of running forward kinematics again: the six
+    terms equal, bit for bit, those of each call made from q on its own data."""
     pm, fid = model.pin_model, model.ee_frame_id
     rng = np.random.default_rng(26)
-    fresh, reused = pm.createData(), pm.createData()
+    data = pm.createData()
     for _ in range(300):
         q = np.concatenate([rng.normal(size=3), rng.normal(size=4), rng.uniform(-3.0, 3.0, model.n)])
         q[3:7] /= np.linalg.norm(q[3:7])
         v = rng.normal(size=pm.nv) * rng.choice([1e-3, 1.0, 10.0])
-        a = [pin.jacobianCenterOfMass(pm, fresh, q, False).copy(), pin.computeMinverse(pm, fresh, q).copy(),
-             pin.computeCoriolisMatrix(pm, fresh, q, v).copy()]
-        b = [None, pin.computeMinverse(pm, reused, q).copy(), pin.computeCoriolisMatrix(pm, reused, q, v).copy()]
-        b[0] = pin.jacobianCenterOfMass(pm, reused, False).copy()
-        for d, r in ((fresh, a), (reused, b)):
-            r += [pin.updateFramePlacement(pm, d, fid).homogeneous.copy(),
-                  pin.getFrameJacobian(pm, d, fid, pin.LOCAL).copy(),
-                  pin.getFrameJacobianTimeVariation(pm, d, fid, pin.LOCAL).copy()]
-        for x, y in zip(a, b):
-            assert np.array_equal(x, y)
+        got = [x.copy() for x in pinocchio_terms(pm, data, fid, q, v)]
+        fresh = pm.createData()
+        pin.computeCoriolisMatrix(pm, fresh, q, v)  # data.dJ for the frame's time variation
+        want = [pin.jacobianCenterOfMass(pm, pm.createData(), q, False), pin.computeMinverse(pm, pm.createData(), q),
+                pin.computeCoriolisMatrix(pm, pm.createData(), q, v), pin.updateFramePlacement(pm, fresh, fid).homogeneous,
+                pin.getFrameJacobian(pm, fresh, fid, pin.LOCAL), pin.getFrameJacobianTimeVariation(pm, fresh, fid, pin.LOCAL)]
+        for name, x, y in zip(("Jcom", "M_inv", "C", "H_WE", "J_e", "Jdot_e"), got, want):
+            assert np.array_equal(x, y), name

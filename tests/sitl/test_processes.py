@@ -138,6 +138,10 @@ def _wait_for_sim_time(stream, t_s: float) -> float:
             return t
 
 
+REJOIN_RUN_S = 9.0  # the simulator runs on while a restarted companion starts (seconds of wall time):
+# a rejoin comes seconds into the run, and the end must leave it seconds to fly its reference
+
+
 @contextlib.contextmanager
 def _two_am_run_that_loses_companion_5(tmp_path, duration_s: float = 6.0):
     """two_am_comp for duration_s; companion 5 SIGKILLed once the run is under way. Yields (sim,
@@ -174,8 +178,7 @@ def test_companion_restarted_seconds_later_takes_its_vehicle_back_from_where_it_
     the wall clock rejoined anywhere from 5 s to the end of a 6 s run, and the error at the end
     then caught the first tenth of a second after the rejoin (up to 12 mm) instead of its
     vehicle taken over."""
-    duration_s = 9.0
-    with _two_am_run_that_loses_companion_5(tmp_path, duration_s) as (sim, _, restart):
+    with _two_am_run_that_loses_companion_5(tmp_path, REJOIN_RUN_S) as (sim, _, restart):
         _wait_for_sim_time(sim.proc.stdout, 1.5)  # the run goes on without it
         c5b = restart()
         code, err = sim.wait(timeout_s=180)
@@ -185,7 +188,7 @@ def test_companion_restarted_seconds_later_takes_its_vehicle_back_from_where_it_
         assert [e["event"] for e in events] == ["lost", "rejoined"], events
         assert events[1]["t"] - events[0]["t"] > 1.0  # a late rejoin
         # the check below judges the vehicle taken over, seconds after the rejoin
-        assert events[1]["t"] < duration_s - 2.0, f"rejoined at t = {events[1]['t']} s of {duration_s}: too late to judge"
+        assert events[1]["t"] < REJOIN_RUN_S - 2.0, f"rejoined at t = {events[1]['t']} s of {REJOIN_RUN_S}: too late to judge"
         assert o["failsafe_at_end"] == [] and o["link"]["rejected_setpoints"] == 0
         c5b.communicate(timeout=30)
         assert c5b.returncode == 0
@@ -194,9 +197,7 @@ def test_companion_restarted_seconds_later_takes_its_vehicle_back_from_where_it_
 
 
 def test_sigkilled_companion_is_detected_and_a_restarted_one_rejoins(tmp_path):
-    # 9 s: the simulator runs on while the new companion starts (seconds of wall time), so
-    # the rejoin comes seconds into the run; the end must leave it time to fly its reference
-    with _two_am_run_that_loses_companion_5(tmp_path, 9.0) as (sim, detected_after_s, restart):
+    with _two_am_run_that_loses_companion_5(tmp_path, REJOIN_RUN_S) as (sim, detected_after_s, restart):
         assert detected_after_s < 10  # detected within the step timeout (+ load)
         c5b = restart()
         line = _wait_for(sim.proc.stderr, "companion back")
@@ -205,7 +206,7 @@ def test_sigkilled_companion_is_detected_and_a_restarted_one_rejoins(tmp_path):
         assert code == 0, err
         o = json.loads((tmp_path / "outcome.json").read_text())
         assert [e["event"] for e in o["events"]] == ["lost", "rejoined"]
-        assert o["events"][1]["t"] < 7.0, o["events"]  # seconds before the end, to judge the flight after it
+        assert o["events"][1]["t"] < REJOIN_RUN_S - 2.0, o["events"]  # seconds before the end, to judge the flight after it
         assert o["failsafe_at_end"] == []
         c5b.communicate(timeout=30)
         assert c5b.returncode == 0
