@@ -41,6 +41,9 @@ More columns take the whole apart, measured in the same run:
   cost when the controller costs nothing: an upper bound on the SITL's real-time factor.
 - "echo+Xus" (with --echo-spin-us X): the same, each echo busy-waiting X us per step: a
   controller's compute time without its memory traffic and telemetry.
+- "in-proc": `simulator.inprocess` on the same scenario: the same world, flight controllers
+  and pilots called in one loop of one process, on one core, without MAVLink, sockets,
+  telemetry or processes to switch between. What the lockstep's process boundary costs.
 - "UDP": one Python process exchanging a datagram per step with N forked processes that
   answer at once (no MAVLink, no physics): the floor of the lockstep's message pattern.
 """
@@ -141,6 +144,17 @@ def sitl_rtf(path: Path, duration: float, run_dir: Path) -> tuple[float, float, 
             **{k: _median([c.get("memory_mib", {}).get(k) for c in comps]) for k in ("rss", "pss", "uss")},
             "verdict": outcome.get("verdict") or {}}
     return outcome["real_time_factor"], wall, proc
+
+
+def inprocess_rtf(path: Path, duration: float) -> float:
+    """x real time of `simulator.inprocess` on the same scenario: the same world, flight
+    controllers and companions' pilots called in one loop of one process (one core), frames
+    rounded as the wire rounds them, no MAVLink, sockets or telemetry; start-up excluded."""
+    p = subprocess.run([sys.executable, "-m", "simulator.inprocess", str(path), "--duration", str(duration)],
+                       capture_output=True, text=True, env=dict(os.environ))
+    if p.returncode not in (0, MISSION_FAILED):
+        raise RuntimeError(f"in-process run failed: {p.stderr[-2000:]}")
+    return json.loads(p.stdout)["real_time_factor"]
 
 
 def _median(xs) -> float:
@@ -258,7 +272,7 @@ def main() -> None:
     print("x real time (simulated s / wall s), each column measured in this run:")
     spin = a.echo_spin_us
     spin_head = f" {'echo+' + format(spin, 'g') + 'us':>12}" if spin is not None else ""
-    print(f"{'N':>3} {'SITL':>7} {'echo':>7}{spin_head} {'UDP':>7} {'bare PyBullet':>14} {'bare/SITL':>10} "
+    print(f"{'N':>3} {'SITL':>7} {'echo':>7}{spin_head} {'in-proc':>8} {'UDP':>7} {'bare PyBullet':>14} {'bare/SITL':>10} "
           f"{'wall incl. start-up':>20} | {'sim CPU/step':>12} {'comp CPU/step':>13} {'CPU cap':>8} {'comp rss':>9} "
           f"{'pss':>6} {'uss':>6}")
     with tempfile.TemporaryDirectory() as tmp:
@@ -269,10 +283,11 @@ def main() -> None:
             rtf, wall, proc = sitl_rtf(path, a.duration, Path(tmp) / f"run{n}")
             echo = nan if a.sitl_only else echo_rtf(path, a.duration, Path(tmp) / f"echo{n}")
             spun = f" {echo_rtf(path, a.duration, Path(tmp) / f'spin{n}', spin):12.2f}" if spin is not None else ""
+            inproc = nan if a.sitl_only else inprocess_rtf(path, a.duration)
             udp = nan if a.sitl_only else udp_rtf(n)
             sp = load_scenario(path)
             cap = cpu_cap(proc["sim_cpu_us"], proc["comp_cpu_us"], n, 1e6 / sp.rate_hz, control_every=sp.control_every)
-            print(f"{n:>3} {rtf:7.2f} {echo:7.2f}{spun} {udp:7.1f} {bare:14.1f} {bare / rtf:10.0f} {wall:19.1f}s | "
+            print(f"{n:>3} {rtf:7.2f} {echo:7.2f}{spun} {inproc:8.2f} {udp:7.1f} {bare:14.1f} {bare / rtf:10.0f} {wall:19.1f}s | "
                   f"{proc['sim_cpu_us']:10.0f}us {proc['comp_cpu_us']:11.0f}us {cap:7.2f}x {proc['rss']:6.0f}MiB "
                   f"{proc['pss']:6.0f} "
                   f"{proc['uss']:6.0f}", flush=True)
@@ -280,6 +295,7 @@ def main() -> None:
                 print(f"    N = {n}: the SITL run's {proc['verdict'].get('text', 'mission FAILED')}", flush=True)
     print("SITL: the product (am-run, telemetry on). echo: same lockstep, companions without a controller"
           + (f" (echo+{spin:g}us: each busy-waits {spin:g} us per step)" if spin is not None else "") + ".\n"
+          "in-proc: the same scenario and pilots in one process on one core (simulator.inprocess).\n"
           "UDP: the message pattern alone. Targets: 2 AMs >= 3x, 10 AMs >= 0.7x (goals 5x, 1x); companion memory\n"
           "<= 120 MiB (goal 80). CPU per step: user + system of the whole process over the run, all threads.")
 
