@@ -8,8 +8,8 @@ Each AM keeps its own companion (`companion.main`, its own MAVLink link, signing
 telemetry session); only the process around it is shared: the first companion of a group
 runs the group's K companions' mains as threads, the others' processes wait for their
 outcome files and exit. The GIL serializes the threads' Python; the law and pinocchio's
-calls run in it as they do in a process of their own. K = 1 is `am-run` as it is (one
-process per AM). Prints, per K, the simulator's real-time factor, its CPU per physics step and
+calls run in it as they do in a process of their own. K = 1 is `am-run` as shipped (one
+`companion` process per AM). Prints, per K, the simulator's real-time factor, its CPU per physics step and
 the companion processes' CPU per AM and control step (user + system of each companion
 process from the lockstep's start, `companion.procstats`, summed and divided by AMs and
 control steps), in one run.
@@ -82,8 +82,8 @@ def measure(path: Path, per_process: int, duration: float, run_dir: Path, teleme
     from amcore.config import load_scenario
     real = launch._command
 
-    def command(name: str) -> list[str]:
-        if name == "companion":
+    def command(name: str) -> list[str]:  # K = 1: the companions' own console script, as shipped
+        if name == "companion" and per_process > 1:
             return [sys.executable, __file__, "--host", str(per_process), "--"]
         return real(name)
     launch._command = command
