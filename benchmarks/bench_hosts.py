@@ -30,6 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.append(str(ROOT))
 sys.path.append(str(ROOT / "benchmarks"))
 
+
 def _argv_for(argv: list[str], own: int, sysid: int) -> list[str]:
     """The companion arguments of `sysid` from those am-run gave companion `own`."""
     out, i = [], 0

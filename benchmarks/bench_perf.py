@@ -246,13 +246,11 @@ def _kind(pid: int) -> str:
 
 
 def _run_sitl(duration: float, window: float, freq: int, top: int, attach_after: float) -> None:
-    from bench_sitl import base_scenario, scenario_with
+    from bench_sitl import am_run_command, base_scenario, scenario_with
     with tempfile.TemporaryDirectory() as tmp:
         path = scenario_with(2, Path(tmp), base_scenario(attitude=True, robust=True), devices=True)
-        exe = Path(sys.executable).parent / "am-run"
-        cmd = [str(exe) if exe.exists() else sys.executable, *([] if exe.exists() else ["-m", "simulator.launch"]),
-               str(path), "--duration", str(duration), "--run-dir", str(Path(tmp) / "run"), "--no-progress"]
-        run = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        run = subprocess.Popen(am_run_command(path, duration, Path(tmp) / "run"), stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
         deadline, pids = time.monotonic() + 120.0, []
         while time.monotonic() < deadline and run.poll() is None:  # the simulator and both companions up
             pids = _descendants(run.pid)

@@ -128,10 +128,15 @@ def bare_rtf(path: Path, duration: float) -> float:
         world.close()
 
 
-def sitl_rtf(path: Path, duration: float, run_dir: Path) -> tuple[float, float, dict]:
+def am_run_command(path: Path, duration: float, run_dir: Path) -> list[str]:
+    """`am-run` of a scenario for `duration` simulated seconds into `run_dir`, without a progress bar."""
     exe = Path(sys.executable).parent / "am-run"
-    cmd = [str(exe) if exe.exists() else sys.executable, *([] if exe.exists() else ["-m", "simulator.launch"]),
-           str(path), "--duration", str(duration), "--run-dir", str(run_dir), "--no-progress"]
+    return [str(exe) if exe.exists() else sys.executable, *([] if exe.exists() else ["-m", "simulator.launch"]),
+            str(path), "--duration", str(duration), "--run-dir", str(run_dir), "--no-progress"]
+
+
+def sitl_rtf(path: Path, duration: float, run_dir: Path) -> tuple[float, float, dict]:
+    cmd = am_run_command(path, duration, run_dir)
     t0 = time.perf_counter()
     p = subprocess.run(cmd, capture_output=True, text=True, env=dict(os.environ))
     wall = time.perf_counter() - t0

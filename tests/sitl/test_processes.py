@@ -138,16 +138,16 @@ def _wait_for_sim_time(stream, t_s: float) -> float:
             return t
 
 
-REJOIN_RUN_S = 9.0  # the simulator runs on while a restarted companion starts (seconds of wall time):
-# a rejoin comes seconds into the run, and the end must leave it seconds to fly its reference
+REJOIN_RUN_S = 9.0  # simulated seconds: a restarted companion takes seconds of wall time to start while
+# the simulator runs on, so its rejoin comes seconds into the run, and the end must leave it seconds to fly
 
 
 @contextlib.contextmanager
-def _two_am_run_that_loses_companion_5(tmp_path, duration_s: float = 6.0):
-    """two_am_comp for duration_s; companion 5 SIGKILLed once the run is under way. Yields (sim,
+def _two_am_run_that_loses_companion_5(tmp_path):
+    """two_am_comp for REJOIN_RUN_S; companion 5 SIGKILLed once the run is under way. Yields (sim,
     seconds from the kill to the simulator's failsafe message, restart), restart() starting a
     new companion 5 that writes am5.json; every process is killed on leaving."""
-    sim = Sim("two_am_comp.toml", tmp_path, "--step-timeout", "2", "--peer-timeout", "30", "--duration", str(duration_s))
+    sim = Sim("two_am_comp.toml", tmp_path, "--step-timeout", "2", "--peer-timeout", "30", "--duration", str(REJOIN_RUN_S))
     procs = [companion(4, sim.bind), companion(5, sim.bind)]
 
     def restart():
@@ -178,7 +178,7 @@ def test_companion_restarted_seconds_later_takes_its_vehicle_back_from_where_it_
     the wall clock rejoined anywhere from 5 s to the end of a 6 s run, and the error at the end
     then caught the first tenth of a second after the rejoin (up to 12 mm) instead of its
     vehicle taken over."""
-    with _two_am_run_that_loses_companion_5(tmp_path, REJOIN_RUN_S) as (sim, _, restart):
+    with _two_am_run_that_loses_companion_5(tmp_path) as (sim, _, restart):
         _wait_for_sim_time(sim.proc.stdout, 1.5)  # the run goes on without it
         c5b = restart()
         code, err = sim.wait(timeout_s=180)
@@ -197,7 +197,7 @@ def test_companion_restarted_seconds_later_takes_its_vehicle_back_from_where_it_
 
 
 def test_sigkilled_companion_is_detected_and_a_restarted_one_rejoins(tmp_path):
-    with _two_am_run_that_loses_companion_5(tmp_path, REJOIN_RUN_S) as (sim, detected_after_s, restart):
+    with _two_am_run_that_loses_companion_5(tmp_path) as (sim, detected_after_s, restart):
         assert detected_after_s < 10  # detected within the step timeout (+ load)
         c5b = restart()
         line = _wait_for(sim.proc.stderr, "companion back")
