@@ -1,0 +1,177 @@
+"""What compiling the simulator's hold step as a whole could save, at most: attitude mode with
+`[devices]`, the steps between control steps (three of every four at 250 Hz setpoints).
+
+    python benchmarks/bench_hold_ceiling.py [--n 2 10] [--steps 3000] [--rounds 3]
+
+A hold step does, per AM: read the base from PyBullet, run the devices and the estimator,
+hold the last setpoint (the link), run the emulated autopilot and its allocation, and set
+the rotors' and the joints' commands; then PyBullet steps the world. Their arithmetic is
+compiled already (four numba kernels per AM: `device_kernels.suite_step`,
+`estimator_update`, `fc_kernels.rate_loops`, `allocation_kernels.allocate`); what remains
+in Python is the glue between the calls. Three loops, each on its own `SitlCore` of the
+same scenario (`bench_core.spec_for`: ten_am_attitude's object and quadrotor, N AMs,
+`[devices]` on), after 3 s of hovering setpoints, CPU time of this process per physics step:
+
+- "now": `SitlCore.hold` and `SitlCore.step` as a run calls them (the control steps between
+  them run too, with hovering setpoints; they are timed apart, as "control step");
+- "stripped": per AM the same five PyBullet calls a hold step needs (two getters and the
+  rotation, two force setters and the joints' setter), the four kernels on the AM's own
+  arrays, and one array of the base's values between them: no link, no motion capture, no
+  effort sensor, no rotor lag, no result objects, no bookkeeping. It is a lower bound of
+  what the step can cost with the kernels as they are: the glue a fused step would keep
+  (the link's hold, the motion capture, the rotors) is left out, so "saved" overstates the
+  gain;
+- "floor": PyBullet's step with the three setters per AM alone.
+
+"per AM above the floor" is (step - floor) / N: the simulator's own per-AM work on a hold step.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.append(str(ROOT))  # if not installed; PYTHONPATH wins (benchmarks/ab.py)
+sys.path.append(str(ROOT / "benchmarks"))
+
+from bench_core import spec_for  # noqa: E402
+
+from amcore.allocation import _WEAK_EFFECTIVENESS, _YAW_MARGIN  # noqa: E402
+from amcore.estimator import estimator_update  # noqa: E402
+from amlink.types import AttitudeSetpoint, AttitudeTarget  # noqa: E402
+from simulator import device_kernels as dk  # noqa: E402
+from simulator.bullet import pb  # noqa: E402
+from simulator.core import SitlCore  # noqa: E402
+
+WARM_S = 3.0
+
+
+def hover(core: SitlCore, s: int, k: int) -> AttitudeSetpoint:
+    """A hovering attitude setpoint of AM s for step k (level, hover thrust, arm torques zero)."""
+    m = core.model
+    thrust = m.mass_kg * m.gravity_mps2 / core.fcs[s].allocation.thrust_scale_n
+    att = AttitudeTarget(k, quat_wxyz=np.array([1.0, 0.0, 0.0, 0.0]), rates_rad_s=np.zeros(3),
+                         thrust_normalized=thrust)
+    return AttitudeSetpoint(step=k, attitude=att, tau_q_nm=np.zeros(m.n))
+
+
+def hovering(spec) -> tuple[SitlCore, int]:
+    """A connected `SitlCore` after WARM_S of hovering setpoints, and its next step."""
+    core = SitlCore(spec)
+    core.connect()
+    steps = round(WARM_S * spec.rate_hz)
+    run_now(core, 0, steps)
+    return core, steps
+
+
+def run_now(core: SitlCore, k0: int, steps: int) -> tuple[float, float]:
+    """Steps k0 .. k0 + steps as a run takes them: CPU [s] per hold step and per control step."""
+    hold = control = 0.0
+    n_hold = 0
+    clock = time.process_time
+    for k in range(k0, k0 + steps):
+        c0 = clock()
+        if core.is_control_step(k):
+            core.frames(k)
+            core.observe()
+            core.actuate(k, {s: hover(core, s, k) for s in core.sysids}, ())
+            core.step()
+            control += clock() - c0
+        else:
+            core.hold(k, ())
+            core.step()
+            hold += clock() - c0
+            n_hold += 1
+    return hold / max(n_hold, 1), control / max(steps - n_hold, 1)
+
+
+def run_stripped(core: SitlCore, steps: int) -> float:
+    """CPU [s] per physics step of the hold step's PyBullet calls and kernels alone (module doc)."""
+    w, c = core.world, core.world._client
+    thrust_n = core.model.mass_kg * core.model.gravity_mps2
+    ams = [(w._ams[s].body_id, w._arm_ids[s], core.devices[s], core.fcs[s], hover(core, s, 0).attitude)
+           for s in core.sysids]
+    t, k0 = core.time_s, core.world.step_index
+    c0 = time.process_time()
+    for k in range(steps):
+        for body, arm, dev, fc, att in ams:
+            p, q = pb.getBasePositionAndOrientation(body, physicsClientId=c)
+            v, om = pb.getBaseVelocity(body, physicsClientId=c)
+            pb.getMatrixFromQuaternion(q)
+            x = np.array((*p, q[3], q[0], q[1], q[2], *v, *om))
+            dk.suite_step(x, t, dev._c, dev._s, dev._imu_noise.next(), dev._ft_noise.next(), dev._tail)
+            e = dev.estimator
+            estimator_update(e.x, e.hist, e.lpf, e.coef, k0 + k, dev._omega_m, dev._f_m, e.dt, e.g, False, 0,
+                             e._none[0], e._none[1], e.gains, e.out, e.innovation)
+            fc._rate_loops(fc._p, fc._s, (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), att.quat_wxyz, att.rates_rad_s,
+                           att.thrust_normalized, (0.0, 0.0, 0.0, 0.0), False, fc._out)
+            o, a = fc._out, fc.allocation
+            a._kernel(a._c, o[3], o[4], o[5], o[6], a.out_max, _WEAK_EFFECTIVENESS, _YAW_MARGIN, a._result)
+            pb.applyExternalForce(body, -1, (0.0, 0.0, thrust_n), (0.0, 0.0, 0.0), pb.LINK_FRAME, physicsClientId=c)
+            pb.applyExternalTorque(body, -1, (0.0, 0.0, 0.0), pb.LINK_FRAME, physicsClientId=c)
+            pb.setJointMotorControlArray(body, arm, pb.TORQUE_CONTROL, forces=[0.0] * len(arm), physicsClientId=c)
+        pb.stepSimulation(physicsClientId=c)
+    return (time.process_time() - c0) / steps
+
+
+def run_floor(core: SitlCore, steps: int) -> float:
+    """CPU [s] per physics step of PyBullet's step with the three setters per AM."""
+    w, c = core.world, core.world._client
+    thrust_n = core.model.mass_kg * core.model.gravity_mps2
+    ams = [(w._ams[s].body_id, w._arm_ids[s]) for s in core.sysids]
+    c0 = time.process_time()
+    for _ in range(steps):
+        for body, arm in ams:
+            pb.applyExternalForce(body, -1, (0.0, 0.0, thrust_n), (0.0, 0.0, 0.0), pb.LINK_FRAME, physicsClientId=c)
+            pb.applyExternalTorque(body, -1, (0.0, 0.0, 0.0), pb.LINK_FRAME, physicsClientId=c)
+            pb.setJointMotorControlArray(body, arm, pb.TORQUE_CONTROL, forces=[0.0] * len(arm), physicsClientId=c)
+        pb.stepSimulation(physicsClientId=c)
+    return (time.process_time() - c0) / steps
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap.add_argument("--n", type=int, nargs="+", default=[2, 10])
+    ap.add_argument("--steps", type=int, default=3000, help="physics steps per loop and round")
+    ap.add_argument("--rounds", type=int, default=3)
+    a = ap.parse_args(argv)
+    print("[us per physics step, CPU time] attitude mode, [devices] on; setpoints every 4 physics steps")
+    print(f"{'N':>3} {'round':>5} {'hold now':>9} {'control step':>13} {'stripped':>9} {'floor':>6} | "
+          f"{'per AM above the floor: now':>28} {'stripped':>9} {'saved':>6} | {'control period now':>19} "
+          f"{'with hold stripped':>19}")
+    for n in a.n:
+        spec = spec_for("attitude", n, True)
+        now, k = hovering(spec)
+        try:
+            for r in range(a.rounds):
+                core, _ = hovering(spec)
+                try:
+                    stripped = run_stripped(core, a.steps)
+                finally:
+                    core.close()
+                core, _ = hovering(spec)
+                try:
+                    floor = run_floor(core, a.steps)
+                finally:
+                    core.close()
+                hold, control = run_now(now, k, a.steps)
+                k += a.steps
+                per_now, per_stripped = (hold - floor) / n, (stripped - floor) / n
+                every = now.control_every
+                period_now = (every - 1) * hold + control
+                period_stripped = (every - 1) * stripped + control
+                print(f"{n:3d} {r + 1:5d} {1e6 * hold:9.0f} {1e6 * control:13.0f} {1e6 * stripped:9.0f} "
+                      f"{1e6 * floor:6.0f} | {1e6 * per_now:28.1f} {1e6 * per_stripped:9.1f} "
+                      f"{1e6 * (per_now - per_stripped):6.1f} | {1e6 * period_now:19.0f} "
+                      f"{1e6 * period_stripped:12.0f} ({100.0 * (period_stripped / period_now - 1.0):+.0f} %)",
+                      flush=True)
+        finally:
+            now.close()
+
+
+if __name__ == "__main__":
+    main()
