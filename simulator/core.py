@@ -107,6 +107,17 @@ def warm_up_kernels(spec: ScenarioSpec) -> None:
         dev.step(values[:13], spec.dt_s)
 
 
+def kernel_group(spec: ScenarioSpec):
+    """`warm_up_kernels(spec)` as a group of `companion.jitcache.warm_groups`: under a lock
+    of its own, so that a process can compile these while another compiles the control law."""
+    from amcore import allocation_kernels, estimator
+    from companion.jitcache import SIMULATOR_LOCK, Group
+
+    from . import device_kernels, fc_kernels
+    return Group(SIMULATOR_LOCK, (fc_kernels, allocation_kernels, device_kernels, estimator),
+                 lambda: warm_up_kernels(spec))
+
+
 class SitlCore:
     def __init__(self, spec: ScenarioSpec, log: Callable[[str], None] = lambda _msg: None,
                  on_truth: Callable[[object], None] | None = None,

@@ -28,7 +28,7 @@ from amlink.types import (AttitudeSetpoint, SensorFrame, TorqueSetpoint, frame_v
 from companion import jitcache
 from companion.pilot import Pilot
 
-from .core import SitlCore, warm_up_kernels
+from .core import SitlCore, kernel_group
 from .verdict import MISSION_FAILED
 
 
@@ -79,9 +79,10 @@ def run(spec: ScenarioSpec, duration_s: float | None = None,
     ground-truth sample (`simulator.world.GroundTruth`, every 10 ms; `experiments/grasp_trace.py`)."""
     core = SitlCore(spec, failsafe_after_rejected=failsafe_after_rejected, on_truth=on_truth)
     pilots = {s: Pilot(spec, s, model=core.model, object_pose=core.object_pose) for s in core.sysids}
-    # the law and the simulator's kernels: compiled once per machine (under jitcache's lock, so that a
-    # campaign's workers starting together do not compile side by side), else loaded from the cache
-    jitcache.warm(lambda: (pilots[core.sysids[0]].warm_up(), warm_up_kernels(spec)))
+    # the law and the simulator's kernels: compiled once per machine (each group under its own lock, so
+    # that a campaign's workers starting together compile the two groups side by side, not the same
+    # one twice), else loaded from the cache
+    jitcache.warm_groups([jitcache.law_group(pilots[core.sysids[0]].warm_up), kernel_group(spec)])
     v = spec.vehicle
     limits = SetpointLimits.for_vehicle(v.rotors.thrust_max_total_n, max(v.joint_torque_max_nm), v.n_joints)
     n = int(round((spec.duration_s if duration_s is None else duration_s) * spec.rate_hz))

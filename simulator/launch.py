@@ -16,6 +16,7 @@ the mission failed, 2 bad configuration, 1 when a process failed.
 from __future__ import annotations
 
 import json
+import multiprocessing
 import os
 import select
 import shutil
@@ -42,18 +43,42 @@ def _command(name: str) -> list[str]:
     return [exe] if exe else [sys.executable, "-m", name]
 
 
-def _warm_control_law(spec) -> None:
+def _warm_kernels(spec, scenario: Path) -> None:
     """Compile the control law (amcore.law) before any companion starts, so that they load
-    it from the cache instead of compiling side by side (companion.jitcache)."""
+    it from the cache instead of compiling side by side (companion.jitcache). On a machine
+    that has not compiled it yet (the first run), also the simulator's kernels, before the
+    simulator starts: a child process compiles them under their own lock while this one
+    compiles the law, on the other core (`jitcache.warm_groups`); should the child fail, this
+    process compiles them after the law."""
     from companion import jitcache
     from companion.pilot import Pilot
 
+    groups = [jitcache.law_group(Pilot(spec, spec.ams[0].sysid).warm_up)]
+    child = None
     if not jitcache.looks_cached():
-        print("am-run: compiling the control law (once per machine; later runs load it from the cache)",
-              file=sys.stderr, flush=True)
-    report = jitcache.warm(Pilot(spec, spec.ams[0].sysid).warm_up)
+        from .core import kernel_group
+        print("am-run: compiling the control law and the simulator's kernels (once per machine; later runs "
+              "load them from the cache)", file=sys.stderr, flush=True)
+        groups.append(kernel_group(spec))
+        child = multiprocessing.get_context("spawn").Process(target=_warm_simulator_kernels, args=(str(scenario),),
+                                                              daemon=True)
+        child.start()
+    report = jitcache.warm_groups(groups)
+    if child is not None:
+        child.join()
+        if child.exitcode != 0:
+            print(f"am-run: warning: compiling the simulator's kernels in a second process failed (exit "
+                  f"{child.exitcode}); this process warmed them instead", file=sys.stderr, flush=True)
     if report.compiled:
-        print(f"am-run: compiled the control law in {report.seconds:.1f} s", file=sys.stderr, flush=True)
+        print(f"am-run: compiled the kernels in {report.seconds:.1f} s", file=sys.stderr, flush=True)
+
+
+def _warm_simulator_kernels(scenario: str) -> None:
+    """The simulator's kernels compiled (or loaded) under their lock: `_warm_kernels`'s child."""
+    from companion import jitcache
+
+    from .core import kernel_group
+    jitcache.warm_groups([kernel_group(load_scenario(scenario))])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -99,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
         run_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         return cliargs.fail("am-run", f"--run-dir {run_dir}: {exc.strerror or exc}")
-    _warm_control_law(spec)  # every argument checked: compile the law once, before any companion
+    _warm_kernels(spec, a.scenario)  # every argument checked: compile the law once, before any companion
     cfg = str(Path(a.scenario).resolve())
     key_args = _fresh_key(spec, run_dir)
     sim_cmd = _command("simulator") + key_args + _gcs_key(spec, run_dir, a.gcs_key_file) + [

@@ -75,3 +75,87 @@ def test_warm_up_covers_the_other_modes(name):
     before = {k.py_func.__name__: len(k.signatures) for k in kernels(law)}
     run(spec, duration_s=0.2)
     assert {k.py_func.__name__: len(k.signatures) for k in kernels(law)} == before
+
+
+_GROUPS = textwrap.dedent("""
+    import json, os, sys, time
+    from pathlib import Path
+    from companion import jitcache
+    log, go = sys.argv[1], Path(sys.argv[2])
+    def first_call(name):
+        def call():
+            t0 = time.time()
+            time.sleep(1.0)
+            with open(log, "a") as f:
+                f.write(json.dumps([os.getpid(), name, t0, time.time()]) + "\\n")
+        return call
+    print("ready", flush=True)
+    while not go.exists():
+        time.sleep(0.01)
+    jitcache.warm_groups([jitcache.Group("a.lock", (), first_call("a")), jitcache.Group("b.lock", (), first_call("b"))])
+""")
+
+
+def test_processes_starting_together_warm_different_groups_side_by_side(tmp_path):
+    """Two processes warming the same two groups at once: while one holds the first group's
+    lock, the other takes the second group, so the two groups' first calls overlap in time;
+    a group is never warmed by two processes at once, and each process warms both."""
+    log, go = tmp_path / "log.jsonl", tmp_path / "go"
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    procs = [subprocess.Popen([sys.executable, "-c", _GROUPS, str(log), str(go)], stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT) for _ in range(2)]
+    for p in procs:
+        assert p.stdout.readline().strip() == "ready", p.stderr.read()
+    go.touch()
+    for p in procs:
+        _, err = p.communicate(timeout=60)
+        assert p.returncode == 0, err
+    calls = [json.loads(line) for line in log.read_text().splitlines()]
+    assert sorted((pid, name) for pid, name, _, _ in calls) == sorted(
+        (p.pid, name) for p in procs for name in ("a", "b"))
+    first = {name: min((c for c in calls if c[1] == name), key=lambda c: c[2]) for name in ("a", "b")}
+    assert first["a"][0] != first["b"][0]  # two processes ...
+    assert first["a"][2] < first["b"][3] and first["b"][2] < first["a"][3]  # ... at the same time
+    for name in ("a", "b"):  # the lock: one process at a time per group
+        (_, _, s0, e0), (_, _, s1, e1) = sorted((c for c in calls if c[1] == name), key=lambda c: c[2])
+        assert e0 <= s1
+
+
+def test_am_run_compiles_the_simulators_kernels_beside_the_law(monkeypatch, capsys):
+    """On a first run (the law not cached), am-run's warm-up starts a second process for the
+    simulator's kernels before it compiles the law, and waits for it before going on."""
+    import multiprocessing
+
+    from simulator import launch
+
+    spec = load_scenario(SCENARIO)
+    seen = []
+    real = jitcache.warm_groups
+
+    def warm_groups(groups):
+        seen.append((len(groups), len(multiprocessing.active_children())))
+        return real(groups)
+    monkeypatch.setattr(jitcache, "looks_cached", lambda: False)
+    monkeypatch.setattr(jitcache, "warm_groups", warm_groups)
+    launch._warm_kernels(spec, SCENARIO)
+    assert seen == [(2, 1)]  # the law and the simulator's group here, one child beside
+    assert multiprocessing.active_children() == []
+    assert "warning" not in capsys.readouterr().err
+
+
+def test_am_run_warms_the_simulators_kernels_itself_if_the_second_process_fails(monkeypatch, tmp_path, capfd):
+    from simulator import launch
+    from simulator.core import kernel_group
+
+    spec = load_scenario(SCENARIO)
+    warmed = []
+    real = jitcache.warm_groups
+
+    def warm_groups(groups):
+        warmed.extend(g.lock for g in groups)
+        return real(groups)
+    monkeypatch.setattr(jitcache, "looks_cached", lambda: False)
+    monkeypatch.setattr(jitcache, "warm_groups", warm_groups)
+    launch._warm_kernels(spec, tmp_path / "gone.toml")  # the child cannot read it: it fails
+    assert warmed == [jitcache.LAW_LOCK, kernel_group(spec).lock]
+    assert "compiling the simulator's kernels in a second process failed (exit 1)" in capfd.readouterr().err
