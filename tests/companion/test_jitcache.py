@@ -32,9 +32,11 @@ _WARM = textwrap.dedent("""
 """)
 
 
-def _start(cache: Path) -> subprocess.Popen:
+def _start(cache: Path, script: str = _WARM, *args: str) -> subprocess.Popen:
+    """`script` in a new Python process with the numba cache in `cache` (args: its argv; default
+    the scenario)."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
-    return subprocess.Popen([sys.executable, "-c", _WARM, str(SCENARIO)], stdout=subprocess.PIPE,
+    return subprocess.Popen([sys.executable, "-c", script, *(args or (str(SCENARIO),))], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT)
 
 
@@ -101,9 +103,7 @@ def test_processes_starting_together_warm_different_groups_side_by_side(tmp_path
     lock, the other takes the second group, so the two groups' first calls overlap in time;
     a group is never warmed by two processes at once, and each process warms both."""
     log, go = tmp_path / "log.jsonl", tmp_path / "go"
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
-    procs = [subprocess.Popen([sys.executable, "-c", _GROUPS, str(log), str(go)], stdout=subprocess.PIPE,
-                              stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT) for _ in range(2)]
+    procs = [_start(tmp_path / "cache", _GROUPS, str(log), str(go)) for _ in range(2)]
     for p in procs:
         assert p.stdout.readline().strip() == "ready", p.stderr.read()
     go.touch()
@@ -117,45 +117,44 @@ def test_processes_starting_together_warm_different_groups_side_by_side(tmp_path
     assert first["a"][0] != first["b"][0]  # two processes ...
     assert first["a"][2] < first["b"][3] and first["b"][2] < first["a"][3]  # ... at the same time
     for name in ("a", "b"):  # the lock: one process at a time per group
-        (_, _, s0, e0), (_, _, s1, e1) = sorted((c for c in calls if c[1] == name), key=lambda c: c[2])
-        assert e0 <= s1
+        (_, _, _, end), (_, _, start, _) = sorted((c for c in calls if c[1] == name), key=lambda c: c[2])
+        assert end <= start
 
 
-def test_am_run_compiles_the_simulators_kernels_beside_the_law(monkeypatch, capsys):
+@pytest.fixture
+def first_run(monkeypatch) -> list[tuple[list[str], int]]:
+    """The law looks uncached (a first run); each `jitcache.warm_groups` call is recorded as
+    (its groups' locks, the child processes alive when it starts) before it runs."""
+    import multiprocessing
+
+    calls = []
+    real = jitcache.warm_groups
+
+    def warm_groups(groups):
+        calls.append(([g.lock for g in groups], len(multiprocessing.active_children())))
+        return real(groups)
+    monkeypatch.setattr(jitcache, "looks_cached", lambda: False)
+    monkeypatch.setattr(jitcache, "warm_groups", warm_groups)
+    return calls
+
+
+def test_am_run_compiles_the_simulators_kernels_beside_the_law(first_run, capsys):
     """On a first run (the law not cached), am-run's warm-up starts a second process for the
     simulator's kernels before it compiles the law, and waits for it before going on."""
     import multiprocessing
 
     from simulator import launch
 
-    spec = load_scenario(SCENARIO)
-    seen = []
-    real = jitcache.warm_groups
-
-    def warm_groups(groups):
-        seen.append((len(groups), len(multiprocessing.active_children())))
-        return real(groups)
-    monkeypatch.setattr(jitcache, "looks_cached", lambda: False)
-    monkeypatch.setattr(jitcache, "warm_groups", warm_groups)
-    launch._warm_kernels(spec, SCENARIO)
-    assert seen == [(2, 1)]  # the law and the simulator's group here, one child beside
+    launch._warm_kernels(load_scenario(SCENARIO), SCENARIO)
+    # the law and the simulator's group here, one child beside
+    assert first_run == [([jitcache.LAW_LOCK, jitcache.SIMULATOR_LOCK], 1)]
     assert multiprocessing.active_children() == []
     assert "warning" not in capsys.readouterr().err
 
 
-def test_am_run_warms_the_simulators_kernels_itself_if_the_second_process_fails(monkeypatch, tmp_path, capfd):
+def test_am_run_warms_the_simulators_kernels_itself_if_the_second_process_fails(first_run, tmp_path, capfd):
     from simulator import launch
-    from simulator.core import kernel_group
 
-    spec = load_scenario(SCENARIO)
-    warmed = []
-    real = jitcache.warm_groups
-
-    def warm_groups(groups):
-        warmed.extend(g.lock for g in groups)
-        return real(groups)
-    monkeypatch.setattr(jitcache, "looks_cached", lambda: False)
-    monkeypatch.setattr(jitcache, "warm_groups", warm_groups)
-    launch._warm_kernels(spec, tmp_path / "gone.toml")  # the child cannot read it: it fails
-    assert warmed == [jitcache.LAW_LOCK, kernel_group(spec).lock]
+    launch._warm_kernels(load_scenario(SCENARIO), tmp_path / "gone.toml")  # the child cannot read it: it fails
+    assert [locks for locks, _ in first_run] == [[jitcache.LAW_LOCK, jitcache.SIMULATOR_LOCK]]
     assert "compiling the simulator's kernels in a second process failed (exit 1)" in capfd.readouterr().err
