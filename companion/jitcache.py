@@ -6,7 +6,8 @@ companions starting together would otherwise all find the cache empty and compil
 while holding an exclusive lock on a file beside the cache: the first process compiles and
 writes the cache, the others wait on the lock and then load what it wrote. am-run warms
 once before it starts any companion, and every companion, the in-process runner and each
-trial worker warm at start-up (then a cache hit, a fraction of a second).
+trial worker warm at start-up (then a cache hit, a fraction of a second); the standalone
+simulator warms its own group (below) before it listens.
 
 The simulator's kernels (its autopilot, allocation, devices and estimator) are a second
 group with a lock of its own (`warm_groups`): a process that finds one group's lock taken

@@ -37,13 +37,13 @@ from amlink.limits import SetpointLimits
 from amlink.lockstep import SimServer
 from amlink.types import ScenarioInfo
 from amlink.udp import STATUSTEXT_MAX
-from companion import procstats
+from companion import jitcache, procstats
 
 from telemetry.publisher import TelemetryPublisher
 from telemetry.session import TelemetryConfigError, add_zenoh_arguments, options_from_args
 from telemetry.wiring import SimulatorTelemetry
 
-from .core import SitlCore
+from .core import SitlCore, kernel_group
 from .gcs import GcsSession, snapshot_every
 from .gcs_link import GcsLink
 from .progress import SimBar
@@ -195,6 +195,13 @@ def main(argv: list[str] | None = None) -> int:
     cpu = procstats.CpuMeter()
     tele.open()
     try:
+        # the autopilot's, allocation's and devices' kernels: compiled on a machine's first run, under their
+        # own lock (companion.jitcache), so that a simulator and an am-run or a campaign starting together
+        # compile them once, side by side with the control law; else loaded from the cache
+        jit = jitcache.warm_groups([kernel_group(spec)])
+        if jit.compiled:
+            print(f"simulator: compiled the simulator's kernels in {jit.seconds:.1f} s (once per machine: cached "
+                  f"in {jitcache.cache_dir()})", file=sys.stderr, flush=True)
         core.connect()
         try:
             server.open()

@@ -19,3 +19,29 @@ def test_the_last_statustext_names_a_gcs_command_within_one_statustext(reason, t
 
 def test_other_failures_are_named_by_their_class():
     assert _told({"class": "dropped", "reason": "dropped at t = 12.40 s"}) == "mission failed: dropped"
+
+
+def test_the_simulator_warms_its_kernels_under_their_lock_before_it_listens(tmp_path, monkeypatch, capsys):
+    """The standalone simulator makes its kernels' first calls (`simulator.core.kernel_group`)
+    through `companion.jitcache.warm_groups`, under the simulator group's lock, before it binds
+    its endpoint: here the bind fails (an address of TEST-NET-1, not this host's), after the
+    warm-up."""
+    from companion import jitcache
+    from simulator import main as sim_main
+
+    events = []
+    real_warm, real_open = jitcache.warm_groups, sim_main.SimServer.open
+
+    def warm_groups(groups):
+        events.append(("warm", [g.lock for g in groups]))
+        return real_warm(groups)
+
+    def server_open(self):
+        events.append(("open", None))
+        return real_open(self)
+    monkeypatch.setattr(jitcache, "warm_groups", warm_groups)
+    monkeypatch.setattr(sim_main.SimServer, "open", server_open)
+    code = sim_main.main(["--bind", "udp:192.0.2.1:14550", "--gcs", "none", "--no-telemetry", "--run-dir",
+                          str(tmp_path / "run"), "--progress", "none"])
+    assert code == 1 and "cannot listen on udp:192.0.2.1:14550" in capsys.readouterr().err
+    assert events == [("warm", [jitcache.SIMULATOR_LOCK]), ("open", None)]
