@@ -24,8 +24,9 @@ def test_other_failures_are_named_by_their_class():
 def test_the_simulator_warms_its_kernels_under_their_lock_before_it_listens(tmp_path, monkeypatch, capsys):
     """The standalone simulator makes its kernels' first calls (`simulator.core.kernel_group`)
     through `companion.jitcache.warm_groups`, under the simulator group's lock, before it binds
-    its endpoint: here the bind fails (an address of TEST-NET-1, not this host's), after the
-    warm-up."""
+    its endpoint: here the bind fails (the port is taken), after the warm-up."""
+    import socket
+
     from companion import jitcache
     from simulator import main as sim_main
 
@@ -41,7 +42,11 @@ def test_the_simulator_warms_its_kernels_under_their_lock_before_it_listens(tmp_
         return real_open(self)
     monkeypatch.setattr(jitcache, "warm_groups", warm_groups)
     monkeypatch.setattr(sim_main.SimServer, "open", server_open)
-    code = sim_main.main(["--bind", "udp:192.0.2.1:14550", "--gcs", "none", "--no-telemetry", "--run-dir",
-                          str(tmp_path / "run"), "--progress", "none"])
-    assert code == 1 and "cannot listen on udp:192.0.2.1:14550" in capsys.readouterr().err
+    monkeypatch.setattr(sim_main.signal, "signal", lambda *_: None)  # pytest keeps its own SIGINT handler
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        bind = f"udp:127.0.0.1:{taken.getsockname()[1]}"
+        code = sim_main.main(["--bind", bind, "--gcs", "none", "--no-telemetry", "--run-dir", str(tmp_path / "run"),
+                              "--progress", "none"])
+    assert code == 1 and f"cannot listen on {bind}" in capsys.readouterr().err
     assert events == [("warm", [jitcache.SIMULATOR_LOCK]), ("open", None)]
