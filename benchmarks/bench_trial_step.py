@@ -8,8 +8,10 @@ CPU time of this thread per physics step. Then it runs again with each part belo
 in a timer (the thread's CPU time around the call, less the wrapped parts it calls): us per
 physics step for all AMs together. The wrappers cost ~0.5 us per call, so the parts sum to
 more than the unwrapped step; "other" is what no part holds (the run loop, the link's
-zero-order hold, the flight controllers' bookkeeping, the digest's inputs). For
-`benchmarks/ab.py`: every name wrapped exists in the trees compared (it is skipped if not).
+zero-order hold, the flight controllers' bookkeeping, the digest's inputs). A part a mode
+does not call (less than once in 100 steps) is not printed: torque mode's setpoint_from_result, attitude mode's offboard
+step, autopilot, rotors and joint effort sensor. For `benchmarks/ab.py`: a name wrapped that
+a tree compared does not have is skipped.
 """
 from __future__ import annotations
 
@@ -27,7 +29,8 @@ from trials.randomize import load_randomize
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# (label, module, attribute path): the parts, in the order of a control step
+# (label, module, attribute path): the parts, in the order of a control step (torque mode's and attitude
+# mode's); a label on two rows times one function under both of its bindings
 PARTS = (
     ("sense (World.sensor_values)", "simulator.world", "World.sensor_values"),
     ("devices and estimator (DeviceSuite.step)", "simulator.devices", "DeviceSuite.step"),
@@ -36,12 +39,19 @@ PARTS = (
     ("state_from_frame", "companion.pilot", "state_from_frame"),
     ("mission reference", "amcore.mission", "AmMission.reference"),
     ("control.step without the law", "amcore.control", "step"),
+    ("control.step without the law", "amcore.offboard", "step"),  # attitude mode's binding of it
     ("the compiled law (law.control_law)", "amcore.law", "control_law"),
+    ("offboard_step, the rest (tau_b^, the arm's torques)", "companion.pilot", "offboard_step"),
     ("setpoint_from_result", "companion.pilot", "setpoint_from_result"),
+    ("attitude_setpoint_from_result, the rest", "companion.pilot", "attitude_setpoint_from_result"),
     ("Pilot.command, the rest", "companion.pilot", "Pilot.command"),
     ("record (companion.outcome)", "companion.pilot", "Pilot.record"),
+    ("setpoint_as_on_the_wire", "simulator.inprocess", "setpoint_as_on_the_wire"),
     ("setpoint limits", "amlink.limits", "SetpointLimits.violation"),
+    ("the emulated autopilot (FlightController.step)", "simulator.flight_controller", "FlightController.step"),
     ("apply (allocation, joint limits)", "simulator.world", "World.apply"),
+    ("apply rotors (allocation, rotor lag, joint limits)", "simulator.world", "World.apply_rotors"),
+    ("joint effort sensor", "simulator.effort", "JointEffortSensor.advance"),
     ("link (ImpairedLink.step)", "amlink.impair", "ImpairedLink.step"),
     ("ground truth and digest (observe)", "simulator.core", "SitlCore.observe"),
     ("PyBullet step (World.step)", "simulator.world", "World.step"),
@@ -106,8 +116,8 @@ def main() -> None:
     assert r2["state_digest"] == r["state_digest"]
     print(f"wrapped run: {1e-3 * total / n:.1f} us per step")
     print(f"{'part':44s} {'us/step':>8s} {'calls/step':>11s}")
-    for label, _, _ in PARTS:
-        if label in calls:
+    for label in dict.fromkeys(label for label, _, _ in PARTS):
+        if calls[label] >= n / 100:  # (a few calls at start-up are no part of the step: warm_up_kernels)
             print(f"{label:44s} {1e-3 * excl[label] / n:8.1f} {calls[label] / n:11.2f}")
     print(f"{'other':44s} {1e-3 * (total - sum(excl.values())) / n:8.1f}")
 

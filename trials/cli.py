@@ -248,14 +248,18 @@ def _campaign(a, tasks: list[TrialTask], out: Path, controller: str | None, work
     params += [k for k in ("max_abs_misalignment_deg", "max_start_offset_m") if k in rows[0]]
     summary = report.summarize(rows, scenario=str(a.scenario), overrides=a.overrides,
                                controller=rows[0]["controller"], seed=a.seed, randomize=rand_source,
-                               executor=where, wall_s=wall, trials_per_minute=60.0 * len(rows) / wall)
+                               executor=where, wall_s=wall, trials_per_minute=60.0 * len(rows) / wall,
+                               # a refused trial costs the pre-flight check alone: the rate of flights is apart
+                               flown_per_minute=60.0 * sum(r["verdict"] != "refused" for r in rows) / wall)
     report.write_summary(summary, out / "summary.json")
     if not a.no_plots:  # success against the draws of the trials that flew (refused ones did not)
         flown = [r for r in rows if r["verdict"] != "refused"]
         report.plot_parameters(flown, params, out / "plots", f"{a.scenario.stem}, {summary['controller']}, "
                                                               f"seed {a.seed}, {len(flown)} trials flown of {len(rows)}")
-    print(f"am-trials: {report.summary_line(summary)}; {summary['trials_per_minute']:.1f} trials/min; in {out}",
-          file=sys.stderr)
+    per_min = f"{summary['trials_per_minute']:.1f} trials/min"
+    if summary["refused"]:
+        per_min += f" ({summary['flown_per_minute']:.1f} flown/min)"
+    print(f"am-trials: {report.summary_line(summary)}; {per_min}; in {out}", file=sys.stderr)
     return summary
 
 

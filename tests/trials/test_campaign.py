@@ -53,6 +53,7 @@ def test_the_summary_counts_the_table(campaign):
     for c in FAILURE_CLASSES:
         assert s["failure_classes"][c] == sum(r["failure_class"] == c for r in rows)
     assert s["trials_per_minute"] > 0
+    assert s["flown_per_minute"] == pytest.approx(s["trials_per_minute"] * s["flown"] / s["trials"])
 
 
 def test_plots_show_success_against_each_drawn_parameter(campaign):

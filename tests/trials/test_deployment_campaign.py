@@ -15,7 +15,7 @@ from trials.report import read_csv
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def test_a_short_deployment_campaign_refuses_what_it_cannot_hold_and_holds_the_rest(tmp_path):
+def test_a_short_deployment_campaign_refuses_what_it_cannot_hold_and_holds_the_rest(tmp_path, capsys):
     out = tmp_path / "c"
     assert cli.main([str(ROOT / "configs" / "scenarios" / "two_am_robust.toml"), "--trials", "3", "--seed", "31",
                      "--out", str(out), "--workers", "2", "--no-progress", "--no-plots"]) == 0
@@ -26,3 +26,6 @@ def test_a_short_deployment_campaign_refuses_what_it_cannot_hold_and_holds_the_r
     assert all("outside the team's envelope" in r["reason"] and " AMs" in r["reason"] for r in refused)
     assert all(r["verdict"] in ("success", "failed") for r in rows if r not in refused)
     assert s["successes"] >= 0.5 * s["flown"], [r["reason"] for r in rows]
+    # the rate of trials counts the refused ones, which cost the pre-flight check alone; the flights' apart
+    assert f"trials/min ({s['flown_per_minute']:.1f} flown/min)" in capsys.readouterr().err
+    assert s["flown_per_minute"] < s["trials_per_minute"]
