@@ -3,14 +3,16 @@ MAVLink over loopback UDP, lockstep) for N = 2, 5, 10, 20 AMs, next to bare PyBu
 of the same world measured in the same run, and how the processes' CPU and memory grow with N.
 
     python benchmarks/bench_sitl.py [--duration 3] [--n 2 5 10 20] [--attitude] [--robust] [--devices]
-                                    [--actuation-delay D] [--sitl-only]
+                                    [--actuation-delay D] [--physics-rate HZ] [--sitl-only]
 
 --attitude runs ten_am_attitude (SET_ATTITUDE_TARGET at 250 Hz, the emulated autopilot at
 1 kHz) instead of ten_am (torque setpoints at 1 kHz); --devices turns [devices] on (the
 sensors as devices and the flight controller's estimator, configs/randomize/default.toml's
 levels); --robust starts from ten_am_robust(_attitude) instead (the hexarotor and the law's
 options, with which the grasp takes an actuation delay of up to 3 ms: docs/flight_controller.md);
---sitl-only leaves out the echo, UDP and bare PyBullet columns.
+--physics-rate steps the world at HZ instead of the scenario's 1 kHz (the emulated autopilot's
+loops at most as fast; a modelling choice measured in docs/benchmarks.md, "A lower physics
+rate"); --sitl-only leaves out the echo, UDP and bare PyBullet columns.
 
 A SITL run whose verdict is a failure is named under its row. With --attitude --devices
 without --robust that is the rule: the paper's quadrotor, flown by the law as written on
@@ -94,16 +96,29 @@ def base_scenario(attitude: bool, robust: bool = False) -> Path:
     return (ROBUST_ATTITUDE if attitude else ROBUST) if robust else (ATTITUDE if attitude else BASE)
 
 
-def scenario_with(n: int, folder: Path, base: Path = BASE, devices: bool = False, delay_steps: int = 0) -> Path:
+def _set_key(head: str, table: str, key: str, value) -> str:
+    """The scenario text `head` with `key = value` in its [table] (replaced if there, else added)."""
+    line = f"{key} = {value}\n"
+    m = re.search(rf"(?ms)^\[{table}\]\n(.*?)(?=^\[|\Z)", head)
+    if m is None:
+        return head + f"\n[{table}]\n" + line
+    body = re.sub(rf"(?m)^{key} = .*\n", "", m.group(1))
+    return head[:m.start(1)] + line + body + head[m.end(1):]
+
+
+def scenario_with(n: int, folder: Path, base: Path = BASE, devices: bool = False, delay_steps: int = 0,
+                  physics_hz: float | None = None) -> Path:
     text = base.read_text()
     head = re.sub(r'(?m)^vehicle = "\.\./vehicles/(\w+\.toml)"',
                   lambda m: f'vehicle = "{ROOT / "configs" / "vehicles" / m.group(1)}"', text.split("[[am]]")[0])
     head = re.sub(r'name = "ten_am\w*"', f'name = "bench_{n}am"', head)
     head = re.sub(r"(?m)^mass_kg = .*$", "mass_kg = 1.0", head)  # liftable by any N (the approach is what runs)
     if delay_steps:  # [flight_controller].actuation_delay_steps
-        line = f"actuation_delay_steps = {delay_steps}\n"
-        head = head.replace("[flight_controller]\n", "[flight_controller]\n" + line) if "[flight_controller]\n" in head \
-            else head + "\n[flight_controller]\n" + line
+        head = _set_key(head, "flight_controller", "actuation_delay_steps", delay_steps)
+    if physics_hz is not None:  # [scenario].rate_hz, and the emulated autopilot's loops at most as fast
+        fc_hz = load_scenario(base).vehicle.flight_controller.rate_hz
+        head = _set_key(head, "scenario", "rate_hz", float(physics_hz))
+        head = _set_key(head, "flight_controller", "rate_hz", float(min(fc_hz, physics_hz)))
     ams = "".join(f"[[am]]\nsysid = {2 + i}\nazimuth_deg = {360.0 * i / n}\n" for i in range(n))
     path = folder / f"bench_{n}am.toml"
     path.write_text(head + (devices_table() if devices else "") + ams)
@@ -267,11 +282,15 @@ def main() -> None:
     ap.add_argument("--actuation-delay", type=int, default=0, metavar="D",
                     help="[flight_controller].actuation_delay_steps: setpoints act D physics steps after their "
                          "frames, the simulator stepping meanwhile (default 0: on arrival)")
+    ap.add_argument("--physics-rate", type=float, default=None, metavar="HZ",
+                    help="[scenario].rate_hz (default: the scenario's, 1 kHz), the emulated autopilot's loops at "
+                         "most as fast ([flight_controller].rate_hz)")
     ap.add_argument("--echo-spin-us", type=float, default=None,
                     help="also run echo companions that busy-wait this long per step (a controller's compute)")
     a = ap.parse_args()
     print(f"load average before: {os.getloadavg()[0]:.2f}; {os.cpu_count()} cores; {a.duration} s simulated per N; "
           f"actuation delay {a.actuation_delay} steps; "
+          + (f"physics at {a.physics_rate:g} Hz; " if a.physics_rate else "") +
           f"{'attitude' if a.attitude else 'torque'} mode{', ten_am_robust' if a.robust else ''}; "
           f"[devices] {'on' if a.devices else 'off'}")
     print("x real time (simulated s / wall s), each column measured in this run:")
@@ -282,7 +301,8 @@ def main() -> None:
           f"{'pss':>6} {'uss':>6}")
     with tempfile.TemporaryDirectory() as tmp:
         for n in a.n:
-            path = scenario_with(n, Path(tmp), base_scenario(a.attitude, a.robust), a.devices, a.actuation_delay)
+            path = scenario_with(n, Path(tmp), base_scenario(a.attitude, a.robust), a.devices, a.actuation_delay,
+                                 a.physics_rate)
             nan = float("nan")
             bare = nan if a.sitl_only else bare_rtf(path, a.duration)
             rtf, wall, proc = sitl_rtf(path, a.duration, Path(tmp) / f"run{n}")
