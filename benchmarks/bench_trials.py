@@ -4,13 +4,15 @@ pool of 1 and of 2 worker processes, on the same trials (default randomization).
     python benchmarks/bench_trials.py [--scenario configs/scenarios/two_am_comp.toml] [--trials 4]
 
 Each row runs the same `--trials` trials (seed 1) through `trials.runner` and prints wall
-time, trials per minute, and simulated seconds per wall second per worker. Worker start-up
-(spawning, importing pinocchio and PyBullet) is inside the wall time, as in a campaign.
-It also prints the workers' CPU time per trial (user + system of the pool's processes,
-start-up included) and the trials per minute that CPU time allows with each worker on a
-core of its own (workers x 60 s / CPU per trial): on a machine shared with other work the
-wall-clock figure falls with the load, this one does not (it is a bound, reached when the
-workers have their cores to themselves).
+time, trials per minute, the trials flown and flown per minute (a scenario with
+`envelope_check` refuses some draws before flight, at the cost of the check alone), and
+simulated seconds per wall second per worker. Worker start-up (spawning, importing pinocchio
+and PyBullet) is inside the wall time, as in a campaign. It also prints the workers' CPU time
+per flown trial (user + system of the pool's processes, start-up included) and the flown
+trials per minute that CPU time allows with each worker on a core of its own (workers x 60 s
+/ CPU per flown trial): on a machine shared with other work the wall-clock figure falls with
+the load, this one does not (it is a bound, reached when the workers have their cores to
+themselves).
 """
 from __future__ import annotations
 
@@ -39,8 +41,8 @@ def main() -> None:
     rand = load_randomize(DEFAULT_RANDOMIZE)
     print(f"{a.trials} trials of {a.scenario.name} ({spec.duration_s:g} s simulated each), default randomization")
     print(f"load average before: {os.getloadavg()[0]:.2f}; {os.cpu_count()} cores")
-    print(f"{'workers':>8} {'wall [s]':>9} {'trials/min':>11} {'sim s per wall s per worker':>28} "
-          f"{'CPU per trial [s]':>18} {'trials/min, a core each':>24}")
+    print(f"{'workers':>8} {'wall [s]':>9} {'trials/min':>11} {'flown':>6} {'flown/min':>10} "
+          f"{'sim s per wall s per worker':>28} {'CPU per flown trial [s]':>24} {'flown/min, a core each':>23}")
     digests = None
     for w in a.workers:
         with tempfile.TemporaryDirectory() as tmp:
@@ -52,9 +54,10 @@ def main() -> None:
         d = [r["state_digest"] for r in rows]
         assert digests is None or d == digests, "the same trials gave other digests"
         digests = d
-        per = cpu / len(rows)
-        print(f"{w:>8} {wall:9.1f} {60.0 * len(rows) / wall:11.2f} {a.trials * spec.duration_s / wall / w:28.2f} "
-              f"{per:18.1f} {w * 60.0 / per:24.2f}")
+        flown = sum(r["verdict"] != "refused" for r in rows)  # a refused trial costs the pre-flight check alone
+        per = cpu / flown if flown else float("nan")
+        print(f"{w:>8} {wall:9.1f} {60.0 * len(rows) / wall:11.2f} {flown:6d} {60.0 * flown / wall:10.2f} "
+              f"{flown * spec.duration_s / wall / w:28.2f} {per:24.1f} {w * 60.0 / per:23.2f}")
 
 
 def _children_cpu_s() -> float:
