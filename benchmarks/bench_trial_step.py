@@ -8,10 +8,10 @@ CPU time of this thread per physics step. Then it runs again with each part belo
 in a timer (the thread's CPU time around the call, less the wrapped parts it calls): us per
 physics step for all AMs together. The wrappers cost ~0.5 us per call, so the parts sum to
 more than the unwrapped step; "other" is what no part holds (the run loop, the link's
-zero-order hold, the flight controllers' bookkeeping, the digest's inputs). A part a mode
-does not call (less than once in 100 steps) is not printed: torque mode's setpoint_from_result, attitude mode's offboard
-step, autopilot, rotors and joint effort sensor. For `benchmarks/ab.py`: a name wrapped that
-a tree compared does not have is skipped.
+zero-order hold, the flight controllers' bookkeeping, the digest's inputs). A part that a
+mode calls less than once in 100 steps is not printed: torque mode's setpoint_from_result,
+attitude mode's offboard step, autopilot, rotors and joint-effort sensor. For
+`benchmarks/ab.py`: a name wrapped that a tree compared does not have is skipped.
 """
 from __future__ import annotations
 
