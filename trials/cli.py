@@ -246,14 +246,14 @@ def _campaign(a, tasks: list[TrialTask], out: Path, controller: str | None, work
     report.write_csv(rows, out / "trials.csv")
     params = [k for k in rows[0] if k in tasks[0].params and k != "seed"]
     params += [k for k in ("max_abs_misalignment_deg", "max_start_offset_m") if k in rows[0]]
+    flown = [r for r in rows if r["verdict"] != "refused"]
     summary = report.summarize(rows, scenario=str(a.scenario), overrides=a.overrides,
                                controller=rows[0]["controller"], seed=a.seed, randomize=rand_source,
                                executor=where, wall_s=wall, trials_per_minute=60.0 * len(rows) / wall,
                                # a refused trial costs the pre-flight check alone: the rate of flights is apart
-                               flown_per_minute=60.0 * sum(r["verdict"] != "refused" for r in rows) / wall)
+                               flown_per_minute=60.0 * len(flown) / wall)
     report.write_summary(summary, out / "summary.json")
     if not a.no_plots:  # success against the draws of the trials that flew (refused ones did not)
-        flown = [r for r in rows if r["verdict"] != "refused"]
         report.plot_parameters(flown, params, out / "plots", f"{a.scenario.stem}, {summary['controller']}, "
                                                               f"seed {a.seed}, {len(flown)} trials flown of {len(rows)}")
     per_min = f"{summary['trials_per_minute']:.1f} trials/min"
