@@ -696,7 +696,10 @@ class ScenarioSpec:
     mission: MissionSpec
     ams: tuple[AmSpec, ...]
     duration_s: float = 20.0
-    rate_hz: float = 1000.0  # physics
+    rate_hz: float = 1000.0  # physics: the world's step, the devices and the emulated autopilot
+    # PyBullet's substeps per physics step (PHYSICS_SUBSTEPS): its contacts and joints integrate at
+    # rate_hz * physics_substeps, with each step's forces held across its substeps; 1: none
+    physics_substeps: int = 1
     # the companions' rate; the lockstep exchanges every rate_hz / control_rate_hz physics
     # steps (a whole number). None: every physics step
     control_rate_hz: float | None = None
@@ -820,6 +823,10 @@ def _in_range(where: str, value, lo: float, hi: float, unit: str = "") -> None:
 # physics rates a scenario may ask for [Hz]: below, the contact and the control laws cannot hold
 # (PyBullet's own default is 240 Hz); above, a second of flight takes hours
 RATE_HZ_RANGE = (100.0, 100_000.0)
+# [scenario].physics_substeps. 2 divides the step exactly (Bullet counts substeps from an
+# accumulator). 4 was left out: at 1 kHz it misreported a friction-held object's contact forces
+# (6.7 N for 4 N; tests/simulator/test_world_sensors.py checks 2)
+PHYSICS_SUBSTEPS = (1, 2)
 SEED_MAX = 2**32 - 1  # the seed is a uint32 (numpy's SeedSequence entropy; AM_SCENARIO.seed)
 SCENARIO_NAME_MAX_BYTES = 32  # AM_SCENARIO.name is char[32]
 # Plausible objects for this stack's AMs, tables and arena ([object], [mission], [[am]]):
@@ -1287,6 +1294,12 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     if not 0 <= spec.seed <= SEED_MAX:
         raise ConfigError(f"{where}: [scenario].seed: must be in 0..{SEED_MAX} (uint32), got {spec.seed}")
     _in_range(f"{where}: [scenario].rate_hz", spec.rate_hz, *RATE_HZ_RANGE, " Hz")
+    if spec.physics_substeps not in PHYSICS_SUBSTEPS:
+        raise ConfigError(f"{where}: [scenario].physics_substeps: must be one of "
+                          f"{', '.join(map(str, PHYSICS_SUBSTEPS))}, got {spec.physics_substeps!r}")
+    if spec.rate_hz * spec.physics_substeps > RATE_HZ_RANGE[1]:
+        raise ConfigError(f"{where}: [scenario].physics_substeps: rate_hz x physics_substeps = "
+                          f"{spec.rate_hz * spec.physics_substeps:g} Hz, above {RATE_HZ_RANGE[1]:g} Hz")
     if spec.control_rate_hz is not None:
         c = _check_type(spec.control_rate_hz, float, f"{where}: [scenario].control_rate_hz")
         _positive(f"{where}: [scenario].control_rate_hz", c)

@@ -2,13 +2,16 @@
 throughput, and what it changes in the verdicts and the grasp's figures.
 
     python experiments/physics_rate.py [configs/scenarios/two_am_robust_attitude.toml] --seed S
-        [--rates 1000 500] [--trials 24] [--workers 2] [--randomize FILE] [--out runs/physics_rate-<time>]
+        [--rates 1000 500] [--substeps 1] [--trials 24] [--workers 2] [--randomize FILE]
+        [--out runs/physics_rate-<time>]
 
 For each rate, `am-trials` runs the base scenario with `[scenario].rate_hz` at that rate and
 the emulated autopilot's loops (`[flight_controller].rate_hz`) at most as fast, on the same
 seed: the drawn variations do not depend on the rate (checked here, column by column). The
 companions' control rate stays the scenario's, so the rate must be a multiple of it (attitude
-mode's 250 Hz; torque mode's companions run at the physics rate and are refused below it).
+mode's 250 Hz; torque mode's companions run at the physics rate, so there a lower rate slows the law too).
+`--substeps 2` runs the second rate with `[scenario].physics_substeps = 2`: PyBullet's contacts
+and joints then integrate at twice that rate, with the step's forces held across its substeps.
 
 Printed: per rate, the campaign's wall time, its flown trials per minute (refused trials cost
 the pre-flight check alone) and the flown trials' median wall time; then, trial by trial, how
@@ -42,13 +45,15 @@ NOT_DRAWN = {"trial", "scenario_file", "verdict", "failure_class", "reason", "st
              *SATURATION, "saturated_steps", "max_lift_m", "rejected_setpoints"}
 
 
-def overrides(base: Path, rate_hz: float) -> list[str]:
-    """am-trials' --set arguments for physics at rate_hz (none at the scenario's own rate)."""
+def overrides(base: Path, rate_hz: float, substeps: int = 1) -> list[str]:
+    """am-trials' --set arguments for physics at rate_hz in `substeps` substeps of PyBullet (none
+    at the scenario's own rate and substeps)."""
     spec = load_scenario(base)
+    out = [] if substeps == spec.physics_substeps else ["--set", f"scenario.physics_substeps={int(substeps)}"]
     if rate_hz == spec.rate_hz:
-        return []
+        return out
     fc = min(spec.vehicle.flight_controller.rate_hz, rate_hz)
-    return ["--set", f"scenario.rate_hz={float(rate_hz)}", "--set", f"flight_controller.rate_hz={float(fc)}"]
+    return ["--set", f"scenario.rate_hz={float(rate_hz)}", "--set", f"flight_controller.rate_hz={float(fc)}", *out]
 
 
 def compare(a: list[dict], b: list[dict], steps_a: int, steps_b: int) -> dict:
@@ -85,6 +90,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("scenario", nargs="?", type=Path, default=ROOT / "configs" / "scenarios" / "two_am_robust_attitude.toml")
     ap.add_argument("--seed", type=int, required=True, help="campaign seed (use one no setting was tuned on)")
     ap.add_argument("--rates", type=float, nargs=2, default=[1000.0, 500.0], metavar="HZ")
+    ap.add_argument("--substeps", type=int, default=1, choices=(1, 2),
+                    help="[scenario].physics_substeps of the second rate (default 1)")
     ap.add_argument("--trials", type=int, default=24)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--randomize", type=Path, default=None, help="am-trials' --randomize (default: its default)")
@@ -92,17 +99,18 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     out = a.out or ROOT / "runs" / f"physics_rate-{time.strftime('%Y%m%d-%H%M%S')}"
     campaigns = []
-    for rate in a.rates:
-        folder = out / f"rate-{rate:g}"
+    for i, rate in enumerate(a.rates):
+        sub = a.substeps if i == 1 else 1
+        folder = out / (f"rate-{rate:g}" + (f"-substeps-{sub}" if sub > 1 else ""))
         code = cli.main([str(a.scenario), "--trials", str(a.trials), "--seed", str(a.seed), "--out", str(folder),
-                         "--workers", str(a.workers), "--no-progress", "--no-plots", *overrides(a.scenario, rate),
+                         "--workers", str(a.workers), "--no-progress", "--no-plots", *overrides(a.scenario, rate, sub),
                          *(["--randomize", str(a.randomize)] if a.randomize else [])])
         if code != 0:  # am-trials said why on stderr
             return code
         campaigns.append((rate, json.loads((folder / "summary.json").read_text()), read_csv(folder / "trials.csv")))
     duration = load_scenario(a.scenario).duration_s
     print(f"{a.scenario.name}, seed {a.seed}, {a.trials} trials, {a.workers} workers, randomization "
-          f"{a.randomize or 'default'}; in {out}")
+          f"{a.randomize or 'default'}; in {out}" + (f"; the second rate in {a.substeps} substeps" if a.substeps > 1 else ""))
     print(f"{'physics [Hz]':>12} {'wall [s]':>9} {'flown':>6} {'flown/min':>10} {'flown trial, median wall [s]':>29}")
     for rate, s, rows in campaigns:
         walls = [float(r["wall_s"]) for r in rows if r["verdict"] != "refused"]

@@ -74,7 +74,12 @@ from .world import World
 
 Setpoint = TorqueSetpoint | AttitudeSetpoint
 
-TRUTH_EVERY = 10  # ground-truth sample period for the outcome and telemetry [steps]: 100 Hz at 1 kHz
+TRUTH_PERIOD_S = 0.01  # ground-truth sample period for the outcome and telemetry [s]: every 10 steps at 1 kHz
+
+
+def truth_every(rate_hz: float) -> int:
+    """Physics steps between two ground-truth samples at `rate_hz` (every TRUTH_PERIOD_S)."""
+    return max(1, round(TRUTH_PERIOD_S * rate_hz))
 LAND_NOW = FailsafeGains(hold_s=0.0)  # a commanded landing: the failsafe's landing, without the hold
 _FAILSAFE_MODE = {"hold": FcMode.HOLD, "land": FcMode.LAND, "landed": FcMode.LANDED}
 
@@ -125,6 +130,7 @@ class SitlCore:
         """failsafe_after_rejected: K of the rejection policy (module docstring); None: the
         scenario's [flight_controller].failsafe_after_rejected."""
         self.spec, self.log, self.on_truth = spec, log, on_truth
+        self._truth_every = truth_every(spec.rate_hz)
         K = spec.vehicle.flight_controller.failsafe_after_rejected if failsafe_after_rejected is None \
             else failsafe_after_rejected
         if not (isinstance(K, int) and K >= 1):
@@ -207,7 +213,7 @@ class SitlCore:
 
     def frames(self, k: int) -> dict[int, SensorFrame]:
         """Step k's sensor frames (exact state, wrist F/T reading). Their bookkeeping (the
-        digest, ground truth every TRUTH_EVERY steps) is left to `observe`, so that a caller
+        digest, ground truth every TRUTH_PERIOD_S) is left to `observe`, so that a caller
         can send the frames first; `actuate` runs it if the caller did not."""
         return dict(self.iter_frames(k))
 
@@ -259,14 +265,14 @@ class SitlCore:
 
     def observe(self) -> None:
         """Bookkeeping of the last `frames` call (once): every frame into the state digest, and
-        every TRUTH_EVERY steps a ground-truth sample for the outcome and `on_truth`."""
+        every TRUTH_PERIOD_S a ground-truth sample for the outcome and `on_truth`."""
         if self._unobserved is None:
             return
         k, values, frames = self._unobserved
         self._unobserved = None
         for s in self.sysids:
             self.digest.update(array("d", values[s]).tobytes())
-        if k % TRUTH_EVERY == 0:
+        if k % self._truth_every == 0:
             self._truth({s: f.wrench_E for s, f in frames.items()})
 
     def _truth(self, wrench_E: dict) -> None:
@@ -288,7 +294,7 @@ class SitlCore:
             for s in self.sysids:  # no frame: the base alone, unless the F/T tare reads the wrist
                 dev = self.devices.get(s)
                 self._sense(s, w.sensor_values(s) if dev is None or dev.needs_reading(t) else w.base_values(s), t)
-        if k % TRUTH_EVERY == 0:
+        if k % self._truth_every == 0:
             self._truth({s: self.world.wrench_ee(s) for s in self.sysids})
         self.actuate(k, setpoints or {}, lost)
 

@@ -157,6 +157,9 @@ class World:
             raise ValueError(f"initial states given for sysids {sorted(initial)}, scenario has {expected}")
         self.spec = spec
         self._dt_s = spec.dt_s  # the physics step [s], read every step (time_s)
+        # PyBullet reports a contact's forces as the last substep's impulse over the whole step
+        # (dt_s): times the substeps, they are that substep's forces
+        self._contact_scale = float(spec.physics_substeps)
         self._initial = dict(initial)
         self._alloc = Allocation(spec.vehicle.rotors, compiled=True)
         # each rotor's least thrust and range [N], for the busiest/idlest rotor's share in the truth
@@ -193,8 +196,10 @@ class World:
         if c < 0:
             raise RuntimeError("PyBullet could not start a DIRECT client")
         self._client = c
-        pb.setPhysicsEngineParameter(fixedTimeStep=self.spec.dt_s, numSubSteps=0, deterministicOverlappingPairs=1,
-                                     physicsClientId=c)
+        # [scenario].physics_substeps: each step's dt_s in n substeps of PyBullet, the forces held
+        n_sub = self.spec.physics_substeps
+        pb.setPhysicsEngineParameter(fixedTimeStep=self.spec.dt_s, numSubSteps=0 if n_sub == 1 else n_sub,
+                                     deterministicOverlappingPairs=1, physicsClientId=c)
         pb.setGravity(0.0, 0.0, -self.spec.vehicle.gravity_mps2, physicsClientId=c)
         self._names[scene.add_ground(c)] = "ground"
         self._names[scene.add_table(c, self.spec.object)] = "table"
@@ -488,7 +493,7 @@ class World:
         on_object = pb.getContactPoints(bodyA=self._object_id, bodyB=am.body_id, linkIndexB=am.pad_link_id,
                                         physicsClientId=c)
         return AmTruth(p_WB=np.array(p), R_WB=_R(quat), p_WE=np.array(ee[4]), R_WE=_R(ee[5]),
-                       pad_object_contact=_sum_contact(on_object),
+                       pad_object_contact=_sum_contact(on_object, self._contact_scale),
                        pad_other_contacts=self._names_of(pt[2] for pt in pad_points if pt[2] != self._object_id),
                        base_contacts=self._names_of(pt[2] for pt in base_points),
                        p_W_joints=tuple(np.array(j[4]) for j in joints),
@@ -515,9 +520,10 @@ def _friction_sign_on_A(pt) -> float:
     return 1.0 if float(n_manifold @ np.asarray(pt[7])) >= 0.0 else -1.0
 
 
-def _sum_contact(points) -> PadContact:
+def _sum_contact(points, scale: float = 1.0) -> PadContact:
     """Sum PyBullet contact points between the object (body A) and a pad (body B) into the
-    force the object applies on the pad.
+    force the object applies on the pad; each point's forces times `scale` (the physics
+    substeps: PyBullet divides the last substep's impulse by the whole step).
 
     Verified conventions (tests/simulator/test_world_sensors.py, the squeeze tests with every
     pad shape): contactNormalOnB points from B into A and A receives +normalForce along it;
@@ -539,7 +545,7 @@ def _sum_contact(points) -> PadContact:
     weighted_point = [0.0, 0.0, 0.0]
     total_normal = 0.0
     for pt in points:
-        f_n, n, f1, d1, f2, d2, p = pt[9], pt[7], pt[10], pt[11], pt[12], pt[13], pt[5]
+        f_n, n, f1, d1, f2, d2, p = scale * pt[9], pt[7], scale * pt[10], pt[11], scale * pt[12], pt[13], pt[5]
         sign = _friction_sign_on_A(pt)
         for i in range(3):
             F_n[i] -= f_n * n[i]

@@ -159,6 +159,41 @@ def test_contact_truth_support_is_the_object_weight_in_the_hover(pad):
         assert -a["hover_mean_tangential_force_W_n"][2] > 0.25 * mg
 
 
+@pytest.mark.parametrize("rate_hz", [1000.0, 500.0])
+def test_contact_truth_is_the_force_with_physics_substeps(spec, model, make_world, rate_hz):
+    """[scenario].physics_substeps: PyBullet reports a contact's forces as the last
+    substep's impulse over the whole step; the world reports them as forces. The squeeze's
+    balance (the 4 N up-push and 1 N side push carried by the pads) and the wrist sensor
+    hold as without substeps (PyBullet's own figure would be half of it)."""
+    w = _squeeze(dataclasses.replace(spec, rate_hz=rate_hz, physics_substeps=2), model, make_world)
+    gt = w.ground_truth()
+    total = sum(gt.ams[s].pad_object_contact.force_W for s in w.sysids)
+    np.testing.assert_allclose(total, [0.0, 1.0, 4.0], atol=0.05)
+    for s in w.sysids:
+        f_W = gt.ams[s].R_WE @ w.wrench_ee(s)[:3]
+        np.testing.assert_allclose(f_W, gt.ams[s].pad_object_contact.force_W, atol=0.02 * np.linalg.norm(f_W))
+
+
+def test_a_step_with_substeps_lasts_dt_and_holds_its_forces(spec, make_world):
+    """A step of dt_s in substeps advances the world by dt_s, the forces applied before it
+    acting over all its substeps: the object pushed up with 2 N more than its weight for
+    0.1 s leaves the table at a = 2 N / m, as without substeps."""
+    def lifted(scenario):
+        w = make_world(far_apart(scenario), scenario)
+        for _ in range(200):
+            w.step()
+        weight = scenario.object.mass_kg * scenario.vehicle.gravity_mps2
+        for _ in range(100):
+            push_object(w, [0.0, 0.0, weight + 2.0])
+            w.step()
+        return w.time_s, w.ground_truth().object.v_WO
+    t1, v1 = lifted(spec)
+    t_n, v_n = lifted(dataclasses.replace(spec, physics_substeps=2))
+    assert t_n == t1 == pytest.approx(0.3)
+    assert v_n[2] == pytest.approx(2.0 / spec.object.mass_kg * 0.1, rel=0.05)
+    np.testing.assert_allclose(v_n, v1, atol=1e-3)
+
+
 def test_object_rests_on_the_table(spec, make_world):
     table = table_geometry(spec.object)
     assert table.top_z_m == pytest.approx(spec.object.position_m[2] - spec.object.half_height_m, abs=1e-12)
