@@ -3,7 +3,7 @@ MAVLink over loopback UDP, lockstep) for N = 2, 5, 10, 20 AMs, next to bare PyBu
 of the same world measured in the same run, and how the processes' CPU and memory grow with N.
 
     python benchmarks/bench_sitl.py [--duration 3] [--n 2 5 10 20] [--attitude] [--robust] [--devices]
-                                    [--actuation-delay D] [--physics-rate HZ] [--sitl-only]
+                                    [--actuation-delay D] [--physics-rate HZ] [--substeps 2] [--sitl-only]
 
 --attitude runs ten_am_attitude (SET_ATTITUDE_TARGET at 250 Hz, the emulated autopilot at
 1 kHz) instead of ten_am (torque setpoints at 1 kHz); --devices turns [devices] on (the
@@ -12,7 +12,8 @@ levels); --robust starts from ten_am_robust(_attitude) instead (the hexarotor an
 options, with which the grasp takes an actuation delay of up to 3 ms: docs/flight_controller.md);
 --physics-rate steps the world at HZ instead of the scenario's 1 kHz (the emulated autopilot's
 loops at most as fast; a modelling choice measured in docs/benchmarks.md, "A lower physics
-rate"); --sitl-only leaves out the echo, UDP and bare PyBullet columns.
+rate"); --substeps 2 integrates PyBullet's contacts and joints in two substeps of each step
+([scenario].physics_substeps); --sitl-only leaves out the echo, UDP and bare PyBullet columns.
 
 A SITL run whose verdict is a failure is named under its row. With --attitude --devices
 without --robust that is the rule: the paper's quadrotor, flown by the law as written on
@@ -107,7 +108,7 @@ def _set_key(head: str, table: str, key: str, value) -> str:
 
 
 def scenario_with(n: int, folder: Path, base: Path = BASE, devices: bool = False, delay_steps: int = 0,
-                  physics_hz: float | None = None) -> Path:
+                  physics_hz: float | None = None, substeps: int = 1) -> Path:
     text = base.read_text()
     head = re.sub(r'(?m)^vehicle = "\.\./vehicles/(\w+\.toml)"',
                   lambda m: f'vehicle = "{ROOT / "configs" / "vehicles" / m.group(1)}"', text.split("[[am]]")[0])
@@ -119,6 +120,8 @@ def scenario_with(n: int, folder: Path, base: Path = BASE, devices: bool = False
         fc_hz = load_scenario(base).vehicle.flight_controller.rate_hz
         head = _set_key(head, "scenario", "rate_hz", float(physics_hz))
         head = _set_key(head, "flight_controller", "rate_hz", float(min(fc_hz, physics_hz)))
+    if substeps != 1:  # [scenario].physics_substeps
+        head = _set_key(head, "scenario", "physics_substeps", int(substeps))
     ams = "".join(f"[[am]]\nsysid = {2 + i}\nazimuth_deg = {360.0 * i / n}\n" for i in range(n))
     path = folder / f"bench_{n}am.toml"
     path.write_text(head + (devices_table() if devices else "") + ams)
@@ -285,12 +288,15 @@ def main() -> None:
     ap.add_argument("--physics-rate", type=float, default=None, metavar="HZ",
                     help="[scenario].rate_hz (default: the scenario's, 1 kHz), the emulated autopilot's loops at "
                          "most as fast ([flight_controller].rate_hz)")
+    ap.add_argument("--substeps", type=int, default=1, choices=(1, 2),
+                    help="[scenario].physics_substeps: PyBullet's substeps per physics step (default 1)")
     ap.add_argument("--echo-spin-us", type=float, default=None,
                     help="also run echo companions that busy-wait this long per step (a controller's compute)")
     a = ap.parse_args()
     print(f"load average before: {os.getloadavg()[0]:.2f}; {os.cpu_count()} cores; {a.duration} s simulated per N; "
           f"actuation delay {a.actuation_delay} steps; "
-          + (f"physics at {a.physics_rate:g} Hz; " if a.physics_rate else "") +
+          + (f"physics at {a.physics_rate:g} Hz; " if a.physics_rate else "")
+          + (f"{a.substeps} PyBullet substeps a step; " if a.substeps > 1 else "") +
           f"{'attitude' if a.attitude else 'torque'} mode{', ten_am_robust' if a.robust else ''}; "
           f"[devices] {'on' if a.devices else 'off'}")
     print("x real time (simulated s / wall s), each column measured in this run:")
@@ -302,7 +308,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for n in a.n:
             path = scenario_with(n, Path(tmp), base_scenario(a.attitude, a.robust), a.devices, a.actuation_delay,
-                                 a.physics_rate)
+                                 a.physics_rate, a.substeps)
             nan = float("nan")
             bare = nan if a.sitl_only else bare_rtf(path, a.duration)
             rtf, wall, proc = sitl_rtf(path, a.duration, Path(tmp) / f"run{n}")
