@@ -166,6 +166,25 @@ def test_attitude_mode_in_process_run_is_bit_identical_to_the_multi_process_one(
     assert ours["state_digest"] == sitl.outcome["state_digest"]
 
 
+def test_a_world_in_physics_substeps_is_bit_identical_in_process_and_through_the_processes(tmp_path):
+    """The screening campaign's world ([scenario].rate_hz = 500 in two PyBullet substeps, the
+    autopilot at 500 Hz): both runners step it alike, and it is another run than 1 kHz."""
+    text = (SCENARIOS / "two_am_comp_attitude.toml").read_text().replace(
+        'vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{SCENARIOS.parent / "vehicles" / "am3dof.toml"}"')
+    text = text.replace("rate_hz = 1000.0", "rate_hz = 500.0\nphysics_substeps = 2", 1)
+    path = tmp_path / "substeps.toml"
+    path.write_text(text.replace('mode = "attitude"', 'mode = "attitude"\nrate_hz = 500.0', 1))
+    spec = load_scenario(path)
+    assert (spec.rate_hz, spec.physics_substeps, spec.vehicle.flight_controller.rate_hz) == (500.0, 2, 500.0)
+    ours = run(spec, duration_s=0.4)
+    sitl = am_run(str(path), tmp_path / "r", "--duration", "0.4", "--no-telemetry", timeout_s=300)
+    assert sitl.code == 0, sitl.stderr
+    assert ours["steps"] == sitl.outcome["steps"] == 200
+    assert ours["state_digest"] == sitl.outcome["state_digest"]
+    plain = run(load_scenario(SCENARIOS / "two_am_comp_attitude.toml"), duration_s=0.4)
+    assert plain["state_digest"] != ours["state_digest"]
+
+
 def test_rejected_setpoints_are_answered_at_once_and_the_run_stays_deterministic(tmp_path):
     """8 ms of sensor latency makes the controllers' joint torques implausible from t = 0.16 s:
     each refusal is answered at once (the flight controller holds the last valid command), K in
