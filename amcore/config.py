@@ -824,8 +824,9 @@ def _in_range(where: str, value, lo: float, hi: float, unit: str = "") -> None:
 # (PyBullet's own default is 240 Hz); above, a second of flight takes hours
 RATE_HZ_RANGE = (100.0, 100_000.0)
 # [scenario].physics_substeps. 2 divides the step exactly (Bullet counts substeps from an
-# accumulator). 4 was left out: at 1 kHz it misreported a friction-held object's contact forces
-# (6.7 N for 4 N; tests/simulator/test_world_sensors.py checks 2)
+# accumulator), and tests/simulator/test_world_sensors.py checks its contact forces. 4 is left
+# out: at 1 kHz (0.25 ms contact steps) a friction-held object read 6.7 N carried for 4 N, as a
+# world stepped at 4 kHz in one step does (docs/benchmarks.md, "A lower physics rate")
 PHYSICS_SUBSTEPS = (1, 2)
 SEED_MAX = 2**32 - 1  # the seed is a uint32 (numpy's SeedSequence entropy; AM_SCENARIO.seed)
 SCENARIO_NAME_MAX_BYTES = 32  # AM_SCENARIO.name is char[32]

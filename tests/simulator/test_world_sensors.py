@@ -139,12 +139,15 @@ def test_contact_truth_agrees_with_the_wrist_sensor_for_every_pad_shape(spec, mo
         assert am.pad_object_contact.tangential_force_W[2] > 1.0
 
 
+@pytest.mark.parametrize("substeps", [1, 2], ids=["one step", "two substeps"])
 @pytest.mark.parametrize("pad", PAD_SHAPES, ids=list(PAD_SHAPES))
-def test_contact_truth_support_is_the_object_weight_in_the_hover(pad):
+def test_contact_truth_support_is_the_object_weight_in_the_hover(pad, substeps):
     """The closed-loop short grasp, in-process: in the hover the pads' ground-truth contact
     forces carry the object's weight, m g up on the object (the object pushes the pads down
-    with m g), nothing sideways."""
+    with m g), nothing sideways; with PyBullet's contacts in two substeps of each step too
+    ([scenario].physics_substeps)."""
     data = copy.deepcopy(_read_toml(SHORT))
+    data["scenario"]["physics_substeps"] = substeps
     if PAD_SHAPES[pad]:
         data["pad"] = dict(PAD_SHAPES[pad])
     scenario = scenario_from_dict(data, SHORT)
