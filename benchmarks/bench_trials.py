@@ -2,6 +2,7 @@
 pool of 1 and of 2 worker processes, on the same trials (default randomization).
 
     python benchmarks/bench_trials.py [--scenario configs/scenarios/two_am_comp.toml] [--trials 4]
+        [--set TABLE.KEY=VALUE ...]
 
 Each row runs the same `--trials` trials (seed 1) through `trials.runner` and prints wall
 time, trials per minute, the trials flown and flown per minute (a scenario with
@@ -12,7 +13,9 @@ per flown trial (user + system of the pool's processes, start-up included) and t
 trials per minute that CPU time allows with each worker on a core of its own (workers x 60 s
 / CPU per flown trial): on a machine shared with other work the wall-clock figure falls with
 the load, this one does not (it is a bound, reached when the workers have their cores to
-themselves).
+themselves). `--set` changes the scenario as am-trials' --set does, e.g. the screening
+campaign's world (docs/trials.md): `--set scenario.rate_hz=500 --set flight_controller.rate_hz=500
+--set scenario.physics_substeps=2`.
 """
 from __future__ import annotations
 
@@ -23,8 +26,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from amcore.config import _read_toml, load_scenario
-from trials.cli import DEFAULT_RANDOMIZE, build_tasks
+from amcore.config import _read_toml, scenario_from_dict
+from trials.cli import DEFAULT_RANDOMIZE, apply_overrides, build_tasks
 from trials.randomize import load_randomize
 from trials.runner import executor, run_all
 
@@ -36,17 +39,21 @@ def main() -> None:
     ap.add_argument("--scenario", type=Path, default=ROOT / "configs" / "scenarios" / "two_am_comp.toml")
     ap.add_argument("--trials", type=int, default=4)
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE", dest="overrides",
+                    help="change a key of the scenario, as am-trials --set")
     a = ap.parse_args()
-    spec = load_scenario(a.scenario)
+    data = apply_overrides(_read_toml(a.scenario), a.overrides)
+    spec = scenario_from_dict(data, a.scenario.resolve())
     rand = load_randomize(DEFAULT_RANDOMIZE)
-    print(f"{a.trials} trials of {a.scenario.name} ({spec.duration_s:g} s simulated each), default randomization")
+    print(f"{a.trials} trials of {a.scenario.name} ({spec.duration_s:g} s simulated each), default randomization"
+          + (f"; {' '.join(a.overrides)}" if a.overrides else ""))
     print(f"load average before: {os.getloadavg()[0]:.2f}; {os.cpu_count()} cores")
     print(f"{'workers':>8} {'wall [s]':>9} {'trials/min':>11} {'flown':>6} {'flown/min':>10} "
           f"{'sim s per wall s per worker':>28} {'CPU per flown trial [s]':>24} {'flown/min, a core each':>23}")
     digests = None
     for w in a.workers:
         with tempfile.TemporaryDirectory() as tmp:
-            tasks = build_tasks(_read_toml(a.scenario), a.scenario.resolve(), rand, 1, a.trials, Path(tmp), None)
+            tasks = build_tasks(data, a.scenario.resolve(), rand, 1, a.trials, Path(tmp), None)
             t0, c0 = time.perf_counter(), _children_cpu_s()
             with executor(w) as ex:
                 rows = run_all(tasks, ex)
