@@ -80,6 +80,8 @@ TRUTH_PERIOD_S = 0.01  # ground-truth sample period for the outcome and telemetr
 def truth_every(rate_hz: float) -> int:
     """Physics steps between two ground-truth samples at `rate_hz` (every TRUTH_PERIOD_S)."""
     return max(1, round(TRUTH_PERIOD_S * rate_hz))
+
+
 LAND_NOW = FailsafeGains(hold_s=0.0)  # a commanded landing: the failsafe's landing, without the hold
 _FAILSAFE_MODE = {"hold": FcMode.HOLD, "land": FcMode.LAND, "landed": FcMode.LANDED}
 

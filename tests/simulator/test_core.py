@@ -1,9 +1,12 @@
 """SitlCore: per-AM link impairment from the scenario reaches that AM's flight controller only."""
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from amcore.config import load_scenario
+from simulator.core import TRUTH_PERIOD_S, truth_every
 from simulator.inprocess import run
 
 from ..conftest import SCENARIO
@@ -337,10 +340,6 @@ def test_ground_truth_is_sampled_every_10_ms_of_simulated_time_at_any_rate(rate_
     """The outcome's and telemetry's ground truth comes every TRUTH_PERIOD_S of simulated
     time, not every so many steps: a world at 500 Hz (in substeps or not) is judged on
     samples as dense as one at 1 kHz."""
-    import dataclasses
-
-    from simulator.core import TRUTH_PERIOD_S, truth_every
-
     base = load_scenario(SCENARIO)
     fc = dataclasses.replace(base.vehicle.flight_controller, rate_hz=min(base.vehicle.flight_controller.rate_hz, rate_hz))
     spec = dataclasses.replace(base, rate_hz=rate_hz, physics_substeps=substeps,
