@@ -700,6 +700,9 @@ class ScenarioSpec:
     # PyBullet's substeps per physics step (PHYSICS_SUBSTEPS): its contacts and joints integrate at
     # rate_hz * physics_substeps, with each step's forces held across its substeps; 1: none
     physics_substeps: int = 1
+    # PyBullet's constraint solver (numSolverIterations): at most this many sweeps a step, fewer
+    # once its residual is below 1e-7 (SOLVER_ITERATIONS_RANGE); 50 is PyBullet's own default
+    solver_iterations: int = 50
     # the companions' rate; the lockstep exchanges every rate_hz / control_rate_hz physics
     # steps (a whole number). None: every physics step
     control_rate_hz: float | None = None
@@ -828,6 +831,11 @@ RATE_HZ_RANGE = (100.0, 100_000.0)
 # out: at 1 kHz (0.25 ms contact steps) a friction-held object read 6.7 N carried for 4 N, as a
 # world stepped at 4 kHz in one step does (docs/benchmarks.md, "A lower physics rate")
 PHYSICS_SUBSTEPS = (1, 2)
+# [scenario].solver_iterations. A squeezed object's contacts never reach PyBullet's residual of
+# 1e-7, so the solver sweeps the most it may every step of a grasp. Against a 1000-sweep solve
+# of the same step, 25 sweeps read the contact forces as closely as 50 do (within ~0.1 N); 10 are
+# off by ~0.2 N, 5 by up to ~1 N (docs/benchmarks.md, "PyBullet's solver sweeps"): hence at least 10
+SOLVER_ITERATIONS_RANGE = (10, 1000)
 SEED_MAX = 2**32 - 1  # the seed is a uint32 (numpy's SeedSequence entropy; AM_SCENARIO.seed)
 SCENARIO_NAME_MAX_BYTES = 32  # AM_SCENARIO.name is char[32]
 # Plausible objects for this stack's AMs, tables and arena ([object], [mission], [[am]]):
@@ -1301,6 +1309,9 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     if spec.rate_hz * spec.physics_substeps > RATE_HZ_RANGE[1]:
         raise ConfigError(f"{where}: [scenario].physics_substeps: rate_hz x physics_substeps = "
                           f"{spec.rate_hz * spec.physics_substeps:g} Hz, above {RATE_HZ_RANGE[1]:g} Hz")
+    lo, hi = SOLVER_ITERATIONS_RANGE
+    if not lo <= spec.solver_iterations <= hi:
+        raise ConfigError(f"{where}: [scenario].solver_iterations: must be in {lo}..{hi}, got {spec.solver_iterations!r}")
     if spec.control_rate_hz is not None:
         c = _check_type(spec.control_rate_hz, float, f"{where}: [scenario].control_rate_hz")
         _positive(f"{where}: [scenario].control_rate_hz", c)

@@ -2,7 +2,7 @@
 pool of 1 and of 2 worker processes, on the same trials (default randomization).
 
     python benchmarks/bench_trials.py [--scenario configs/scenarios/two_am_comp.toml] [--trials 4]
-        [--set TABLE.KEY=VALUE ...]
+        [--set TABLE.KEY=VALUE ...] [--screening]
 
 Each row runs the same `--trials` trials (seed 1) through `trials.runner` and prints wall
 time, trials per minute, the trials flown and flown per minute (a scenario with
@@ -13,9 +13,9 @@ per flown trial (user + system of the pool's processes, start-up included) and t
 trials per minute that CPU time allows with each worker on a core of its own (workers x 60 s
 / CPU per flown trial): on a machine shared with other work the wall-clock figure falls with
 the load, this one does not (it is a bound, reached when the workers have their cores to
-themselves). `--set` changes the scenario as am-trials' --set does, e.g. the screening
-campaign's world (docs/trials.md): `--set scenario.rate_hz=500 --set flight_controller.rate_hz=500
---set scenario.physics_substeps=2`.
+themselves). `--set` changes the scenario as am-trials' --set does, e.g. `--set
+scenario.solver_iterations=25`; `--screening` applies am-trials' screening world
+(`trials.cli.screening_overrides`, docs/trials.md) before them.
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 from amcore.config import _read_toml, scenario_from_dict
-from trials.cli import DEFAULT_RANDOMIZE, apply_overrides, build_tasks
+from trials.cli import DEFAULT_RANDOMIZE, apply_overrides, build_tasks, screening_overrides
 from trials.randomize import load_randomize
 from trials.runner import executor, run_all
 
@@ -41,7 +41,11 @@ def main() -> None:
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE", dest="overrides",
                     help="change a key of the scenario, as am-trials --set")
+    ap.add_argument("--screening", action="store_true", help="am-trials' screening world")
     a = ap.parse_args()
+    if a.screening:
+        a.overrides = [*screening_overrides(scenario_from_dict(apply_overrides(_read_toml(a.scenario), a.overrides),
+                                                               a.scenario.resolve())), *a.overrides]
     data = apply_overrides(_read_toml(a.scenario), a.overrides)
     spec = scenario_from_dict(data, a.scenario.resolve())
     rand = load_randomize(DEFAULT_RANDOMIZE)

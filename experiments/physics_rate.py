@@ -2,7 +2,7 @@
 throughput, and what it changes in the verdicts and the grasp's figures.
 
     python experiments/physics_rate.py [configs/scenarios/two_am_robust_attitude.toml] --seed S
-        [--rates 1000 500] [--substeps 1] [--trials 24] [--workers 2] [--randomize FILE]
+        [--rates 1000 500] [--substeps 1] [--iterations N] [--screening] [--trials 24] [--workers 2] [--randomize FILE]
         [--out runs/physics_rate-<time>]
 
 For each rate, `am-trials` runs the base scenario with `[scenario].rate_hz` at that rate and
@@ -12,6 +12,10 @@ companions' control rate stays the scenario's, so the rate must be a multiple of
 mode's 250 Hz; torque mode's companions run at the physics rate, so there a lower rate slows the law too).
 `--substeps 2` runs the second rate with `[scenario].physics_substeps = 2`: PyBullet's contacts
 and joints then integrate at twice that rate, with the step's forces held across its substeps.
+`--iterations N` runs the second world with `[scenario].solver_iterations = N` (PyBullet's
+constraint solver sweeps; `--rates 1000 1000 --iterations 25` compares that alone).
+`--screening` runs the second world as `am-trials --screening` does (`trials.cli.screening_overrides`;
+the rates, substeps and iterations given are then ignored for it).
 
 Printed: per rate, the campaign's wall time, its flown trials per minute (refused trials cost
 the pre-flight check alone) and the flown trials' median wall time; then, trial by trial, how
@@ -34,7 +38,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from amcore.config import load_scenario  # noqa: E402
+from amcore.config import _read_toml, load_scenario, scenario_from_dict  # noqa: E402
 from trials import cli  # noqa: E402
 from trials.report import read_csv  # noqa: E402
 
@@ -45,11 +49,14 @@ NOT_DRAWN = {"trial", "scenario_file", "verdict", "failure_class", "reason", "st
              *SATURATION, "saturated_steps", "max_lift_m", "rejected_setpoints"}
 
 
-def overrides(base: Path, rate_hz: float, substeps: int = 1) -> list[str]:
-    """am-trials' --set arguments for physics at rate_hz in `substeps` substeps of PyBullet (none
-    at the scenario's own rate and substeps)."""
+def overrides(base: Path, rate_hz: float, substeps: int = 1, iterations: int | None = None) -> list[str]:
+    """am-trials' --set arguments for physics at rate_hz in `substeps` substeps of PyBullet, its
+    solver sweeping at most `iterations` times a step (None: the scenario's); none where these
+    are the scenario's own."""
     spec = load_scenario(base)
     out = [] if substeps == spec.physics_substeps else ["--set", f"scenario.physics_substeps={int(substeps)}"]
+    if iterations is not None and iterations != spec.solver_iterations:
+        out += ["--set", f"scenario.solver_iterations={int(iterations)}"]
     if rate_hz == spec.rate_hz:
         return out
     fc = min(spec.vehicle.flight_controller.rate_hz, rate_hz)
@@ -92,6 +99,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rates", type=float, nargs=2, default=[1000.0, 500.0], metavar="HZ")
     ap.add_argument("--substeps", type=int, default=1, choices=(1, 2),
                     help="[scenario].physics_substeps of the second rate (default 1)")
+    ap.add_argument("--iterations", type=int, default=None,
+                    help="[scenario].solver_iterations of the second world (default: the scenario's)")
+    ap.add_argument("--screening", action="store_true", help="the second world is am-trials' screening world")
     ap.add_argument("--trials", type=int, default=24)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--randomize", type=Path, default=None, help="am-trials' --randomize (default: its default)")
@@ -99,18 +109,28 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     out = a.out or ROOT / "runs" / f"physics_rate-{time.strftime('%Y%m%d-%H%M%S')}"
     campaigns = []
+    base = load_scenario(a.scenario)
+    if a.screening:
+        screened = scenario_from_dict(cli.apply_overrides(_read_toml(a.scenario), cli.screening_overrides(base)),
+                                      a.scenario)
+        a.rates[1], a.substeps, a.iterations = screened.rate_hz, screened.physics_substeps, screened.solver_iterations
     for i, rate in enumerate(a.rates):
         sub = a.substeps if i == 1 else 1
-        folder = out / (f"rate-{rate:g}" + (f"-substeps-{sub}" if sub > 1 else ""))
+        its = a.iterations if i == 1 else None
+        folder = out / (f"{'ab'[i]}-rate-{rate:g}" + (f"-substeps-{sub}" if sub > 1 else "")
+                        + (f"-iterations-{its}" if its is not None else ""))
         code = cli.main([str(a.scenario), "--trials", str(a.trials), "--seed", str(a.seed), "--out", str(folder),
-                         "--workers", str(a.workers), "--no-progress", "--no-plots", *overrides(a.scenario, rate, sub),
+                         "--workers", str(a.workers), "--no-progress", "--no-plots",
+                         *(["--screening"] if a.screening and i == 1 else overrides(a.scenario, rate, sub, its)),
                          *(["--randomize", str(a.randomize)] if a.randomize else [])])
         if code != 0:  # am-trials said why on stderr
             return code
         campaigns.append((rate, json.loads((folder / "summary.json").read_text()), read_csv(folder / "trials.csv")))
-    duration = load_scenario(a.scenario).duration_s
+    duration = base.duration_s
     print(f"{a.scenario.name}, seed {a.seed}, {a.trials} trials, {a.workers} workers, randomization "
-          f"{a.randomize or 'default'}; in {out}" + (f"; the second rate in {a.substeps} substeps" if a.substeps > 1 else ""))
+          f"{a.randomize or 'default'}; in {out}" + (f"; the second rate in {a.substeps} substeps" if a.substeps > 1 else "")
+          + (f"; the second world's solver at most {a.iterations} sweeps" if a.iterations is not None else "")
+          + ("; the second world is am-trials' --screening" if a.screening else ""))
     print(f"{'physics [Hz]':>12} {'wall [s]':>9} {'flown':>6} {'flown/min':>10} {'flown trial, median wall [s]':>29}")
     for rate, s, rows in campaigns:
         walls = [float(r["wall_s"]) for r in rows if r["verdict"] != "refused"]

@@ -199,6 +199,7 @@ class World:
         # [scenario].physics_substeps: each step's dt_s in n substeps of PyBullet, the forces held
         n_sub = self.spec.physics_substeps
         pb.setPhysicsEngineParameter(fixedTimeStep=self.spec.dt_s, numSubSteps=0 if n_sub == 1 else n_sub,
+                                     numSolverIterations=self.spec.solver_iterations,  # [scenario]
                                      deterministicOverlappingPairs=1, physicsClientId=c)
         pb.setGravity(0.0, 0.0, -self.spec.vehicle.gravity_mps2, physicsClientId=c)
         self._names[scene.add_ground(c)] = "ground"

@@ -2,7 +2,7 @@
 mission verdict, on a local process pool or a Dask distributed cluster.
 
     am-trials SCENARIO --trials N --seed S --out DIR [--workers K] [--scheduler ADDRESS]
-              [--randomize FILE] [--controller NAME ...] [--set TABLE.KEY=VALUE ...]
+              [--randomize FILE] [--controller NAME ...] [--set TABLE.KEY=VALUE ...] [--screening]
 
 What varies: --randomize FILE's [randomize] table, else the scenario's own, else
 configs/randomize/default.toml (see trials/randomize.py). Trial i of seed S is the same
@@ -15,6 +15,10 @@ each law (DIR/<controller>/...) and write DIR/comparison.md. --set changes the b
 scenario before the draws (a value in TOML syntax; `am.KEY` sets it on every [[am]]), e.g.
 `--set mission.squeeze_sizing=true --set pad.shape='"crowned"'`: a campaign with and without
 an option on the same trials; `--set devices.estimator.gyro_cutoff_hz=0` sets a key of a sub-table.
+--screening flies every trial in the screening world (`screening_overrides`: fewer solver
+sweeps and, in attitude mode, half the physics rate in two substeps): faster, its verdicts
+measured against the scenario's own world in docs/trials.md; confirm the ones that matter
+without it.
 Exit codes: 0 the campaign ran (whatever its success rate), 2 bad arguments or
 configuration, 1 a trial raised (a bug: failed missions are verdicts, not errors).
 """
@@ -38,6 +42,23 @@ from .runner import TrialTask, executor, run_all
 from .toml_write import dumps
 
 DEFAULT_RANDOMIZE = Path(__file__).resolve().parents[1] / "configs" / "randomize" / "default.toml"
+# --screening's PyBullet solver sweeps a step ([scenario].solver_iterations; the default is 50)
+SCREENING_SWEEPS = 25
+
+
+def screening_overrides(spec) -> list[str]:
+    """--screening: the --set arguments of the screening world for a scenario (docs/trials.md,
+    "Screening campaigns"). PyBullet's solver sweeps at most SCREENING_SWEEPS times a step. Where
+    the companions' rate divides half the physics rate (attitude mode's 250 Hz at 1 kHz), the
+    world also steps at half its rate in two substeps of PyBullet, so that contacts and joints
+    still integrate at the scenario's rate, and the emulated autopilot's loops run at most at the
+    new rate. Torque mode's companions run at the physics rate, so there the rate stays."""
+    out = [f"scenario.solver_iterations={SCREENING_SWEEPS}"]
+    half, c = spec.rate_hz / 2.0, spec.control_rate_hz
+    if spec.physics_substeps == 1 and c is not None and c < spec.rate_hz and (half / c).is_integer():
+        fc = min(spec.vehicle.flight_controller.rate_hz, half)
+        out += [f"scenario.rate_hz={half!r}", f"flight_controller.rate_hz={fc!r}", "scenario.physics_substeps=2"]
+    return out
 
 
 def _positive_int(text: str) -> int:
@@ -76,6 +97,9 @@ def parse_args(argv):
                     help="control law for every trial ([options].controller); repeat to compare laws")
     ap.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE", dest="overrides",
                     help="change the base scenario before the draws (VALUE in TOML syntax; am.KEY: every [[am]])")
+    ap.add_argument("--screening", action="store_true",
+                    help="fly the trials in the screening world (fewer solver sweeps; in attitude mode half the "
+                         "physics rate in two substeps): faster; --set applies after it")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar (there is one on a terminal only)")
     ap.add_argument("--no-plots", action="store_true", help="no plots")
     return ap.parse_args(argv)
@@ -166,6 +190,11 @@ def main(argv: list[str] | None = None) -> int:
     scenario = a.scenario.resolve()
     try:
         load_scenario(scenario)
+        if a.screening:  # before the user's --set, which may change what it set
+            raw = apply_overrides(_read_toml(scenario), a.overrides)
+            screening = screening_overrides(scenario_from_dict(raw, scenario))
+            a.overrides = [*screening, *a.overrides]
+            print(f"am-trials: screening world: --set {' --set '.join(screening)}", file=sys.stderr)
         base = apply_overrides(_read_toml(scenario), a.overrides)
         if a.overrides:
             scenario_from_dict(base, scenario)  # an override the scenario cannot take stops here, named

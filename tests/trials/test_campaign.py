@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from amcore.config import _read_toml, load_scenario
+from amcore.config import _read_toml, load_scenario, scenario_from_dict
 from simulator.inprocess import run
 from simulator.verdict import FAILURE_CLASSES
 from trials import cli
@@ -192,3 +192,35 @@ def test_redirected_output_has_no_progress_bar_and_no_worker_says_pybullets_buil
     err = capfd.readouterr().err
     assert "am-trials: 1 trials of" in err
     assert "trial/s" not in err and "succeeded]" not in err and "pybullet build time" not in err, err
+
+
+@pytest.mark.parametrize("name,rate_hz,substeps,control_every", [
+    ("two_am_robust_attitude", 500.0, 2, 2),  # attitude mode: the companions' 250 Hz divides 500 Hz
+    ("two_am_comp_attitude", 500.0, 2, 2),
+    ("two_am_comp", 1000.0, 1, 1),  # torque mode: the law runs at the physics rate, which stays
+])
+def test_the_screening_world_keeps_the_contact_step_and_the_companions_rate(name, rate_hz, substeps, control_every):
+    """--screening: fewer solver sweeps; in attitude mode half the physics rate in two substeps,
+    so that PyBullet's contacts still integrate every millisecond and the companions still run
+    at their rate; the emulated autopilot at most at the new rate."""
+    path = ROOT / "configs" / "scenarios" / f"{name}.toml"
+    spec = load_scenario(path)
+    screened = scenario_from_dict(cli.apply_overrides(_read_toml(path), cli.screening_overrides(spec)), path)
+    assert screened.solver_iterations == cli.SCREENING_SWEEPS < spec.solver_iterations == 50
+    assert (screened.rate_hz, screened.physics_substeps, screened.control_every) == (rate_hz, substeps, control_every)
+    assert screened.dt_s / screened.physics_substeps == spec.dt_s
+    assert screened.control_dt_s == spec.control_dt_s
+    assert screened.vehicle.flight_controller.rate_hz == min(spec.vehicle.flight_controller.rate_hz, rate_hz)
+
+
+def test_a_screening_campaign_records_its_world_and_set_applies_after_it(tmp_path, capsys):
+    out = tmp_path / "o"
+    assert cli.main([str(SHORT), "--trials", "1", "--seed", "3", "--out", str(out), "--workers", "1",
+                     "--no-progress", "--no-plots", "--screening", "--set", "scenario.duration_s=1.0",
+                     "--set", "scenario.solver_iterations=30"]) == 0
+    assert "screening world: --set scenario.solver_iterations=25" in capsys.readouterr().err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["overrides"] == ["scenario.solver_iterations=25", "scenario.duration_s=1.0",
+                                    "scenario.solver_iterations=30"]
+    trial = load_scenario(out / "scenarios" / "trial-0000.toml")
+    assert (trial.solver_iterations, trial.duration_s, trial.rate_hz) == (30, 1.0, 1000.0)
