@@ -52,12 +52,19 @@ def screening_overrides(spec) -> list[str]:
     the companions' rate divides half the physics rate (attitude mode's 250 Hz at 1 kHz), the
     world also steps at half its rate in two substeps of PyBullet, so that contacts and joints
     still integrate at the scenario's rate, and the emulated autopilot's loops run at most at the
-    new rate. Torque mode's companions run at the physics rate, so there the rate stays."""
+    new rate; an actuation delay keeps its length in time (half the steps; an odd number of steps
+    keeps the rate). Torque mode's companions run at the physics rate, so there the rate stays.
+    What the simulator times in seconds ([link] delays, [sensors].latency_s) is rounded to the
+    new step, as at any rate."""
     out = [f"scenario.solver_iterations={SCREENING_SWEEPS}"]
     half, c = spec.rate_hz / 2.0, spec.control_rate_hz
-    if spec.physics_substeps == 1 and c is not None and c < spec.rate_hz and (half / c).is_integer():
-        fc = min(spec.vehicle.flight_controller.rate_hz, half)
-        out += [f"scenario.rate_hz={half!r}", f"flight_controller.rate_hz={fc!r}", "scenario.physics_substeps=2"]
+    fc = spec.vehicle.flight_controller
+    if (spec.physics_substeps == 1 and c is not None and c < spec.rate_hz and (half / c).is_integer()
+            and fc.actuation_delay_steps % 2 == 0):
+        out += [f"scenario.rate_hz={half!r}", f"flight_controller.rate_hz={min(fc.rate_hz, half)!r}",
+                "scenario.physics_substeps=2"]
+        if fc.actuation_delay_steps:
+            out.append(f"flight_controller.actuation_delay_steps={fc.actuation_delay_steps // 2}")
     return out
 
 

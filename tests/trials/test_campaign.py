@@ -213,6 +213,19 @@ def test_the_screening_world_keeps_the_contact_step_and_the_companions_rate(name
     assert screened.vehicle.flight_controller.rate_hz == min(spec.vehicle.flight_controller.rate_hz, rate_hz)
 
 
+@pytest.mark.parametrize("delay,rate_hz,screened_delay", [(2, 500.0, 1), (1, 1000.0, 1)])
+def test_the_screening_world_keeps_an_actuation_delay_in_time(delay, rate_hz, screened_delay):
+    """[flight_controller].actuation_delay_steps counts physics steps: two steps at 1 kHz are
+    one at 500 Hz; one step has no half, so the world keeps its rate (the sweeps still change)."""
+    path = ROOT / "configs" / "scenarios" / "two_am_robust_attitude.toml"
+    data = cli.apply_overrides(_read_toml(path), [f"flight_controller.actuation_delay_steps={delay}"])
+    spec = scenario_from_dict(data, path)
+    screened = scenario_from_dict(cli.apply_overrides(data, cli.screening_overrides(spec)), path)
+    assert (screened.rate_hz, screened.vehicle.flight_controller.actuation_delay_steps) == (rate_hz, screened_delay)
+    assert screened_delay * screened.dt_s == pytest.approx(delay * spec.dt_s)  # the same delay in time
+    assert screened.solver_iterations == cli.SCREENING_SWEEPS
+
+
 def test_a_screening_campaign_records_its_world_and_set_applies_after_it(tmp_path, capsys):
     out = tmp_path / "o"
     assert cli.main([str(SHORT), "--trials", "1", "--seed", "3", "--out", str(out), "--workers", "1",
