@@ -113,7 +113,8 @@ def main(argv: list[str] | None = None) -> int:
     if a.screening:
         screened = scenario_from_dict(cli.apply_overrides(_read_toml(a.scenario), cli.screening_overrides(base)),
                                       a.scenario)
-        a.rates[1], a.substeps, a.iterations = screened.rate_hz, screened.physics_substeps, screened.solver_iterations
+        a.rates = [a.rates[0], screened.rate_hz]  # a new list: argparse's default is shared
+        a.substeps, a.iterations = screened.physics_substeps, screened.solver_iterations
     for i, rate in enumerate(a.rates):
         sub = a.substeps if i == 1 else 1
         its = a.iterations if i == 1 else None
