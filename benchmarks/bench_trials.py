@@ -15,7 +15,7 @@ trials per minute that CPU time allows with each worker on a core of its own (wo
 the load, this one does not (it is a bound, reached when the workers have their cores to
 themselves). `--set` changes the scenario as am-trials' --set does, e.g. `--set
 scenario.solver_iterations=25`; `--screening` applies am-trials' screening world
-(`trials.cli.screening_overrides`, docs/trials.md) before them.
+(`trials.cli.screening_for`, docs/trials.md) before them.
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 from amcore.config import _read_toml, scenario_from_dict
-from trials.cli import DEFAULT_RANDOMIZE, apply_overrides, build_tasks, screening_overrides
+from trials.cli import DEFAULT_RANDOMIZE, apply_overrides, build_tasks, screening_for
 from trials.randomize import load_randomize
 from trials.runner import executor, run_all
 
@@ -44,8 +44,7 @@ def main() -> None:
     ap.add_argument("--screening", action="store_true", help="am-trials' screening world")
     a = ap.parse_args()
     if a.screening:
-        a.overrides = [*screening_overrides(scenario_from_dict(apply_overrides(_read_toml(a.scenario), a.overrides),
-                                                               a.scenario.resolve())), *a.overrides]
+        a.overrides = [*screening_for(a.scenario.resolve(), a.overrides), *a.overrides]
     data = apply_overrides(_read_toml(a.scenario), a.overrides)
     spec = scenario_from_dict(data, a.scenario.resolve())
     rand = load_randomize(DEFAULT_RANDOMIZE)

@@ -111,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     campaigns = []
     base = load_scenario(a.scenario)
     if a.screening:
-        screened = scenario_from_dict(cli.apply_overrides(_read_toml(a.scenario), cli.screening_overrides(base)),
+        screened = scenario_from_dict(cli.apply_overrides(_read_toml(a.scenario), cli.screening_for(a.scenario)),
                                       a.scenario)
         a.rates = [a.rates[0], screened.rate_hz]  # a new list: argparse's default is shared
         a.substeps, a.iterations = screened.physics_substeps, screened.solver_iterations

@@ -68,6 +68,12 @@ def screening_overrides(spec) -> list[str]:
     return out
 
 
+def screening_for(scenario: Path, overrides: list[str] = ()) -> list[str]:
+    """`screening_overrides` of a scenario file with `overrides` (--set) applied; they go before
+    those, which may change what they set. ConfigError as `apply_overrides` and the scenario's."""
+    return screening_overrides(scenario_from_dict(apply_overrides(_read_toml(scenario), list(overrides)), scenario))
+
+
 def _positive_int(text: str) -> int:
     try:
         v = int(text)
@@ -198,8 +204,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         load_scenario(scenario)
         if a.screening:  # before the user's --set, which may change what it set
-            raw = apply_overrides(_read_toml(scenario), a.overrides)
-            screening = screening_overrides(scenario_from_dict(raw, scenario))
+            screening = screening_for(scenario, a.overrides)
             a.overrides = [*screening, *a.overrides]
             print(f"am-trials: screening world: --set {' --set '.join(screening)}", file=sys.stderr)
         base = apply_overrides(_read_toml(scenario), a.overrides)
