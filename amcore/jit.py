@@ -12,10 +12,24 @@ each kernel, so a change to a callee in another file would not invalidate its ca
 error_model="numpy": a division by zero gives inf or nan as in numpy (the law checks its
 divisors where it matters and raises itself). NUMBA_DISABLE_JIT=1 runs the same functions
 as plain Python (for a debugger; slow).
+
+LLVM's optimization level: 1 (`OPT_LEVEL`), not numba's default 3, unless NUMBA_OPT is set.
+On a machine's first run the kernels compile in about four fifths of the time, and they run
+as fast and give the same bits (docs/benchmarks.md, "LLVM's optimization level"): none asks
+for fast-math, so no level may reorder or fuse their floating-point operations. Set as
+NUMBA_OPT in this process's environment (children inherit it, and numba's own re-reading of
+its environment keeps it), before the first compile.
 """
 from __future__ import annotations
 
-import numba
+import os
+
+OPT_LEVEL = "1"
+os.environ.setdefault("NUMBA_OPT", OPT_LEVEL)
+
+import numba  # noqa: E402 (after NUMBA_OPT)
+
+numba.core.config.reload_config()  # numba may have been imported already (its config read)
 
 
 def kernel(fn):
