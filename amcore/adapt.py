@@ -1,5 +1,6 @@
 """Heading admittance: an AM whose pad meets the object's face at an angle turns to face it,
-from its own wrist sensor alone (decentralized; pure: numpy only).
+from its own wrist sensor alone (decentralized; pure math: numpy and the compiled
+`amcore.law.adapted_reference`, no I/O).
 
 Beyond the paper, whose AMs are aligned with the faces by construction. With a crowned pad
 (`amcore.config.PadSpec`, a vertical cylinder of radius R through the face centre {e}), a
@@ -28,9 +29,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
+from . import law
 from .so3 import Rz
 
 
@@ -43,8 +46,7 @@ class HeadingAdmittance:
     max_turn_rad: float = 0.35  # |dpsi| is held within this (20 deg)
 
 
-@dataclass(frozen=True)
-class HeadingState:
+class HeadingState(NamedTuple):  # a named tuple: one is made every control step
     dpsi: float = 0.0  # heading correction [rad]
     dpsi_d1: float = 0.0  # its rate [rad/s]
     dpsi_d2: float = 0.0  # its acceleration [rad/s^2], as last computed
@@ -126,8 +128,7 @@ class LateralAdmittance:
     max_shift_m: float = 0.02
 
 
-@dataclass(frozen=True)
-class LateralState:
+class LateralState(NamedTuple):  # a named tuple: one is made every control step
     dy: float = 0.0  # CoM reference shift along the task frame's y axis [m]
     dy_d1: float = 0.0
     dy_d2: float = 0.0
@@ -194,3 +195,46 @@ def trim_update(trim: Trim, dr: np.ndarray, r_c_err_W: np.ndarray, ref_speed_mps
 def trim_reference(ref, dr: np.ndarray):
     """`ref` with its CoM path moved by the (constant) trim dr."""
     return ref if not dr.any() else ref._replace(r_c=ref.r_c + dr)
+
+
+# ------------------------------------------------------------------ the three together
+def adapted(ref, frame, dr: np.ndarray, heading: HeadingState | None, pivot_W: np.ndarray,
+            lateral: LateralState | None, compiled: bool = True):
+    """(ref, task_frame): the mission's reference `ref` and task frame `frame` (amcore.task.TaskFrame)
+    with the options applied in the companion's order: the trim's shift dr (`trim_reference`),
+    the heading's turn about the vertical through pivot_W (`turn_reference`, `turn_frame`;
+    heading: its state, None: the admittance is off) and the lateral shift along the turned
+    frame's y axis (`shift_reference`; lateral: None: off). task_frame is None with the heading
+    off (the law then takes the mission's frame).
+
+    compiled: the arithmetic in one call of `amcore.law.adapted_reference`, the same numbers to
+    rounding (its 3 x 3 products are loops, numpy's go to BLAS), else the functions above
+    (the form the tests compare it with). A step costs ~10 us against ~55 us for the
+    functions' small numpy operations (docs/benchmarks.md)."""
+    if not compiled:
+        ref = trim_reference(ref, dr)
+        task_frame = None
+        if heading is not None:
+            ref = turn_reference(ref, heading, pivot_W)
+            task_frame = turn_frame(frame, heading, pivot_W)
+        if lateral is not None:
+            ref = shift_reference(ref, lateral, (frame if task_frame is None else task_frame).R_WT[:, 1])
+        return ref, task_frame
+    turn, shift = heading is not None, lateral is not None
+    h = heading if turn else _AT_REST
+    s = lateral if shift else _NOT_SHIFTED
+    r, R_WT, p_WT, H_TW, e_y_W = law.adapted_reference(
+        np.array(ref[:5]), dr, turn, h.dpsi, h.dpsi_d1, pivot_W, shift, s.dy, s.dy_d1, s.dy_d2, frame.R_WT, frame.p_WT)
+    psi = ref[5:8]
+    if turn and not (h.dpsi == 0.0 and h.dpsi_d1 == 0.0):  # as turn_reference
+        psi = (ref.psi + h.dpsi, ref.psi_d1 + h.dpsi_d1, ref.psi_d2 + h.dpsi_d2)
+    ref = type(ref)(r[0], r[1], r[2], r[3], r[4], *psi, ref.y, ref.y_d1, ref.y_d2)
+    if not turn:
+        return ref, None
+    if h.dpsi == 0.0:  # as turn_frame: the mission's frame itself
+        return ref, frame
+    return ref, type(frame).with_transform(R_WT, p_WT, H_TW, e_y_W)
+
+
+_AT_REST = HeadingState()
+_NOT_SHIFTED = LateralState()

@@ -14,6 +14,7 @@ the functions below turn them into the decoupled dynamics and the control law.
     impedance_law         eq. u3: u_3, with the singularity guard
     control_law           all of them, in order, for one step; its results packed in one array
     attitude_mode_torques attitude mode's body torque estimate and joint torques (amcore.offboard)
+    adapted_reference     the robust options' trim, heading turn and lateral shift (amcore.adapt)
 
 This module imports numpy and numba only (no I/O). Small dense linear algebra is written
 out as loops (numba compiles them; at these sizes a call into BLAS or LAPACK costs more
@@ -760,3 +761,37 @@ def attitude_mode_torques(Lambda_w, G, T_inv, J_e_xi, wrench_E_f, s, J_y, M_inv,
     tau[3:6] = tau_b
     tau[6:] = joint_torques_for_body_torque(J_y, M_inv, Lambda_y, damping, tau_b_p, tau_q_p, tau_b)
     return tau, mtv(T_inv, tau), w_new, r_new
+
+
+# ----------------------------------------------------------------------------- the robust options' references
+@kernel
+def adapted_reference(r, dr, turn, dpsi, dpsi_d1, pivot, shift, dy, dy_d1, dy_d2, R_WT, p_WT):
+    """amcore.adapt's shaping of one step's reference and task frame, in its order
+    (`amcore.adapt.adapted`; beyond the paper): r (5 x 3) the CoM path r_c .. r_c_d4 in {w}
+    moved by the trim's dr; with `turn` (the heading admittance on), the path and the task frame
+    (R_WT, p_WT) turned by dpsi about the vertical through pivot; with `shift` (the lateral
+    admittance on), the path moved by dy and its two rates along the (turned) frame's y axis.
+    Each part is skipped where its function in amcore.adapt returns its input unchanged.
+    Returns (r, R_WT, p_WT, H_TW, e_y_W) of the adapted reference and frame."""
+    out = r.copy()
+    if dr[0] != 0.0 or dr[1] != 0.0 or dr[2] != 0.0:  # trim_reference
+        out[0] = out[0] + dr
+    R, p = R_WT.copy(), p_WT.copy()
+    if turn:
+        c, s = np.cos(dpsi), np.sin(dpsi)
+        Rz = np.array(((c, -s, 0.0), (s, c, 0.0), (0.0, 0.0, 1.0)))
+        if dpsi != 0.0 or dpsi_d1 != 0.0:  # turn_reference
+            out[0] = pivot + mv(Rz, out[0] - pivot)
+            for k in range(1, 5):
+                out[k] = mv(Rz, out[k])
+        if dpsi != 0.0:  # turn_frame
+            R, p = mm(Rz, R_WT), pivot + mv(Rz, p_WT - pivot)
+    e_y = R[:, 1].copy()
+    if shift and (dy != 0.0 or dy_d1 != 0.0):  # shift_reference
+        out[0] = out[0] + dy * e_y
+        out[1] = out[1] + dy_d1 * e_y
+        out[2] = out[2] + dy_d2 * e_y
+    H = np.eye(4)  # TaskFrame.H_TW
+    H[0:3, 0:3] = R.T
+    H[0:3, 3] = -mtv(R, p)
+    return out, R, p, H, e_y

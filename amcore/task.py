@@ -51,6 +51,14 @@ class TaskFrame:
         """{t}'s y axis in {w}, R_WT[:, 1] (computed once)."""
         return self.R_WT[:, 1].copy()
 
+    @classmethod
+    def with_transform(cls, R_WT: np.ndarray, p_WT: np.ndarray, H_TW: np.ndarray, e_y_W: np.ndarray) -> "TaskFrame":
+        """The frame with its H_TW and e_y_W computed beside it (amcore.law.adapted_reference):
+        they become the cached properties' values, as a first read would store them."""
+        f = cls(R_WT, p_WT)
+        f.__dict__.update(H_TW=H_TW, e_y_W=e_y_W)
+        return f
+
 
 @dataclass
 class TaskTerms:

@@ -36,8 +36,20 @@ def state_from_frame(frame: SensorFrame) -> AmState:
 def setpoint_from_result(step: int, res: StepResult, thrust_max_n: float) -> tuple[TorqueSetpoint, AttitudeTarget]:
     """The torque-level setpoint the simulator applies, and the attitude target (R_b,d as a
     quaternion, w_b,d, thrust normalized by the vehicle's maximum) that goes with it."""
-    c, d = res.command, res.diagnostics
+    c = res.command
     n = c.tau_q_nm.shape[0]
+    att = attitude_target_from_result(step, res, thrust_max_n)
+    if not (0 <= step < 1 << 64 and n <= MAX_JOINTS):  # the validating constructor says why
+        return TorqueSetpoint(step=step, thrust_n=c.thrust_n, tau_B_nm=c.tau_B_nm, tau_q_nm=c.tau_q_nm), att
+    # within the wire's bounds, the decoder's constructor builds the same immutable instance
+    # without re-checking it
+    return torque_setpoint_from_wire(step, c.thrust_n, [*c.tau_B_nm.tolist(), *c.tau_q_nm.tolist()], n, 0), att
+
+
+def attitude_target_from_result(step: int, res: StepResult, thrust_max_n: float) -> AttitudeTarget:
+    """The attitude target of a step: R_b,d as a quaternion with w >= 0, w_b,d, and the thrust
+    normalized by the vehicle's maximum (PX4's offboard thrust), within [0, 1]."""
+    c, d = res.command, res.diagnostics
     if d.q_d is not None:  # R_d as a quaternion with w >= 0, from the compiled law
         w, x, y, z = d.q_d.tolist()
     else:
@@ -46,22 +58,16 @@ def setpoint_from_result(step: int, res: StepResult, thrust_max_n: float) -> tup
             x, y, z, w = -x, -y, -z, -w
     thrust = c.thrust_n / thrust_max_n
     thrust = min(max(thrust, 0.0), 1.0)  # np.clip, which costs ~15x more on a float
-    if not (0 <= step < 1 << 64 and n <= MAX_JOINTS):  # the validating constructors say why
-        return (TorqueSetpoint(step=step, thrust_n=c.thrust_n, tau_B_nm=c.tau_B_nm, tau_q_nm=c.tau_q_nm),
-                AttitudeTarget(step=step, quat_wxyz=np.array([w, x, y, z]), rates_rad_s=d.w_bd,
-                               thrust_normalized=thrust))
-    # within the wire's bounds, the decoders' constructors build the same immutable instances
-    # without re-checking them
-    sp = torque_setpoint_from_wire(step, c.thrust_n, [*c.tau_B_nm.tolist(), *c.tau_q_nm.tolist()], n, 0)
-    att = attitude_target_from_wire(step, [w, x, y, z, *d.w_bd.tolist(), thrust])
-    return sp, att
+    if not 0 <= step < 1 << 64:  # the validating constructor says why
+        return AttitudeTarget(step=step, quat_wxyz=np.array([w, x, y, z]), rates_rad_s=d.w_bd, thrust_normalized=thrust)
+    return attitude_target_from_wire(step, [w, x, y, z, *d.w_bd.tolist(), thrust])
 
 
 def attitude_setpoint_from_result(step: int, res: StepResult, thrust_max_n: float) -> AttitudeSetpoint:
     """Attitude mode's setpoint: the attitude target of `setpoint_from_result` (R_b,d, w_b,d,
     the thrust normalized by the vehicle's maximum, PX4's offboard thrust) and the joint torques."""
     c = res.command
-    _, att = setpoint_from_result(step, res, thrust_max_n)
+    att = attitude_target_from_result(step, res, thrust_max_n)
     n = c.tau_q_nm.shape[0]
     if not (0 <= step < 1 << 64 and n <= MAX_JOINTS):  # the validating constructor says why
         return AttitudeSetpoint(step=step, attitude=att, tau_q_nm=c.tau_q_nm)

@@ -22,9 +22,8 @@ import numpy as np
 
 from amcore import baseline, control
 from amcore.allocation import Allocation
-from amcore.adapt import (HeadingAdmittance, HeadingState, LateralAdmittance, LateralState, heading_update,
-                          lateral_update, shift_reference, trim_reference, trim_update, turn_frame,
-                          turn_reference, Trim)
+from amcore.adapt import (HeadingAdmittance, HeadingState, LateralAdmittance, LateralState, Trim, adapted,
+                          heading_update, lateral_update, trim_update)
 from amcore.config import ScenarioSpec
 from amcore.control import StepResult
 from amcore.mission import JoinBlend, ObjectPose, am_mission, join_blend
@@ -84,6 +83,7 @@ class Pilot:
         self.lateral_state = LateralState()
         self.trim = Trim(2.0 * math.pi * o.trim_hz) if o.trim_hz > 0.0 else None
         self.trim_dr = np.zeros(3)
+        self._adapts = self.trim is not None or self.heading is not None or self.lateral is not None
         self._r_c_err: np.ndarray | None = None  # the law's CoM error of the last step (trim)
         self._wrench_E_f = None  # the controller's filtered wrench of the last step (the admittances' input)
         self._t_last: float | None = None
@@ -122,32 +122,26 @@ class Pilot:
         ref = self.mission.reference(t)
         if self._blend is not None:
             ref = self._blend.apply(ref, t)
-        if self.trim is not None:
-            if self._r_c_err is not None and self.mission.phase(t) == "approach":
-                self.trim_dr = trim_update(self.trim, self.trim_dr, self._r_c_err,
-                                           float(np.linalg.norm(ref.r_c_d1)), t - self._t_last)
-            ref = trim_reference(ref, self.trim_dr)
-        task_frame = None
-        if self.heading is not None:
-            if self._wrench_E_f is not None:
-                # the heading follows the face while the pads squeeze the object on the table;
-                # from the lift on it settles (damping only): the object then hangs between
-                # the pads and its own turning would drive the heading
-                w = self._wrench_E_f if self.mission.phase(t) == "grasp" else _NO_WRENCH
+        phase = self.mission.phase(t)
+        if self.trim is not None and self._r_c_err is not None and phase == "approach":
+            self.trim_dr = trim_update(self.trim, self.trim_dr, self._r_c_err, float(np.linalg.norm(ref.r_c_d1)),
+                                       t - self._t_last)
+        if self._wrench_E_f is not None:
+            # the heading follows the face, and the CoM gives way along the face to the force the
+            # pad pushes with, while the pads squeeze the object on the table; from the lift on
+            # both settle (damping only): the object then hangs between the pads, and its own
+            # turning and swinging would drive them, not a misalignment or a disagreement
+            w = self._wrench_E_f if phase == "grasp" else _NO_WRENCH
+            if self.heading is not None:
                 self.heading_state = heading_update(self.heading, self.heading_state, w, t - self._t_last)
-            pivot = self.mission.contact_point_W
-            ref = turn_reference(ref, self.heading_state, pivot)
-            task_frame = turn_frame(self.mission.frame, self.heading_state, pivot)
-        if self.lateral is not None:
-            if self._wrench_E_f is not None:
-                # the CoM gives way along the face to the force the pad pushes with while the
-                # pads squeeze the object on the table; from the lift on it settles (damping
-                # only), as the heading does: the object then hangs between the pads, and the
-                # push measures its swinging and turning, not a disagreement
-                w = self._wrench_E_f if self.mission.phase(t) == "grasp" else _NO_WRENCH
+            if self.lateral is not None:
                 self.lateral_state = lateral_update(self.lateral, self.lateral_state, w, t - self._t_last)
-            axis = (task_frame if task_frame is not None else self.mission.frame).R_WT[:, 1]
-            ref = shift_reference(ref, self.lateral_state, axis)
+        task_frame = None
+        if self._adapts:  # trim, heading turn and lateral shift, in that order (amcore.adapt.adapted)
+            ref, task_frame = adapted(ref, self.mission.frame, self.trim_dr,
+                                      self.heading_state if self.heading is not None else None,
+                                      self.mission.contact_point_W,
+                                      self.lateral_state if self.lateral is not None else None)
         args = (self.model, self.data, self.params, state, ref, frame.wrench_E, self.memory, t)
         if self.attitude_mode:  # the autopilot flies the attitude; the arm law is amcore.offboard's
             out = offboard_step(*args, task_frame, self.offboard, self.applied(frame))
@@ -158,7 +152,7 @@ class Pilot:
         if self.heading is not None or self.lateral is not None:  # the admittances' input
             self._wrench_E_f = res.diagnostics.wrench_E_filtered
         self._t_last = t
-        if self.trim is not None and self.mission.phase(t) == "approach":  # held from the grasp on
+        if self.trim is not None and phase == "approach":  # held from the grasp on
             self._r_c_err = np.array(res.diagnostics.r_c_err)
         if self.attitude_mode:
             return attitude_setpoint_from_result(frame.step, res, self.thrust_max_n), None, res

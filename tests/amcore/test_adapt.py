@@ -7,8 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from amcore.adapt import (Trim, trim_reference, trim_update, HeadingAdmittance, HeadingState, LateralAdmittance, LateralState, heading_update,
-                          lateral_update, misalignment, shift_reference, turn_frame, turn_reference)
+from amcore.adapt import (Trim, adapted, trim_reference, trim_update, HeadingAdmittance, HeadingState, LateralAdmittance,
+                          LateralState, heading_update, lateral_update, misalignment, shift_reference, turn_frame,
+                          turn_reference)
 from amcore.config import load_scenario
 from amcore.control import Reference
 from amcore.mission import am_mission, squeeze_plan
@@ -223,3 +224,59 @@ def test_the_trim_moves_the_com_path_and_nothing_else():
     for name in Reference._fields[1:]:
         assert np.array_equal(getattr(moved, name), getattr(ref, name))
     assert trim_reference(ref, np.zeros(3)) is ref
+
+
+# ----------------------------------------------------------------- the three together, compiled
+def _random_case(rng, heading_on, lateral_on, trim_on, at_rest):
+    """A mission reference and frame, and option states drawn at random (at_rest: the
+    admittances' states zero, as before the first contact)."""
+    rows = rng.normal(size=(5, 3))
+    y = rng.normal(size=(3, 3))
+    ref = Reference(*rows, *rng.normal(size=3), *y)
+    psi = rng.uniform(-math.pi, math.pi)
+    frame = TaskFrame(R_WT=Rz(psi), p_WT=rng.normal(size=3))
+    dr = np.array([*rng.normal(scale=0.01, size=2), 0.0]) if trim_on else np.zeros(3)
+    h = HeadingState() if at_rest else HeadingState(*rng.normal(scale=0.1, size=3), 0.0)
+    s = LateralState() if at_rest else LateralState(*rng.normal(scale=0.005, size=3), 0.0)
+    return ref, frame, dr, (h if heading_on else None), rng.normal(size=3), (s if lateral_on else None)
+
+
+@pytest.mark.parametrize("heading_on", [False, True])
+@pytest.mark.parametrize("lateral_on", [False, True])
+@pytest.mark.parametrize("trim_on", [False, True])
+def test_the_compiled_shaping_gives_the_functions_numbers_to_rounding(heading_on, lateral_on, trim_on):
+    """amcore.law.adapted_reference against trim_reference, turn_reference, turn_frame and
+    shift_reference applied in turn: every reference field and the task frame (with its H_TW
+    and e_y_W) within 1e-15 of the path's scale, on 40 random cases each."""
+    rng = np.random.default_rng(2831)
+    for k in range(40):
+        case = _random_case(rng, heading_on, lateral_on, trim_on, at_rest=False)
+        fast, fast_frame = adapted(*case)
+        slow, slow_frame = adapted(*case, compiled=False)
+        for a, b in zip(fast, slow):
+            np.testing.assert_allclose(a, b, rtol=0.0, atol=1e-15 * 10)
+        if not heading_on:
+            assert fast_frame is None and slow_frame is None
+            continue
+        np.testing.assert_allclose(fast_frame.R_WT, slow_frame.R_WT, rtol=0.0, atol=1e-15)
+        np.testing.assert_allclose(fast_frame.p_WT, slow_frame.p_WT, rtol=0.0, atol=1e-14)
+        fresh = TaskFrame(R_WT=fast_frame.R_WT, p_WT=fast_frame.p_WT)  # its properties computed anew
+        np.testing.assert_array_equal(fast_frame.e_y_W, fresh.e_y_W)
+        np.testing.assert_allclose(fast_frame.H_TW, fresh.H_TW, rtol=0.0, atol=1e-14)
+
+
+def test_the_compiled_shaping_leaves_what_the_functions_leave_bit_for_bit():
+    """With the admittances at rest and no trim, the reference comes back unchanged and the task
+    frame is the mission's own (its cached H_TW reused); a trim alone adds exactly dr."""
+    rng = np.random.default_rng(2832)
+    ref, frame, dr, h, pivot, s = _random_case(rng, True, True, False, at_rest=True)
+    out, task_frame = adapted(ref, frame, dr, h, pivot, s)
+    assert task_frame is frame
+    for a, b in zip(out, ref):
+        np.testing.assert_array_equal(a, b)
+    dr = np.array([0.01, -0.02, 0.0])
+    out, _ = adapted(ref, frame, dr, h, pivot, s)
+    np.testing.assert_array_equal(out.r_c, ref.r_c + dr)
+    # a heading turned by zero with a rate: the path turns (by the identity), the frame stays
+    out, task_frame = adapted(ref, frame, np.zeros(3), HeadingState(0.0, 0.01), pivot, None)
+    assert task_frame is frame and out.psi_d1 == ref.psi_d1 + 0.01
