@@ -223,6 +223,8 @@ def adapted(ref, frame, dr: np.ndarray, heading: HeadingState | None, pivot_W: n
     turn, shift = heading is not None, lateral is not None
     h = heading if turn else _AT_REST
     s = lateral if shift else _NOT_SHIFTED
+    if h.dpsi == 0.0 and h.dpsi_d1 == 0.0 and s.dy == 0.0 and s.dy_d1 == 0.0:  # at rest (before contact): the trim alone
+        return trim_reference(ref, dr), (frame if turn else None)
     r, R_WT, p_WT, H_TW, e_y_W = law.adapted_reference(
         np.array(ref[:5]), dr, turn, h.dpsi, h.dpsi_d1, pivot_W, shift, s.dy, s.dy_d1, s.dy_d2, frame.R_WT, frame.p_WT)
     psi = ref[5:8]

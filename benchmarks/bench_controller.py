@@ -17,6 +17,8 @@ besides, mission.reference and the wire conversions of companion/adapter.py; eac
 own line. In attitude mode the companion calls amcore.offboard.offboard_step instead of
 `step` (every 4 ms): its row, and the same with the numpy functions that the compiled
 estimate is tested against, show what the body torque estimate and the arm's torques add.
+With the robust options (amcore.adapt: the trim, the heading turn, the lateral shift) the
+companion shapes the reference first: one compiled call, and beside it the numpy functions.
 Rows are timed in interleaved rounds so that a change in machine load hits all
 of them alike. The literal transcription (finite differences, generic inverses) is timed
 on fewer calls: it takes milliseconds.
@@ -33,6 +35,7 @@ import numpy as np
 import pinocchio as pin
 
 from amcore import law
+from amcore.adapt import HeadingState, LateralState, adapted
 from amcore.allocation import Allocation
 from amcore.config import load_scenario
 from amcore.control import ControllerMemory, ControllerParams, pinocchio_terms, step
@@ -99,6 +102,17 @@ def main() -> None:
         off_mem[c] = offboard_step(model, data, params, sts[i % 64], refs[i % 64], F, off_mem[c], 4e-3 * i,
                                    oparams=oparams, applied=applied, compiled=compiled).memory
 
+    # the robust options' shaping of the reference (amcore.adapt.adapted): trim, heading turn and
+    # lateral shift all acting, the turned frame's H_TW and e_y_W read as the step reads them
+    headings = [HeadingState(*(0.05 * rng.normal(size=3)), 0.0) for _ in range(64)]
+    laterals = [LateralState(*(0.003 * rng.normal(size=3)), 0.0) for _ in range(64)]
+    trim_dr = np.array([0.004, -0.002, 0.0])
+
+    def run_adapted(i, compiled):
+        _, frame = adapted(refs[i % 64], mission.frame, trim_dr, headings[i % 64], mission.contact_point_W,
+                           laterals[i % 64], compiled)
+        return frame.H_TW, frame.e_y_W
+
     def run_companion(i):  # companion.pilot's per-frame work, without its outcome bookkeeping
         frame, t = frames[i % 64], 0.0067 * i
         res = step(model, data, params, state_from_frame(frame), mission.reference(t), frame.wrench_E, mem[1], t)
@@ -116,6 +130,8 @@ def main() -> None:
         "companion": run_companion,
         "offboard": lambda i: run_offboard(i, True),
         "offboard_numpy": lambda i: run_offboard(i, False),
+        "adapted": lambda i: run_adapted(i, True),
+        "adapted_numpy": lambda i: run_adapted(i, False),
     }
     for i in range(300):
         for fn in parts.values():
@@ -167,6 +183,9 @@ def main() -> None:
     print(f"  attitude mode (amcore.offboard, inputs {oparams.inputs!r}, torque cutoff {oparams.torque_cutoff_hz:g} Hz):")
     row("    offboard_step: step, then tau_b^ and the arm's torques", samples["offboard"], "offboard")
     row("    the same with the numpy functions (compiled=False)", samples["offboard_numpy"], "offboard_numpy")
+    print("  the robust options (amcore.adapt: trim, heading turn, lateral shift, all acting):")
+    row("    adapted: one compiled call (amcore.law.adapted_reference)", samples["adapted"], "adapted")
+    row("    the same with the functions (compiled=False)", samples["adapted_numpy"], "adapted_numpy")
     step_us, comp_us, ratio = med(samples["step"]), med(samples["companion"]), med(samples["step"]) / med(literal)
     print(f"step / literal transcription, same run: {ratio:.4f}x")
     print(f"controller step, CPU time: {med(cpu['step']):.1f} us per call (median of {len(cpu['step'])} rounds)")

@@ -99,12 +99,16 @@ class Pilot:
     def warm_up(self) -> None:
         """Two steps of a throwaway pilot on frames of the mission's start, built as the wire
         builds them: the first calls into the compiled law (amcore.law), with the argument
-        types a run passes (companion.jitcache holds the lock around it). This pilot is untouched."""
+        types a run passes (companion.jitcache holds the lock around it), and with the robust
+        options their shaping's kernel, which the steps at rest do not reach. This pilot is untouched."""
         twin = Pilot(self.spec, self.am.sysid, model=self.model, object_pose=self.object_pose)
         x = self.mission.initial_state()
         values = [*x.p_WB, *R_to_quat_wxyz(x.R_WB), *x.v_B, *x.w_B, *x.q, *x.qdot, *_NO_WRENCH]
         for k in range(2):
             twin.step(sensor_frame_from_wire(k, k * self.spec.control_dt_s, values, self.model.n, 0))
+        if twin._adapts:  # the options' compiled shaping acts from the first contact on (amcore.adapt.adapted)
+            m = twin.mission
+            adapted(m.reference(0.0), m.frame, twin.trim_dr, HeadingState(1e-3), m.contact_point_W, LateralState(1e-3))
 
     def command(self, frame: SensorFrame) -> tuple[TorqueSetpoint | AttitudeSetpoint, AttitudeTarget | None, StepResult]:
         """The controller's answer to `frame`, and nothing else: in lockstep the simulator is

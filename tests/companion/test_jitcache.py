@@ -79,6 +79,18 @@ def test_warm_up_covers_the_other_modes(name):
     assert {k.py_func.__name__: len(k.signatures) for k in kernels(law)} == before
 
 
+def test_warm_up_covers_the_robust_options_once_they_act():
+    """The robust options' compiled shaping (amcore.law.adapted_reference) acts from the first
+    contact on, which the warm-up's steps at rest do not reach: the warm-up compiles it itself,
+    and the grasp's first second adds no specialization."""
+    spec = load_scenario(SCENARIO.parent / "two_am_robust_attitude.toml")
+    jitcache.warm(Pilot(spec, spec.ams[0].sysid).warm_up)
+    before = {k.py_func.__name__: len(k.signatures) for k in kernels(law)}
+    assert before["adapted_reference"] >= 1
+    run(spec, duration_s=spec.mission.approach_end_s + 1.0)
+    assert {k.py_func.__name__: len(k.signatures) for k in kernels(law)} == before
+
+
 _GROUPS = textwrap.dedent("""
     import json, os, sys, time
     from pathlib import Path
