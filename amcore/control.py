@@ -220,6 +220,11 @@ class Diagnostics:
         return d
 
     @property
+    def packed(self) -> np.ndarray | None:
+        """law.control_law's result the fields are read from (None: built with keywords)."""
+        return self.__dict__.get("_packed")
+
+    @property
     def decoupled(self) -> StepTerms | None:
         """The model terms the step evaluated (M_inv, T_inv, Lambda_w, Gamma_xi_xi): `terms`."""
         return self.terms
@@ -272,6 +277,16 @@ def packed_slices(n: int) -> dict[str, tuple[slice, tuple[int, ...]]]:
         out[name] = (slice(at, at + k), shape)
         at += k
     return out
+
+
+@lru_cache(maxsize=None)
+def packed_offsets(n: int, names: tuple[str, ...]) -> np.ndarray:
+    """The offsets in PACKED, for a task dimension n, of the fields `names` (a compiled law
+    that reads them from the packed result: law.attitude_mode_torques_of_packed)."""
+    at = packed_slices(n)
+    offsets = np.array([at[name][0].start for name in names], dtype=np.int64)
+    offsets.setflags(write=False)
+    return offsets
 
 
 def _view(sl: slice, shape: tuple[int, ...]):

@@ -13,7 +13,8 @@ the functions below turn them into the decoupled dynamics and the control law.
     orientation_law       eq. ori_error, ori_vel_error, ori_controller: u_2
     impedance_law         eq. u3: u_3, with the singularity guard
     control_law           all of them, in order, for one step; its results packed in one array
-    attitude_mode_torques attitude mode's body torque estimate and joint torques (amcore.offboard)
+    attitude_mode_torques attitude mode's body torque estimate and joint torques (amcore.offboard),
+                          also reading its terms from control_law's result (_of_packed)
     adapted_reference     the robust options' trim, heading turn and lateral shift (amcore.adapt)
 
 This module imports numpy and numba only (no I/O). Small dense linear algebra is written
@@ -761,6 +762,22 @@ def attitude_mode_torques(Lambda_w, G, T_inv, J_e_xi, wrench_E_f, s, J_y, M_inv,
     tau[3:6] = tau_b
     tau[6:] = joint_torques_for_body_torque(J_y, M_inv, Lambda_y, damping, tau_b_p, tau_q_p, tau_b)
     return tau, mtv(T_inv, tau), w_new, r_new
+
+
+@kernel
+def attitude_mode_torques_of_packed(packed, at, n, s, thrust, tau_b_p, tau_q_p, thrust_prev, tau_q_prev, w, w_prev,
+                                    dt, Phi, w_filter, r_filter):
+    """`attitude_mode_torques` with the terms torque mode's step evaluated read from its
+    `control_law` result `packed` (task dimension n), not handed over one by one: `at` holds
+    the offsets in it of Lambda_w, Gamma_xi_xi, T_inv, J_e_xi, wrench_E_filtered, J_y, M_inv,
+    Lambda_y and the guard (whose second entry is the damping; amcore.control.PACKED)."""
+    nv = n + 6
+    return attitude_mode_torques(
+        packed[at[0]:at[0] + 9].reshape((3, 3)), packed[at[1]:at[1] + nv],
+        packed[at[2]:at[2] + nv * nv].reshape((nv, nv)), packed[at[3]:at[3] + 6 * nv].reshape((6, nv)),
+        packed[at[4]:at[4] + 6], s, packed[at[5]:at[5] + n * nv].reshape((n, nv)),
+        packed[at[6]:at[6] + nv * nv].reshape((nv, nv)), packed[at[7]:at[7] + n * n].reshape((n, n)),
+        packed[at[8] + 1], thrust, tau_b_p, tau_q_p, thrust_prev, tau_q_prev, w, w_prev, dt, Phi, w_filter, r_filter)
 
 
 # ----------------------------------------------------------------------------- the robust options' references

@@ -72,7 +72,7 @@ import pinocchio as pin
 
 from . import law, linalg3
 from .config import VehicleParams
-from .control import Command, ControllerMemory, ControllerParams, Reference, StepResult, step
+from .control import Command, ControllerMemory, ControllerParams, Reference, StepResult, packed_offsets, step
 from .filters import FilterState, LowPass2, lowpass_update
 from .model import AmModel, AmState
 from .task import TaskFrame
@@ -238,6 +238,8 @@ def offboard_step(model: AmModel, data: pin.Data, params: ControllerParams, stat
 
 _NO_ROWS = np.zeros((0, 3))  # a filter not started yet (amcore.law.attitude_mode_torques)
 _NO_PHI = np.zeros((0, 0))  # no filter: the plain backward difference
+# what law.attitude_mode_torques_of_packed reads from the step's packed result, in its order
+_TERMS_READ = ("Lambda_w", "Gamma_xi_xi", "T_inv", "J_e_xi", "wrench_E_filtered", "J_y", "M_inv", "Lambda_y", "guard")
 
 
 def _estimate_compiled(params: ControllerParams, oparams: OffboardParams, res: StepResult, memory: OffboardMemory,
@@ -260,11 +262,10 @@ def _estimate_compiled(params: ControllerParams, oparams: OffboardParams, res: S
     else:
         Phi, w_prev, w_filter, r_filter = _NO_PHI, np.array(memory.w_B), _NO_ROWS, _NO_ROWS
     thrust, tau_q = _last_inputs(memory, applied)
-    tm = d.terms
-    tau, u, w_filter, r_filter = law.attitude_mode_torques(
-        tm.Lambda_w, tm.Gamma_xi_xi, tm.T_inv, tm.J_e_xi, d.wrench_E_filtered, 1.0 if params.force_compensation else 0.0,
-        tm.J_y, tm.M_inv, d.Lambda_y, d.damping, c.thrust_n, c.tau_B_nm, c.tau_q_nm, float(thrust),
-        np.array(tau_q, dtype=float), w, w_prev, dt, Phi, w_filter, r_filter)
+    n = c.tau_q_nm.shape[0]
+    tau, u, w_filter, r_filter = law.attitude_mode_torques_of_packed(  # the step's terms read in the kernel
+        d.packed, packed_offsets(n, _TERMS_READ), n, 1.0 if params.force_compensation else 0.0, c.thrust_n,
+        c.tau_B_nm, c.tau_q_nm, float(thrust), np.array(tau_q, dtype=float), w, w_prev, dt, Phi, w_filter, r_filter)
     if not filtered:
         return tau, u, None, None, True
     return tau, u, FilterState(w_filter[0], w_filter[1]), FilterState(r_filter[0], r_filter[1]), True

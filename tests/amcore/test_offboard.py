@@ -219,3 +219,34 @@ def test_the_compiled_step_is_the_numpy_functions_to_rounding(model, mission, pa
             if a is not None:
                 np.testing.assert_allclose(np.array(a), np.array(b), rtol=1e-12, atol=1e-12)
         mems = [o.memory for o in out]
+
+
+@pytest.mark.parametrize("cutoff_hz", [0.0, 40.0])
+@pytest.mark.parametrize("damped", [False, True])
+def test_the_packed_reader_hands_the_kernel_the_steps_terms_bit_for_bit(model, mission, params, cutoff_hz, damped):
+    """amcore.law.attitude_mode_torques_of_packed reads the step's terms from control_law's
+    packed result at amcore.control.packed_offsets: the same bits as attitude_mode_torques
+    handed the Diagnostics' named fields."""
+    from amcore import law
+    from amcore.control import packed_offsets
+    from amcore.offboard import _TERMS_READ
+
+    params = dataclasses.replace(params, **({"sigma_damping": 1e3} if damped else {}))
+    rng = np.random.default_rng(62)
+    for k in range(6):
+        t = 4.0 + 4e-3 * k
+        st, F_e = near_reference(mission, model, t, rng, scale=0.5), _wrench(rng)
+        res = step(model, create_data(model), params, st, mission.reference(t), F_e, steady_memory(model, st, F_e, t), t)
+        c, d, n = res.command, res.diagnostics, model.n
+        assert (d.damping > 0.0) == damped
+        Phi = OffboardParams("reported", cutoff_hz).torque_filter.transition(4e-3) if cutoff_hz else np.zeros((0, 0))
+        w_filter = rng.normal(size=(2, 3)) if cutoff_hz else np.zeros((0, 3))
+        r_filter = rng.normal(size=(2, 3)) if cutoff_hz else np.zeros((0, 3))
+        rest = (c.thrust_n, c.tau_B_nm, c.tau_q_nm, 19.5, rng.normal(size=n), st.w_B, st.w_B + 0.01, 4e-3, Phi,
+                w_filter, r_filter)
+        tm = d.terms
+        named = law.attitude_mode_torques(tm.Lambda_w, tm.Gamma_xi_xi, tm.T_inv, tm.J_e_xi, d.wrench_E_filtered, 1.0,
+                                          tm.J_y, tm.M_inv, d.Lambda_y, d.damping, *rest)
+        packed = law.attitude_mode_torques_of_packed(d.packed, packed_offsets(n, _TERMS_READ), n, 1.0, *rest)
+        for a, b in zip(packed, named):
+            np.testing.assert_array_equal(a, b)
