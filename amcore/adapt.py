@@ -209,8 +209,8 @@ def adapted(ref, frame, dr: np.ndarray, heading: HeadingState | None, pivot_W: n
 
     compiled: the arithmetic in one call of `amcore.law.adapted_reference`, the same numbers to
     rounding (its 3 x 3 products are loops, numpy's go to BLAS), else the functions above
-    (the form the tests compare it with). A step costs ~10 us against ~55 us for the
-    functions' small numpy operations (docs/benchmarks.md)."""
+    (the form the tests compare it with). With every option acting, ~8 us a step against
+    ~25 us for the functions' small numpy operations (benchmarks/bench_controller.py)."""
     if not compiled:
         ref = trim_reference(ref, dr)
         task_frame = None
