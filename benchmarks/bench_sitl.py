@@ -37,6 +37,13 @@ cores x step / (sim CPU + N x companion CPU / control_every). The simulator's CP
 physics step, a companion's per control step (attitude mode: one physics step in four). The lockstep cannot run faster than that however
 the processes are scheduled, so a target above it needs less CPU per step, not better waiting.
 
+Under each row, how the simulator's and a companion's main thread spent the run's wall time
+(companion.procstats, from Linux's scheduler statistics): on a CPU, queued for one (ready,
+while the cores ran other processes or threads), and blocked. In lockstep the simulator is
+blocked while it waits for the companions' answers, and a companion while it waits for its
+next frame. The run is no faster than the simulator's main thread: a simulator on a CPU for
+most of the wall time is the bound, whatever the CPU cap says.
+
 More columns take the whole apart, measured in the same run:
 - "echo": the same simulator and lockstep with `echo_companion.py` in place of each
   companion (same client, codec and signing; it answers every frame at once with a hover
@@ -165,6 +172,8 @@ def sitl_rtf(path: Path, duration: float, run_dir: Path) -> tuple[float, float, 
     proc = {"sim_cpu_us": (outcome.get("process") or {}).get("cpu_us_per_step"),
             "comp_cpu_us": _median([c.get("cpu_us_per_step") for c in comps]),
             **{k: _median([c.get("memory_mib", {}).get(k) for c in comps]) for k in ("rss", "pss", "uss")},
+            "sim_split": time_split([(outcome.get("process") or {}).get("main_thread")]),
+            "comp_split": time_split([c.get("main_thread") for c in comps]),
             "verdict": outcome.get("verdict") or {}}
     return outcome["real_time_factor"], wall, proc
 
@@ -178,6 +187,16 @@ def inprocess_rtf(path: Path, duration: float) -> float:
     if p.returncode not in (0, MISSION_FAILED):
         raise RuntimeError(f"in-process run failed: {p.stderr[-2000:]}")
     return json.loads(p.stdout)["real_time_factor"]
+
+
+def time_split(threads: list[dict | None]) -> tuple[float, float, float] | None:
+    """Per cent of the wall time the main threads (`companion.procstats.CpuMeter.main_thread`)
+    spent on a CPU, queued for one and blocked: the medians over the threads given (None
+    where no process reported them: a machine without Linux's scheduler statistics)."""
+    ts = [t for t in threads if t and t.get("wall_s")]
+    if not ts:
+        return None
+    return tuple(_median([100.0 * t[k] / t["wall_s"] for t in ts]) for k in ("on_cpu_s", "queued_s", "blocked_s"))
 
 
 def _median(xs) -> float:
@@ -322,13 +341,19 @@ def main() -> None:
                   f"{proc['sim_cpu_us']:10.0f}us {proc['comp_cpu_us']:11.0f}us {cap:7.2f}x {proc['rss']:6.0f}MiB "
                   f"{proc['pss']:6.0f} "
                   f"{proc['uss']:6.0f}", flush=True)
+            if proc["sim_split"] and proc["comp_split"]:
+                print("    main threads, per cent of the run's wall time on a CPU / queued for one / blocked: "
+                      "simulator {:.0f} / {:.0f} / {:.0f}, a companion {:.0f} / {:.0f} / {:.0f}".format(
+                          *proc["sim_split"], *proc["comp_split"]), flush=True)
             if proc["verdict"].get("status") == "failed":  # the figures are those of a run that failed its mission
                 print(f"    N = {n}: the SITL run's {proc['verdict'].get('text', 'mission FAILED')}", flush=True)
     print("SITL: the product (am-run, telemetry on). echo: same lockstep, companions without a controller"
           + (f" (echo+{spin:g}us: each busy-waits {spin:g} us per step)" if spin is not None else "") + ".\n"
           "in-proc: the same scenario and pilots in one process on one core (simulator.inprocess).\n"
           "UDP: the message pattern alone. Targets: 2 AMs >= 3x, 10 AMs >= 0.7x (goals 5x, 1x); companion memory\n"
-          "<= 120 MiB (goal 80). CPU per step: user + system of the whole process over the run, all threads.")
+          "<= 120 MiB (goal 80). CPU per step: user + system of the whole process over the run, all threads.\n"
+          "Main threads: the simulator's blocked time is its wait for the companions' answers; queued, the time it\n"
+          "was ready to run while the cores ran the companions, the recorder or its own other threads.")
 
 
 if __name__ == "__main__":

@@ -188,7 +188,8 @@ def main(argv: list[str] | None = None) -> int:
     summary = pilot.summary()
     cpu_s = cpu.seconds()
     summary["process"] = {"memory_mib": procstats.memory_mib(), "cpu_s": cpu_s,
-                          "cpu_us_per_step": 1e6 * cpu_s / pilot.steps if cpu_s is not None and pilot.steps else None}
+                          "cpu_us_per_step": 1e6 * cpu_s / pilot.steps if cpu_s is not None and pilot.steps else None,
+                          "main_thread": cpu.main_thread()}
     _write(a.outcome, summary)
     steps = pilot.steps
     rate = f", {steps / wall:.0f} steps/s" if wall else ""

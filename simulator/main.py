@@ -297,12 +297,13 @@ def main(argv: list[str] | None = None) -> int:
         tele.close()
     wall = time.perf_counter() - progress.t_wall0
     sim_time = k * spec.dt_s
-    cpu_s = cpu.seconds()
+    cpu_s, main_thread = cpu.seconds(), cpu.main_thread()
     result = {"scenario": spec.name, "scenario_id": info.scenario_id, "status": status, "exit_code": code,
               "steps": k, "sim_time_s": sim_time, "wall_s": wall,
               "real_time_factor": (sim_time / wall) if wall > 0 else None, "link": vars(server.stats),
               "process": {"memory_mib": procstats.memory_mib(), "cpu_s": cpu_s,
-                          "cpu_us_per_step": 1e6 * cpu_s / k if cpu_s is not None and k else None},
+                          "cpu_us_per_step": 1e6 * cpu_s / k if cpu_s is not None and k else None,
+                          "main_thread": main_thread},
               "gcs": {"endpoint": str(gcs_endpoint) if gcs_endpoint else None, **vars(gcs_link.stats),
                       "error": gcs_link.error, "link": vars(gcs_link.link_stats)}, **result}
     run_dir.mkdir(parents=True, exist_ok=True)

@@ -10,6 +10,8 @@ import time
 
 import pytest
 
+from companion import procstats
+
 from .runner import SCENARIOS, Sim, am_run, companion, script
 
 pytestmark = pytest.mark.sitl
@@ -21,6 +23,12 @@ def test_same_scenario_gives_a_bit_identical_run(tmp_path):
     assert a.code == 0 and b.code == 0, a.stderr + b.stderr
     assert a.outcome["steps"] == b.outcome["steps"] == 400
     assert a.outcome["state_digest"] == b.outcome["state_digest"]
+    # the outcome files say how each process's main thread spent the run (companion.procstats)
+    if procstats.thread_schedstat() is not None:
+        for proc in [a.outcome["process"], *(c["process"] for c in a.companions.values())]:
+            t = proc["main_thread"]
+            assert t["wall_s"] > 0.0 and t["on_cpu_s"] > 0.0
+            assert t["on_cpu_s"] + t["queued_s"] + t["blocked_s"] == pytest.approx(t["wall_s"], abs=2e-3)
 
 
 def test_digest_sees_a_different_run(tmp_path):
