@@ -12,6 +12,15 @@ zero-order hold, the flight controllers' bookkeeping, the digest's inputs). A pa
 mode calls less than once in 100 steps is not printed: torque mode's setpoint_from_result,
 attitude mode's offboard step, autopilot, rotors and joint-effort sensor. For
 `benchmarks/ab.py`: a name wrapped that a tree compared does not have is skipped.
+
+With --in-situ, a third run times the two largest pure calls of a controller step where the
+run makes them and then again at once on the same arguments (the second result dropped, the
+digest checked unchanged): the compiled law (`law.control_law`) and pinocchio's terms
+(`control.pinocchio_terms`). A call made at once again finds its code and data in the
+caches the first call filled; in the run they were cold, evicted by the physics, the
+simulator's per-AM work and the other controller in between. The two figures bound what a
+hot micro-benchmark (`bench_controller.py`) says about a run: its calls are the repeated
+kind.
 """
 from __future__ import annotations
 
@@ -92,10 +101,40 @@ def _wrap_parts(excl: dict, calls: dict) -> None:
             wrap(label, owner, name)
 
 
+# (label, module, attribute): the pure calls --in-situ times twice, in the order of a control step
+REPEATED = (
+    ("pinocchio's terms (control.pinocchio_terms)", "amcore.control", "pinocchio_terms"),
+    ("the compiled law (law.control_law)", "amcore.law", "control_law"),
+)
+
+
+def _wrap_repeated(first: dict, again: dict, calls: dict) -> None:
+    """Each of REPEATED timed where the run calls it and again at once (wall clock, ns)."""
+    clock = time.perf_counter_ns
+    for label, module, name in REPEATED:
+        owner = importlib.import_module(module)
+        f = getattr(owner, name, None)
+        if f is None:
+            continue
+
+        def twice(*a, _f=f, _label=label):
+            t0 = clock()
+            out = _f(*a)
+            t1 = clock()
+            _f(*a)
+            first[_label] += t1 - t0
+            again[_label] += clock() - t1
+            calls[_label] += 1
+            return out
+        setattr(owner, name, twice)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenario", type=Path, default=ROOT / "configs" / "scenarios" / "two_am_comp.toml")
     ap.add_argument("--duration", type=float, default=None, help="simulated seconds (default: the trial's)")
+    ap.add_argument("--in-situ", action="store_true",
+                    help="a third run: the law and pinocchio's terms in the run against called again at once")
     a = ap.parse_args()
     import simulator.inprocess as ip
 
@@ -113,13 +152,26 @@ def main() -> None:
         c0 = time.thread_time_ns()
         r2 = ip.run(spec, a.duration)
         total = time.thread_time_ns() - c0
+        excl, calls = dict(excl), dict(calls)  # this run's (the parts' timers stay on in the next)
+        first, again, repeated = defaultdict(int), defaultdict(int), defaultdict(int)
+        if a.in_situ:
+            _wrap_repeated(first, again, repeated)
+            r3 = ip.run(spec, a.duration)
+            assert r3["state_digest"] == r["state_digest"]
     assert r2["state_digest"] == r["state_digest"]
     print(f"wrapped run: {1e-3 * total / n:.1f} us per step")
     print(f"{'part':44s} {'us/step':>8s} {'calls/step':>11s}")
     for label in dict.fromkeys(label for label, _, _ in PARTS):
-        if calls[label] >= n / 100:  # (a few calls at start-up are no part of the step: warm_up_kernels)
+        if calls.get(label, 0) >= n / 100:  # (a few calls at start-up are no part of the step: warm_up_kernels)
             print(f"{label:44s} {1e-3 * excl[label] / n:8.1f} {calls[label] / n:11.2f}")
     print(f"{'other':44s} {1e-3 * (total - sum(excl.values())) / n:8.1f}")
+    if repeated:
+        print(f"{'in situ, wall clock per call':44s} {'in the run':>10s} {'again at once':>14s} {'ratio':>6s}")
+        for label, _, _ in REPEATED:
+            k = repeated[label]
+            if k:
+                print(f"{label:44s} {1e-3 * first[label] / k:10.1f} {1e-3 * again[label] / k:14.1f} "
+                      f"{first[label] / again[label]:6.2f}")
 
 
 if __name__ == "__main__":
