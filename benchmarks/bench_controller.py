@@ -51,10 +51,11 @@ sys.path.insert(0, str(ROOT))  # tests/amcore/literal.py
 from tests.amcore.literal import controller_literal  # noqa: E402
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> dict[str, float]:
+    """Print the table; return its medians [us] (`benchmarks/bench_targets.py` reads them)."""
     ap = argparse.ArgumentParser()
     ap.add_argument("--iters", type=int, default=3000)
-    a = ap.parse_args()
+    a = ap.parse_args(argv)
     spec = load_scenario(ROOT / "configs" / "scenarios" / "two_am_comp.toml")
     model = build_model(spec.vehicle)
     mission = am_mission(spec, spec.ams[0], model)
@@ -195,6 +196,8 @@ def main() -> None:
                                             ("companion step", comp_us, 50, 25, " us")):
         verdict = "goal met" if value <= goal else ("target met" if value <= target else "NOT met")
         print(f"{what}: {value:.4g}{unit} (target <= {target}{unit}, goal <= {goal}{unit}): {verdict}")
+    return {"step": step_us, "configuration": med(samples["configuration"]), "pinocchio": med(samples["pinocchio"]),
+            "law": med(samples["law"]), "rest": rest, "companion": comp_us}
 
 
 if __name__ == "__main__":

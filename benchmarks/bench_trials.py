@@ -55,19 +55,28 @@ def main() -> None:
           f"{'sim s per wall s per worker':>28} {'CPU per flown trial [s]':>24} {'flown/min, a core each':>23}")
     digests = None
     for w in a.workers:
-        with tempfile.TemporaryDirectory() as tmp:
-            tasks = build_tasks(data, a.scenario.resolve(), rand, 1, a.trials, Path(tmp), None)
-            t0, c0 = time.perf_counter(), _children_cpu_s()
-            with executor(w) as ex:
-                rows = run_all(tasks, ex)
-            wall, cpu = time.perf_counter() - t0, _children_cpu_s() - c0
-        d = [r["state_digest"] for r in rows]
-        assert digests is None or d == digests, "the same trials gave other digests"
-        digests = d
-        flown = sum(r["verdict"] != "refused" for r in rows)  # a refused trial costs the pre-flight check alone
-        per = cpu / flown if flown else float("nan")
-        print(f"{w:>8} {wall:9.1f} {60.0 * len(rows) / wall:11.2f} {flown:6d} {60.0 * flown / wall:10.2f} "
-              f"{flown * spec.duration_s / wall / w:28.2f} {per:24.1f} {w * 60.0 / per:23.2f}")
+        r = throughput(data, a.scenario.resolve(), rand, a.trials, w)
+        assert digests is None or r["digests"] == digests, "the same trials gave other digests"
+        digests = r["digests"]
+        print(f"{w:>8} {r['wall_s']:9.1f} {r['trials_per_min']:11.2f} {r['flown']:6d} {r['flown_per_min']:10.2f} "
+              f"{r['flown'] * spec.duration_s / r['wall_s'] / w:28.2f} {r['cpu_per_flown_s']:24.1f} "
+              f"{w * 60.0 / r['cpu_per_flown_s']:23.2f}")
+
+
+def throughput(data: dict, scenario: Path, rand, trials: int, workers: int, seed: int = 1) -> dict:
+    """One campaign of `trials` draws of `rand` (campaign seed `seed`) on a local pool of
+    `workers` processes: wall time, trials and flown trials per minute, the workers' CPU per
+    flown trial (start-up included) and the trials' digests."""
+    with tempfile.TemporaryDirectory() as tmp:
+        tasks = build_tasks(data, scenario, rand, seed, trials, Path(tmp), None)
+        t0, c0 = time.perf_counter(), _children_cpu_s()
+        with executor(workers) as ex:
+            rows = run_all(tasks, ex)
+        wall, cpu = time.perf_counter() - t0, _children_cpu_s() - c0
+    flown = sum(r["verdict"] != "refused" for r in rows)  # a refused trial costs the pre-flight check alone
+    return {"wall_s": wall, "trials_per_min": 60.0 * len(rows) / wall, "flown": flown,
+            "flown_per_min": 60.0 * flown / wall, "cpu_per_flown_s": cpu / flown if flown else float("nan"),
+            "digests": [r["state_digest"] for r in rows]}
 
 
 def _children_cpu_s() -> float:
