@@ -292,6 +292,12 @@ def cpu_cap(sim_cpu_us: float, comp_cpu_us: float, n: int, step_us: float, cores
     return cores * step_us / (sim_cpu_us + n * comp_cpu_us / control_every)
 
 
+def run_cap(path: Path, proc: dict, n: int) -> float:
+    """`cpu_cap` of a SITL run of the scenario at `path` with n AMs, from `sitl_rtf`'s CPU figures."""
+    sp = load_scenario(path)
+    return cpu_cap(proc["sim_cpu_us"], proc["comp_cpu_us"], n, 1e6 / sp.rate_hz, control_every=sp.control_every)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("--duration", type=float, default=3.0)
@@ -335,8 +341,7 @@ def main() -> None:
             spun = f" {echo_rtf(path, a.duration, Path(tmp) / f'spin{n}', spin):12.2f}" if spin is not None else ""
             inproc = nan if a.sitl_only else inprocess_rtf(path, a.duration)
             udp = nan if a.sitl_only else udp_rtf(n)
-            sp = load_scenario(path)
-            cap = cpu_cap(proc["sim_cpu_us"], proc["comp_cpu_us"], n, 1e6 / sp.rate_hz, control_every=sp.control_every)
+            cap = run_cap(path, proc, n)
             print(f"{n:>3} {rtf:7.2f} {echo:7.2f}{spun} {inproc:8.2f} {udp:7.1f} {bare:14.1f} {bare / rtf:10.0f} {wall:19.1f}s | "
                   f"{proc['sim_cpu_us']:10.0f}us {proc['comp_cpu_us']:11.0f}us {cap:7.2f}x {proc['rss']:6.0f}MiB "
                   f"{proc['pss']:6.0f} "

@@ -46,7 +46,7 @@ import bench_core  # noqa: E402
 import bench_sitl  # noqa: E402
 import bench_trials  # noqa: E402
 
-from amcore.config import _read_toml, load_scenario  # noqa: E402
+from amcore.config import _read_toml  # noqa: E402
 from trials.cli import DEFAULT_RANDOMIZE  # noqa: E402
 from trials.randomize import load_randomize  # noqa: E402
 
@@ -70,11 +70,8 @@ def sitl(n: int, attitude: bool, duration: float, folder: Path) -> dict:
     folder.mkdir(parents=True)
     path = bench_sitl.scenario_with(n, folder, bench_sitl.base_scenario(attitude, robust=attitude), devices=attitude)
     rtf, _wall, proc = bench_sitl.sitl_rtf(path, duration, folder / "run")
-    sp = load_scenario(path)
-    cap = bench_sitl.cpu_cap(proc["sim_cpu_us"], proc["comp_cpu_us"], n, 1e6 / sp.rate_hz,
-                             control_every=sp.control_every)
     failed = proc["verdict"].get("status") == "failed"
-    return {"value": rtf, "cap": cap, "failed": proc["verdict"].get("text", "mission FAILED") if failed else None}
+    return {"value": rtf, "cap": bench_sitl.run_cap(path, proc, n), "failed": proc["verdict"].get("text", "mission FAILED") if failed else None}
 
 
 def one_round(a, folder: Path) -> dict[str, dict]:
@@ -100,12 +97,12 @@ def main(argv: list[str] | None = None) -> None:
     a = ap.parse_args(argv)
     if a.rounds < 1 or a.duration <= 0 or a.trials < 1 or a.iters < 100:
         ap.error("--rounds and --trials must be >= 1, --duration > 0 and --iters >= 100")
-    rounds, loads = [], []
+    rounds = []
     with tempfile.TemporaryDirectory() as tmp:
         for r in range(a.rounds):
-            loads.append(os.getloadavg()[0])
+            load = os.getloadavg()[0]
             rounds.append(one_round(a, Path(tmp) / f"round{r}"))
-            print(f"round {r + 1} of {a.rounds} measured (load average before it {loads[-1]:.2f})", flush=True)
+            print(f"round {r + 1} of {a.rounds} measured (load average before it {load:.2f})", flush=True)
     print(f"{os.cpu_count()} cores; SITL runs of {a.duration:g} simulated s; campaign of {a.trials} trials")
     heads = " ".join(f"{'round ' + str(r + 1):>9}" for r in range(a.rounds))
     print(f"{'figure':<74} {'target':>9} {heads} {'median':>9}  met")
