@@ -139,6 +139,15 @@ class GcsLink:
         local = getattr(self._transport, "local_address", None)
         return None if local is None else tuple(local[:2])
 
+    @property
+    def bound_endpoint(self) -> Endpoint | None:
+        """The endpoint as opened: a listening one's port 0 replaced by the port it was given, so
+        that a GCS can be told where to connect."""
+        if self.endpoint is None or not self.endpoint.listens or self.endpoint.port != 0:
+            return self.endpoint
+        local = self.local_address
+        return self.endpoint if local is None else self.endpoint.with_port(local[1])
+
     def publish(self, snapshot: FleetSnapshot) -> None:
         """The newest state of every vehicle (the thread sends from it); returns at once."""
         self._latest = snapshot

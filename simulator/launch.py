@@ -11,7 +11,11 @@ gives one to keep), telemetry*.key (the run's telemetry
 keys: the recorder keeps only what the run's simulator and companions sealed, telemetry.auth)
 and every process's log. Exit code:
 0 when every process ended cleanly and the mission succeeded (simulator.verdict), 4 when
-the mission failed, 2 bad configuration, 1 when a process failed.
+the mission failed, 2 bad configuration, 1 when a process failed, 130 when am-run was
+interrupted (SIGINT, as Ctrl-C sends it, or SIGTERM). An interrupt reaches the simulator
+whether the terminal sent it to every process or it went to am-run alone: the simulator
+ends the run as it does on its own interrupt (its outcome.json says so, the companions are
+told and the recorder finishes the log), and am-run waits for every process to end.
 """
 from __future__ import annotations
 
@@ -35,6 +39,49 @@ from telemetry.keyfiles import write_run_keys, write_secret
 
 from .progress import SimBar
 from .verdict import MISSION_FAILED
+
+INTERRUPTED = 130  # exit code, as every process of the stack exits when interrupted
+
+
+class _Interrupted(Exception):
+    """am-run got SIGINT or SIGTERM while the run was under way; the argument is the signal's name."""
+
+
+class _Signals:
+    """SIGINT and SIGTERM while the run is under way raise _Interrupted; once its shutdown has
+    begun they are only noted (`late`), so that the shutdown and the summary run to their end."""
+
+    def __init__(self) -> None:
+        self.armed, self.late = False, None
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, self._on_signal)
+
+    def _on_signal(self, signum, _frame) -> None:
+        name = signal.Signals(signum).name
+        if self.armed:
+            self.armed = False
+            raise _Interrupted(name)
+        self.late = self.late or name
+
+
+# how long an interrupted am-run lets the simulator end by itself before passing the signal on:
+# a terminal's Ctrl-C reaches every process of the group at once, and the simulator stops
+# within a lockstep step; a signal sent to am-run alone never reaches it
+INTERRUPT_PASS_ON_S = 2.0
+
+
+def _pass_on(procs: dict[str, subprocess.Popen], name: str) -> None:
+    """End the run after am-run was interrupted: the simulator gets the same signal unless it
+    ends by itself within INTERRUPT_PASS_ON_S (it then tells the companions and the recorder,
+    as at any end of a run); before the simulator runs, every process started gets it."""
+    signum = signal.Signals[name]
+    sim = procs.get("simulator")
+    targets = [sim] if sim is not None else list(procs.values())
+    for p in targets:
+        try:
+            p.wait(timeout=INTERRUPT_PASS_ON_S if p is sim else 0.0)
+        except subprocess.TimeoutExpired:
+            p.send_signal(signum)
 
 
 def _command(name: str) -> list[str]:
@@ -124,7 +171,12 @@ def main(argv: list[str] | None = None) -> int:
         run_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         return cliargs.fail("am-run", f"--run-dir {run_dir}: {exc.strerror or exc}")
-    _warm_kernels(spec, a.scenario)  # every argument checked: compile the law once, before any companion
+    try:
+        _warm_kernels(spec, a.scenario)  # every argument checked: compile the law once, before any companion
+    except KeyboardInterrupt:
+        print("am-run: interrupted while compiling the kernels; nothing was started", file=sys.stderr)
+        return INTERRUPTED
+    signals = _Signals()
     cfg = str(Path(a.scenario).resolve())
     key_args = _fresh_key(spec, run_dir)
     sim_cmd = _command("simulator") + key_args + _gcs_key(spec, run_dir, a.gcs_key_file) + [
@@ -138,11 +190,13 @@ def main(argv: list[str] | None = None) -> int:
     mcap = run_dir / "run.mcap"
     procs: dict[str, subprocess.Popen] = {}
     logs = []
+    interrupted = None
     # a bar on a terminal only, as the simulator's own default: redirected output gets the summary lines
     bar = SimBar(spec.duration_s if a.duration is None else a.duration, disabled=a.no_progress or not sys.stderr.isatty())
     print(f"am-run: scenario '{spec.name}' with {len(spec.ams)} AMs; run folder {run_dir}; GCS link {a.gcs}",
           file=sys.stderr)
     try:
+        signals.armed = True
         if not a.no_telemetry:
             # the logger listens on a free loopback port; every publisher connects to it
             endpoint = f"tcp/127.0.0.1:{_free_tcp_port()}"
@@ -167,6 +221,8 @@ def main(argv: list[str] | None = None) -> int:
             ev = json.loads(line)
             if ev.get("event") == "ready":
                 bind = ev["connect"]
+                if ev.get("gcs") and parse_endpoint(a.gcs).port == 0:  # the port a GCS connects to
+                    print(f"am-run: the GCS link listens on {ev['gcs']}", file=sys.stderr)
         for am in spec.ams:
             clog = open(run_dir / f"companion-{am.sysid}.log", "w")
             logs.append(clog)
@@ -178,12 +234,17 @@ def main(argv: list[str] | None = None) -> int:
                 + (["--telemetry-key-file", tele_keys[f"am{am.sysid}"]] if tele_keys else []),
                 stdout=clog, stderr=subprocess.STDOUT, env=env)
         failed = _follow(sim, procs, bar)
-    except KeyboardInterrupt:
-        failed = ["interrupted"]
+    except _Interrupted as stop:
+        interrupted = str(stop)
+        failed = []
+        bar.close()
+        print(f"am-run: interrupted by {interrupted}; ending the run", file=sys.stderr)
+        _pass_on(procs, interrupted)
     except RuntimeError as exc:
         print(f"am-run: error: {exc}", file=sys.stderr)
         failed = ["start-up"]
     finally:
+        signals.armed = False
         bar.close()
         _stop_all(procs)
         for f in logs:
@@ -193,11 +254,20 @@ def main(argv: list[str] | None = None) -> int:
         if p.returncode != 0 and name not in failed and not (name == "simulator" and mission_failed):
             failed.append(name)
     _print_summary(run_dir, spec, procs)
+    interrupted = interrupted or signals.late
+    if interrupted:  # the processes' non-zero exits are the interrupt's; the log stays to review
+        if not a.no_telemetry and mcap.is_file():
+            print(f"log: {mcap} (ground-station review {mcap})", file=sys.stderr)
+        print(f"am-run: interrupted by {interrupted} (logs in {run_dir})", file=sys.stderr)
+        return INTERRUPTED
     if not a.no_telemetry and mcap.is_file():
         r = subprocess.run(_command("ground-station") + ["review", str(mcap), "--plots", str(run_dir / "plots")],
                            capture_output=True, text=True, env=env)
         print(r.stdout + r.stderr, file=sys.stderr)
         print(f"log: {mcap}\nplots: {run_dir / 'plots'}", file=sys.stderr)
+    if signals.late:  # during the review
+        print(f"am-run: interrupted by {signals.late} (logs in {run_dir})", file=sys.stderr)
+        return INTERRUPTED
     if failed:
         print(f"am-run: FAILED: {', '.join(failed)} (logs in {run_dir})", file=sys.stderr)
         return 1
@@ -386,8 +456,8 @@ def _print_summary(run_dir: Path, spec, procs) -> None:
               f"{rad(end.get('e_R')):>9} {up:7.2f}N {share:6.2f}N {g['hover_mean_normal_force_n']:6.2f}N "
               f"{g['slip_max_m'] * 1e3:5.2f}mm {g['saturated_steps']:>6}", file=sys.stderr)
     print(f"(F/T up: mean vertical force the wrist sensor measures in the hover window "
-          f"{o['hover_window_s'][0]:.0f}-{o['hover_window_s'][1]:.0f} s; share: m_obj g / N; slip: pad "
-          f"relative to the object since t = {o['slip_from_s']:.0f} s)", file=sys.stderr)
+          f"{o['hover_window_s'][0]:g}-{o['hover_window_s'][1]:g} s; share: m_obj g / N; slip: pad "
+          f"relative to the object since t = {o['slip_from_s']:g} s)", file=sys.stderr)
 
 
 if __name__ == "__main__":

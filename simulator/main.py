@@ -60,6 +60,11 @@ class _BindError(Exception):
 
 
 def _on_signal(signum, _frame):
+    """The first SIGINT or SIGTERM ends the run; later ones are ignored, so that the run's end
+    (the outcome, the companions told, the log's last samples) is not cut short by a second
+    Ctrl-C or by am-run passing an interrupt on that the terminal delivered too."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
     raise _Stop(signal.Signals(signum).name)
 
 
@@ -211,6 +216,7 @@ def main(argv: list[str] | None = None) -> int:
             gcs.open()
         except OSError as exc:
             raise _BindError(f"cannot open --gcs {gcs_endpoint}: {exc}") from None
+        gcs_endpoint = gcs_link.bound_endpoint  # a listening GCS endpoint's port 0 resolved
         bound = [str(e) for e in server.bound_endpoints]
         first = server.bound_endpoints[0]
         # "bind" as before (udp:HOST:PORT); "connect" is what a companion passes as --sim to reach it

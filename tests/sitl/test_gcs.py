@@ -218,6 +218,32 @@ def test_malformed_endpoints_exit_2_listing_the_accepted_forms(tmp_path):
     assert not (tmp_path / "a").exists() and not (tmp_path / "c" / "simulator.log").exists()
 
 
+def test_a_listening_gcs_endpoint_on_port_0_says_which_port_it_got(tmp_path):
+    """docs/mavlink.md: PORT 0 on a listening form picks a free port. The port is of use only
+    if the simulator says which: in its ready event, its log line and outcome.json; a GCS
+    that sends there is answered."""
+    p = subprocess.Popen([script("simulator"), "--config", str(SCENARIOS / "two_am_comp.toml"), "--bind",
+                          "udpin:127.0.0.1:0", "--gcs", "udpin:127.0.0.1:0", "--run-dir", str(tmp_path),
+                          "--progress", "jsonl", "--insecure", "--no-telemetry", "--peer-timeout", "3"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        ready = json.loads(p.stdout.readline())
+        kind, host, port = ready["gcs"].rsplit(":", 2)
+        assert (kind, host) == ("udpin", "127.0.0.1") and int(port) > 0
+        gcs = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=255, source_component=190)
+        try:
+            gcs.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+            assert gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=10) is not None  # served on that port
+        finally:
+            gcs.close()
+        _, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 1 and f"GCS link udpin:127.0.0.1:{port}" in err  # no companion came
+    assert json.loads((tmp_path / "outcome.json").read_text())["gcs"]["endpoint"] == f"udpin:127.0.0.1:{port}"
+
+
 def test_the_old_companion_sim_udp_form_still_sends_and_says_so(tmp_path):
     sim = Sim("two_am_comp.toml", tmp_path, "--duration", "0.05", "--no-telemetry", "--gcs", "none")
     legacy = sim.bind.replace("udpout:", "udp:")

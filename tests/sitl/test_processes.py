@@ -322,6 +322,61 @@ def test_am_run_keeps_flying_when_a_companion_dies_and_reports_it(tmp_path):
     assert o["steps"] == 4000 and o["failsafe_at_end"] == [5]  # the run was not torn down
 
 
+def _am_run_under_way(run_dir, *extra):
+    """An `am-run` of two_am_comp (8 s) in a process group of its own, returned once both
+    companions have armed and the run has flown a second."""
+    import os
+    p = subprocess.Popen([script("am-run"), str(SCENARIOS / "two_am_comp.toml"), "--run-dir", str(run_dir),
+                          "--duration", "8", *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         start_new_session=True)
+    deadline = time.monotonic() + 180
+    while time.monotonic() < deadline:
+        logs = [run_dir / f"companion-{s}.log" for s in (4, 5)]
+        if all(f.is_file() and "armed" in f.read_text() for f in logs):
+            time.sleep(1.0)
+            return p, os.getpgid(p.pid)
+        if p.poll() is not None:
+            raise AssertionError(f"am-run ended before the run: {p.communicate()}")
+        time.sleep(0.1)
+    os.killpg(p.pid, signal.SIGKILL)
+    raise AssertionError("the companions never armed")
+
+
+@pytest.mark.parametrize("to", ["am-run", "the group", "the group twice"])
+def test_an_interrupted_am_run_ends_the_run_and_exits_130(tmp_path, to):
+    """Ctrl-C at a terminal signals every process of the group; a supervisor or `kill -INT`
+    signals am-run alone. Either way the run ends within seconds (it would otherwise fly on to
+    its end), every process is gone, the simulator's outcome says it was interrupted, the log is
+    finished, nothing prints a traceback, and am-run exits 130 (README, "Exit codes")."""
+    import os
+    run_dir = tmp_path / "r"
+    p, group = _am_run_under_way(run_dir)
+    t0 = time.monotonic()
+    try:
+        if to == "am-run":
+            p.send_signal(signal.SIGINT)
+        else:
+            os.killpg(group, signal.SIGINT)
+            if to == "the group twice":  # a second Ctrl-C while the run is ending
+                time.sleep(0.3)
+                os.killpg(group, signal.SIGINT)
+        _, err = p.communicate(timeout=60)
+        took = time.monotonic() - t0
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(group, signal.SIGKILL)
+    assert p.returncode == 130, err
+    assert "am-run: interrupted by SIGINT" in err and "Traceback" not in err, err
+    o = json.loads((run_dir / "outcome.json").read_text())
+    assert o["status"] == "interrupted by SIGINT"
+    assert o["sim_time_s"] < 7.0 and took < 20.0  # ended by the interrupt, not by the run's end
+    assert subprocess.run(["pgrep", "-f", str(run_dir)], capture_output=True).returncode == 1  # none left
+    for log in run_dir.glob("*.log"):
+        assert "Traceback" not in log.read_text(), log
+    assert "stopped (" in (run_dir / "recorder.log").read_text()
+    assert (run_dir / "run.mcap").read_bytes().endswith(b"\x89MCAP0\r\n")  # the log finished, not truncated
+
+
 def test_bad_endpoints_are_named_not_tracebacks(tmp_path):
     import socket
 
