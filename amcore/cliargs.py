@@ -13,6 +13,7 @@ import argparse
 import math
 import os
 import sys
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -114,6 +115,12 @@ def _creatable(path: Path, text: str) -> None:
         raise argparse.ArgumentTypeError(f"{text}: {parent} is not a folder")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise argparse.ArgumentTypeError(f"{text}: cannot create it, {parent} is not writable")
+    try:  # os.access says yes to root everywhere (/proc, say): a nameless file tells
+        with tempfile.TemporaryFile(dir=parent):
+            pass
+    except OSError as exc:
+        raise argparse.ArgumentTypeError(f"{text}: cannot create it: {parent} takes no new files "
+                                         f"({exc.strerror or exc})") from None
 
 
 def fail(prog: str, message: str) -> int:

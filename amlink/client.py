@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import re
 import time
 from collections import deque
 
 from amlink import codec, fastcodec
 from amlink.codec import mav
 from amlink.endpoint import UDP_IN, UDP_OUT, Endpoint, as_destination, parse_endpoint
-from amlink.errors import CommandRejectedError, SimulatorTimeoutError, SimulatorUnreachableError
+from amlink.errors import CommandRejectedError, LinkError, SimulatorTimeoutError, SimulatorUnreachableError
 from amlink.limits import DEFAULT_SENSOR_LIMITS, SensorLimits
 from amlink.transport import open_transport
 from amlink.types import AttitudeSetpoint, AttitudeTarget, ScenarioInfo, SensorFrame, TorqueSetpoint
@@ -37,6 +38,27 @@ _SENSOR_PART_IDS = frozenset(
 _ACCEPT = (_HEARTBEAT, _SCENARIO, _OBJECT_POSE, _ACK, _STATUSTEXT, _SIM_STEP, *_SENSOR_PART_IDS)
 _MAX_TEXTS = 256
 _MAX_ACKS = 64
+
+
+class EndpointOpenError(SimulatorUnreachableError):
+    """Companion side: the simulator's endpoint could not be opened (no such serial device,
+    an unknown host, an address in use) or, as a TCP client, connected to within the
+    timeout. Nothing reached the simulator: it is not its answer (or a signing key) that
+    is missing. ``why`` is the operating system's reason."""
+
+    def __init__(self, address: str, why: str, timeout_s: float | None = None):
+        self.address = address
+        self.why = why
+        self.timeout_s = timeout_s  # None: it failed at once
+        LinkError.__init__(self, f"cannot open {address}: {why}" if timeout_s is None
+                           else f"cannot connect to {address} within {timeout_s:.3g} s: {why}")
+
+
+def _os_reason(exc: OSError | str) -> str:
+    """The OS error without Python's '[Errno N]' and the repeated file name."""
+    if isinstance(exc, OSError) and exc.strerror:
+        return exc.strerror
+    return re.sub(r"^\[Errno -?\d+\] ", "", str(exc))
 
 
 class CompanionClient:
@@ -125,14 +147,16 @@ class CompanionClient:
 
         Listening (udpin, tcpin) it first waits for the simulator to speak (or connect);
         as a TCP client it retries connecting.  Raises SimulatorUnreachableError naming
-        the endpoint after ``timeout_s``, or at once if the endpoint cannot be opened.
+        the endpoint after ``timeout_s``; its subclass EndpointOpenError at once if the
+        endpoint cannot be opened, or after ``timeout_s`` if a TCP connection never got
+        through (nothing was sent, so no HEARTBEAT went unanswered).
         """
         if self._link is not None:
             raise RuntimeError("CompanionClient is already connected")
         try:
             self._link = open_transport(self.endpoint, self.stats, shim=self._shim, client=True)
         except OSError as exc:
-            raise SimulatorUnreachableError(self.sim, 0.0, f"cannot open: {exc}") from exc
+            raise EndpointOpenError(self.sim, _os_reason(exc)) from exc
         self._sim_addr = self._link.peer if self.endpoint.kind == UDP_OUT else None
         deadline = time.monotonic() + timeout_s
         next_beat = 0.0
@@ -141,6 +165,8 @@ class CompanionClient:
                 now = time.monotonic()
                 if now >= deadline:
                     detail = getattr(self._link, "last_error", "")
+                    if detail and self._dest() is None:  # a TCP client that never connected
+                        raise EndpointOpenError(self.sim, _os_reason(detail), timeout_s)
                     raise SimulatorUnreachableError(self.sim, timeout_s, detail)
                 if now >= next_beat and self._dest() is not None:
                     self._send([self._heartbeat])

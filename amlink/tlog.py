@@ -3,7 +3,8 @@
 A .tlog is a plain sequence of records, each the wall-clock time as a big-endian uint64 of
 microseconds since the Unix epoch followed by one whole MAVLink frame, as sent or received.
 :meth:`TlogWriter.write` takes a datagram (or a stream's whole frames) and writes one record
-per frame.  Writes are buffered; nothing is written until :meth:`open`.
+per frame.  Writes are buffered; nothing is written until :meth:`open`, which raises
+:class:`TlogError` (an OSError naming the file) if the file cannot be created.
 """
 
 from __future__ import annotations
@@ -18,6 +19,16 @@ from amlink.wire import split_frames
 _STAMP = struct.Struct(">Q")
 
 
+class TlogError(OSError):
+    """The .tlog cannot be created: its folder cannot be made, or is not writable."""
+
+    def __init__(self, path: Path, cause: OSError) -> None:
+        super().__init__(cause.errno, cause.strerror or str(cause), str(path))
+
+    def __str__(self) -> str:
+        return f"cannot write {self.filename}: {self.strerror}"
+
+
 class TlogWriter:
     """Appends MAVLink frames to ``path`` with MAVProxy's timestamps; thread-safe."""
 
@@ -28,8 +39,12 @@ class TlogWriter:
         self._lock = threading.Lock()
 
     def open(self) -> TlogWriter:
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = open(self.path, "wb", buffering=1 << 16)
+        """Create the file (and its folder); TlogError if it cannot be."""
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._file = open(self.path, "wb", buffering=1 << 16)
+        except OSError as exc:
+            raise TlogError(self.path, exc) from exc
         return self
 
     def write(self, data: bytes, t_s: float | None = None) -> None:

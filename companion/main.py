@@ -12,7 +12,10 @@ grasp, lift, hover, timed on simulation time) and never sees another AM's state.
 checks that the simulator runs the same scenario (AM_SCENARIO.scenario_id), arms, answers
 every sensor frame with a setpoint (torque mode: AM_TORQUE_SETPOINT; attitude mode:
 SET_ATTITUDE_TARGET and AM_JOINT_TORQUE_SETPOINT, docs/flight_controller.md), and exits 0
-when the simulator ends the run or on SIGINT/SIGTERM. Exit codes: 2 bad configuration, 3 scenario mismatch, 1 link failure.
+when the simulator ends the run or on SIGINT/SIGTERM. Exit codes: 2 bad configuration or
+arguments (an --outcome or --tlog that cannot be written is found before flying), 3 scenario
+mismatch, 1 link failure (an --sim endpoint that cannot be opened, a simulator that does not
+answer, a lost link) or an outcome that could not be written at the end.
 """
 from __future__ import annotations
 
@@ -26,11 +29,12 @@ from amcore import cliargs
 from amcore.config import DEFAULT_SCENARIO, ConfigError, load_scenario, scenario_id
 from amcore.mission import ObjectPose
 from amlink import signing
+from amlink.client import EndpointOpenError
 from amlink.codec import mav
 from amlink.endpoint import COMPANION_SIM, COMPANION_SIM_FORMS, EndpointError, as_destination, parse_endpoint
 from amlink.errors import LinkError, SimulatorUnreachableError
 from amlink.lockstep import CompanionClient
-from amlink.tlog import TlogWriter
+from amlink.tlog import TlogError, TlogWriter
 
 from telemetry.publisher import TelemetryPublisher
 from telemetry.session import TelemetryConfigError, add_zenoh_arguments, options_from_args
@@ -51,6 +55,10 @@ class _Stop(Exception):
 
 
 def _on_signal(signum, _frame):
+    """The first SIGINT or SIGTERM stops the companion; later ones are ignored, so that its
+    end (the link closed, the outcome written) is not cut short by a second Ctrl-C."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
     raise _Stop(signal.Signals(signum).name)
 
 
@@ -110,11 +118,25 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         print(f"{tag}: error: --sim: {exc}", file=sys.stderr)
         return 2
+    # the output files, before flying: a folder that cannot take them would lose the run's record
+    try:
+        _check_writable(a.outcome)
+    except OSError as exc:
+        print(f"{tag}: error: --outcome {a.outcome}: cannot write there: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+    if tlog is not None:
+        try:
+            tlog.open()
+        except TlogError as exc:
+            print(f"{tag}: error: --tlog {a.tlog}: cannot write there: {exc.strerror}", file=sys.stderr)
+            return 2
     # every argument checked: compile the law (the first run on this machine) or load it
     try:
         jit = jitcache.warm(pilot.warm_up)
     except _Stop as stop:
         print(f"{tag}: stopped ({stop}) while preparing the control law", file=sys.stderr)
+        if tlog is not None:
+            tlog.close()
         return 1
     if jit.compiled:
         print(f"{tag}: compiled the control law in {jit.seconds:.1f} s (once per machine: cached in "
@@ -122,8 +144,6 @@ def main(argv: list[str] | None = None) -> int:
     why = "simulator ended the run"
     cpu = procstats.CpuMeter()
     tele.open()  # never blocks: publishes are queued, dropped and counted while nobody listens
-    if tlog is not None:
-        tlog.open()
     try:
         if not tele.await_recorder(tele.keys.controller(a.sysid), a.telemetry_wait):
             print(f"{tag}: warning: telemetry: no subscriber (recorder) after {a.telemetry_wait:g} s; "
@@ -168,12 +188,16 @@ def main(argv: list[str] | None = None) -> int:
     except _Stop as stop:
         why = f"stopped by {stop}"
         wall = None
+    except EndpointOpenError as exc:  # nothing was sent: no hint about the simulator or its keys
+        print(f"{tag}: error: --sim: {exc}", file=sys.stderr)
+        _save(tag, a.outcome, pilot.summary(error=str(exc)))
+        return 1
     except LinkError as exc:
         hint = ""
         if isinstance(exc, SimulatorUnreachableError) and keys is not None:
             hint = " (is it running, and does it use the same signing key? unsigned or wrongly signed packets are dropped)"
         print(f"{tag}: error: {exc}{hint}", file=sys.stderr)
-        _write(a.outcome, pilot.summary(error=str(exc)))
+        _save(tag, a.outcome, pilot.summary(error=str(exc)))
         return 1
     finally:
         client.close()
@@ -183,27 +207,48 @@ def main(argv: list[str] | None = None) -> int:
     failure = [text for sev, text in client.status_texts if sev <= 3]  # MAV_SEVERITY_ERROR or worse
     if failure:
         print(f"{tag}: error: the simulator ended the run: {failure[-1]}", file=sys.stderr)
-        _write(a.outcome, pilot.summary(error=failure[-1]))
+        _save(tag, a.outcome, pilot.summary(error=failure[-1]))
         return 1
     summary = pilot.summary()
     cpu_s = cpu.seconds()
     summary["process"] = {"memory_mib": procstats.memory_mib(), "cpu_s": cpu_s,
                           "cpu_us_per_step": 1e6 * cpu_s / pilot.steps if cpu_s is not None and pilot.steps else None,
                           "main_thread": cpu.main_thread()}
-    _write(a.outcome, summary)
+    saved = _save(tag, a.outcome, summary)
     steps = pilot.steps
     rate = f", {steps / wall:.0f} steps/s" if wall else ""
     print(f"{tag}: {why} after {steps} steps{rate}", file=sys.stderr)
-    return 0
+    return 0 if saved else 1
 
 
-def _write(path: Path | None, summary: dict) -> None:
+def _check_writable(path: Path | None) -> None:
+    """The outcome file's folder exists (it is created) and takes the file; OSError if not."""
     if path is None:
         return
+    path.parent.mkdir(parents=True, exist_ok=True)
+    probe = path.with_suffix(".tmp")  # the file _write writes first
+    probe.touch()
+    probe.unlink()
+
+
+def _write(path: Path, summary: dict) -> None:
+    """The outcome as JSON, replaced at once (a reader never sees half of it); OSError if it cannot be."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(summary, indent=1))
     tmp.replace(path)
+
+
+def _save(tag: str, path: Path | None, summary: dict) -> bool:
+    """Write the outcome if asked for; False, saying why, if it could not be written."""
+    if path is None:
+        return True
+    try:
+        _write(path, summary)
+    except OSError as exc:  # the folder went away or filled up during the run
+        print(f"{tag}: error: --outcome {path}: cannot write it: {exc.strerror or exc}", file=sys.stderr)
+        return False
+    return True
 
 
 if __name__ == "__main__":

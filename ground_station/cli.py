@@ -9,7 +9,8 @@ the simulator's run_end event, and always finishes the file. review reads finish
 truncated logs (a killed recorder) alike. keys writes a run's telemetry keys for processes
 started by hand: the recorder's master key and the simulator's and each companion's own
 (telemetry.keyfiles). Exit status: 0 ok, 1 runtime failure,
-2 bad input (missing file, not an MCAP, empty log, bad options).
+2 bad input (missing file, not an MCAP, empty log, bad options, an output folder that
+cannot be created or written).
 """
 from __future__ import annotations
 
@@ -41,7 +42,8 @@ def _record(a: argparse.Namespace) -> int:
         _err(f"--out {a.out}: {a.out.parent}: no such directory")
         return 2
     rec = Recorder(a.out, opts, scene_rate_hz=a.scene_rate, flush_period_s=a.flush_period,
-                   compression=a.compression, linger_s=a.linger)
+                   compression=a.compression, linger_s=a.linger,
+                   notify=lambda text: print(text, file=sys.stderr, flush=True))
     stop = threading.Event()
 
     def on_signal(signum, _frame):
@@ -54,9 +56,13 @@ def _record(a: argparse.Namespace) -> int:
     except (RecorderError, TelemetryConfigError) as exc:
         _err(str(exc))
         return 2 if isinstance(exc, TelemetryConfigError) else 1
-    where = ", ".join(opts.listen_endpoints) or "(config file)"
+    where = ", ".join(opts.listen_endpoints) or ("(config file)" if opts.config_file is not None else "none")
     print(f"recording {opts.keys.everything} to {a.out} (zenoh {opts.mode}, listen {where}, "
           f"connect {', '.join(opts.connect_endpoints) or 'none'})", file=sys.stderr, flush=True)
+    if rec.waiting_for_router is not None:
+        print(f"zenoh: no router answers yet ({rec.waiting_for_router}); retrying every "
+              f"{opts.retry_init_ms / 1e3:g}-{opts.retry_max_ms / 1e3:g} s, recording once one does",
+              file=sys.stderr, flush=True)
     try:
         rec.run(duration_s=a.duration, stop=stop)
     finally:
@@ -64,6 +70,9 @@ def _record(a: argparse.Namespace) -> int:
     print(f"stopped ({s.stop_reason}): {s.received} samples from {s.keys} keys, {s.written} messages, "
           f"{s.sim_time_s:.3f} s simulated, {s.bytes / 1e6:.2f} MB; lost: {s.missing} (seq gaps), "
           f"{s.inbox_overflow} (inbox overflow), {s.malformed} malformed, {s.rejected} rejected (unauthenticated)", file=sys.stderr)
+    if not s.connected:
+        print(f"ground-station: warning: zenoh: never reached {', '.join(opts.connect_endpoints) or 'the router'} "
+              f"({rec.waiting_for_router}): nothing was recorded; is the router running there?", file=sys.stderr)
     if a.summary_json:
         print(json.dumps(s.as_dict()))
     return 0
@@ -82,8 +91,12 @@ def _keys(a: argparse.Namespace) -> int:
         _err(f"{a.folder} already holds {MASTER_FILE}: a new set would lock out the processes using it; "
              f"choose another folder or remove the old keys")
         return 2
-    a.folder.mkdir(parents=True, exist_ok=True)
-    files = write_run_keys(a.folder, sysids)
+    try:
+        a.folder.mkdir(parents=True, exist_ok=True)
+        files = write_run_keys(a.folder, sysids)
+    except OSError as exc:
+        _err(f"keys {a.folder}: cannot write there: {exc.strerror or exc}")
+        return 2
     for name, path in files.items():
         print(f"{name}: --telemetry-key-file {path}")
     return 0
@@ -109,8 +122,16 @@ def _review(a: argparse.Namespace) -> int:
     if a.plots is not None:
         from .plots import write_plots
 
-        a.plots.mkdir(parents=True, exist_ok=True)
-        summary["plots"] = [str(p) for p in write_plots(run, a.plots)]
+        try:
+            a.plots.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            _err(f"--plots {a.plots}: cannot create it: {exc.strerror or exc}")
+            return 2
+        try:
+            summary["plots"] = [str(p) for p in write_plots(run, a.plots)]
+        except OSError as exc:  # the folder is there: a full disk, say
+            _err(f"--plots {a.plots}: cannot write {exc.filename or 'a plot'}: {exc.strerror or exc}")
+            return 1
     if a.json:
         print(json.dumps(summary, indent=1))
     else:

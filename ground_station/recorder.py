@@ -11,6 +11,11 @@ and writes. Every flush_period_s of wall time it writes /recorder/stats and flus
 MCAP writer (closing the chunk), so a SIGKILL loses at most that much. `run` returns when
 `stop` is set (signal handler), after duration_s of wall time, or linger_s after the
 simulator's run_end event (late samples of other processes still get in).
+
+In client mode a router that is not there yet is waited for, as the publishers do: `open`
+creates the file and returns, a thread retries the session (every retry_init_ms, backing
+off to retry_max_ms) and subscribes once the router answers; `waiting_for_router` says
+why meanwhile. Once connected, zenoh reconnects by itself to a router that restarts.
 """
 from __future__ import annotations
 
@@ -23,10 +28,15 @@ from pathlib import Path
 
 from telemetry import wire
 from telemetry.auth import publisher_of, unseal
-from telemetry.session import ZenohOptions, build_config
+from telemetry.session import ZenohOptions, build_config, check_tls_files
 
 from .contract import Translator
 from .mcap_io import McapLogWriter
+
+
+def _zenoh_text(exc: Exception) -> str:
+    """zenoh's error message without the Rust source location it ends with."""
+    return str(exc).split(" at /", 1)[0].strip()
 
 
 class RecorderError(RuntimeError):
@@ -49,6 +59,7 @@ class RecorderSummary:
     keys: int
     sim_time_s: float
     bytes: int
+    connected: bool  # the zenoh session opened (False: a client whose router never answered)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -57,7 +68,9 @@ class RecorderSummary:
 class Recorder:
     def __init__(self, out_path: str | Path, options: ZenohOptions, *, scene_rate_hz: float = 20.0,
                  flush_period_s: float = 1.0, compression: str = "zstd", chunk_size: int = 4 * 1024 * 1024,
-                 inbox_limit: int = 2_000_000, linger_s: float = 0.5):
+                 inbox_limit: int = 2_000_000, linger_s: float = 0.5, notify=None):
+        """notify(text): told, from the retry thread, when a client reaches its router after
+        waiting for it (the CLI prints it)."""
         self.out_path = Path(out_path)
         self.options = options
         self.keys = options.keys
@@ -73,25 +86,76 @@ class Recorder:
         self._master = options.auth_key  # telemetry.auth: keep only what the run's publishers sealed
         self._session = None
         self._subscriber = None
+        self._session_lock = threading.Lock()  # the retry thread sets the session, close() takes it
+        self._closing = threading.Event()
+        self._retry_thread: threading.Thread | None = None
+        self._notify = notify
+        self.connected = False  # the session opened (at open, or later by the retry thread)
+        self.waiting_for_router: str | None = None  # client mode: the last connection error while waiting
         self._t0 = 0.0
         self._stop_reason = ""
         self._run_start_written = False
 
     # ------------------------------------------------------------------ lifecycle
     def open(self) -> None:
-        import zenoh
-
+        """Create the file, open the zenoh session and subscribe. A client whose router does
+        not answer yet keeps retrying in the background (`waiting_for_router`); any other
+        failure raises RecorderError (TelemetryConfigError: a TLS file the config names is missing)."""
+        check_tls_files(self.options)
         try:
             self.writer.open()
         except OSError as exc:
             raise RecorderError(f"cannot create {self.out_path}: {exc.strerror or exc}") from exc
         try:
-            self._session = zenoh.open(build_config(self.options))
-            self._subscriber = self._session.declare_subscriber(self.keys.everything, self._on_sample)
+            self._connect()
         except Exception as exc:
-            self.writer.close()
-            raise RecorderError(f"zenoh: {exc}") from exc
+            if not self._router_missing(exc):
+                self.writer.close()
+                raise RecorderError(f"zenoh: {_zenoh_text(exc)}") from exc
+            self.waiting_for_router = _zenoh_text(exc)
+            self._retry_thread = threading.Thread(target=self._retry, name="recorder-connect", daemon=True)
+            self._retry_thread.start()
         self._t0 = time.monotonic()
+
+    def _connect(self) -> None:
+        """Open the session and subscribe (raises what zenoh raises). A session that opens
+        after close() began is closed again at once."""
+        import zenoh
+
+        session = zenoh.open(build_config(self.options))
+        try:
+            subscriber = session.declare_subscriber(self.keys.everything, self._on_sample)
+        except Exception:
+            session.close()
+            raise
+        with self._session_lock:
+            if not self._closing.is_set():
+                self._session, self._subscriber = session, subscriber
+                self.connected = True
+                return
+        subscriber.undeclare()
+        session.close()
+
+    def _router_missing(self, exc: Exception) -> bool:
+        """A client's session that failed only because its router does not answer (zenoh opens
+        a client only once connected; a peer or router opens at once and connects later)."""
+        return self.options.mode == "client" and "Unable to connect" in str(exc)
+
+    def _retry(self) -> None:
+        """Thread: retry the client's session, backing off as zenoh's own connect retry."""
+        period_s = self.options.retry_init_ms / 1e3
+        while not self._closing.wait(period_s):
+            try:
+                self._connect()
+            except Exception as exc:
+                self.waiting_for_router = _zenoh_text(exc)
+                period_s = min(2.0 * period_s, self.options.retry_max_ms / 1e3)
+                continue
+            if self.connected:
+                self.waiting_for_router = None
+                if self._notify is not None:
+                    self._notify(f"zenoh: connected to {', '.join(self.options.connect_endpoints) or 'the router'}")
+            return
 
     def _on_sample(self, sample) -> None:
         # zenoh's thread: keep it minimal
@@ -184,19 +248,26 @@ class Recorder:
 
     def close(self) -> RecorderSummary:
         """Stop listening, write what arrived, the final stats and summary; finish the file."""
-        if self._subscriber is not None:
-            try:
-                self._subscriber.undeclare()
-            except Exception:
-                pass
+        self._closing.set()
+        if self._retry_thread is not None:
+            # an attempt under way ends within zenoh's open timeout; its session is then closed at once
+            self._retry_thread.join(1.0)
+        with self._session_lock:
+            session, subscriber = self._session, self._subscriber
             self._subscriber = None
-        self._drain()
-        if self._session is not None:
+        if subscriber is not None:
             try:
-                self._session.close()
+                subscriber.undeclare()
             except Exception:
                 pass
-            self._session = None
+        self._drain()
+        if session is not None:
+            try:
+                session.close()
+            except Exception:
+                pass
+            with self._session_lock:
+                self._session = None
         self._drain()
         self.writer.write(self.translator.stats_out(time.monotonic() - self._t0, self._overflow, self._rejected))
         self.writer.flush()  # every message is in the file: `written` and `bytes` below count them all
@@ -214,4 +285,5 @@ class Recorder:
             received=self._received, written=self.writer.messages, missing=sum(s.missing for s in st),
             reordered=sum(s.reordered for s in st), inbox_overflow=self._overflow, rejected=self._rejected,
             malformed=self.translator.malformed, unknown=self.translator.unknown, keys=len(self.translator.stats),
-            sim_time_s=self.translator.latest_t, bytes=size)
+            sim_time_s=self.translator.latest_t, bytes=size,
+            connected=self.connected)

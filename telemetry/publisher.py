@@ -44,7 +44,7 @@ from typing import Iterable, Mapping
 from .auth import seal
 from .binary import HEADER
 from .schema import encode, publisher_stats_sample
-from .session import ZenohOptions, build_config
+from .session import ZenohOptions, build_config, check_tls_files
 from . import wire
 
 log = logging.getLogger(__name__)
@@ -143,6 +143,8 @@ class TelemetryPublisher:
         if queue_size < 1:
             raise ValueError("queue_size must be positive")
         self.options = options or ZenohOptions()
+        if self.options.enabled:
+            check_tls_files(self.options)  # a missing certificate named now, not retried for ever
         self.keys = self.options.keys
         self._key = self.options.auth_key  # telemetry.auth: seal every message
         self.name = name or re.sub(r"[^A-Za-z0-9_\-]", "-", f"{socket.gethostname()}-{os.getpid()}")

@@ -143,6 +143,25 @@ def config_items(opts: ZenohOptions) -> dict[str, Any]:
     return items
 
 
+# the files a zenoh config's transport.link.tls names (zenoh's own error when one is missing
+# names neither the key nor the path: "Invalid TLS private key file: No such file or directory")
+TLS_FILE_KEYS = ("root_ca_certificate", "listen_certificate", "listen_private_key", "connect_certificate",
+                 "connect_private_key")
+
+
+def check_tls_files(opts: ZenohOptions) -> None:
+    """Before a session opens: TelemetryConfigError naming the key and the path if the config
+    file's transport.link.tls names a certificate or key file that is not there."""
+    if opts.config_file is None:
+        return
+    tls = json.loads(build_config(opts).get_json("transport/link/tls") or "{}") or {}
+    for key in TLS_FILE_KEYS:
+        path = tls.get(key)
+        if isinstance(path, str) and not Path(path).is_file():
+            raise TelemetryConfigError(f"zenoh config {opts.config_file}: transport.link.tls.{key}: {path}: "
+                                       f"no such file (docs/telemetry.md, \"TLS, authentication and access control\")")
+
+
 def build_config(opts: ZenohOptions):
     """A zenoh.Config for these options."""
     import zenoh

@@ -2,6 +2,7 @@
 flag, at once (no traceback, no hang, nothing started)."""
 from __future__ import annotations
 
+import argparse
 import importlib
 import signal
 import time
@@ -20,7 +21,7 @@ def paths(tmp_path):
     f = tmp_path / "a_file"
     f.write_text("x")
     return {"FILE": str(f), "DIR": str(tmp_path), "UNDER_FILE": str(f / "sub" / "out.json"),
-            "RUN": str(tmp_path / "run")}
+            "RUN": str(tmp_path / "run"), "NO_NEW_FILES": "/proc/amstack-test/out"}  # /proc: even root cannot
 
 
 SIM = ("simulator.main", ["--config", SHORT, "--run-dir", "RUN"])
@@ -53,6 +54,13 @@ CASES = [
     (COMP, ["--telemetry-every", "0"], "--telemetry-every"),
     (COMP, ["--outcome", "DIR"], "--outcome"),
     (COMP, ["--tlog", "UNDER_FILE"], "--tlog"),
+    (COMP, ["--outcome", "NO_NEW_FILES"], "--outcome"),
+    (COMP, ["--tlog", "NO_NEW_FILES"], "--tlog"),
+    (SIM, ["--run-dir", "NO_NEW_FILES"], "--run-dir"),
+    (AMRUN, ["--run-dir", "NO_NEW_FILES"], "--run-dir"),
+    (REC, ["--out", "NO_NEW_FILES"], "--out"),
+    (("ground_station.cli", ["keys"]), ["NO_NEW_FILES"], "/proc/amstack-test/out: cannot create it"),
+    (("ground_station.cli", ["review", "FILE"]), ["--plots", "NO_NEW_FILES"], "--plots"),
     (AMRUN, ["--duration", "-1"], "--duration"),
     (AMRUN, ["--duration", "nan"], "--duration"),
     (AMRUN, ["--startup-timeout", "nan"], "--startup-timeout"),
@@ -173,3 +181,12 @@ def test_the_help_formatter_leaves_flags_and_unset_options_alone(capsys):
     text = " ".join(capsys.readouterr().out.split())
     assert "a flag (default" not in text and "not given: none (default" not in text
     assert text.count("default 3") == 1 and "a count (default: 7)" in text and "a place (default: here)" in text
+
+
+@pytest.mark.parametrize("kind", [cliargs.output_dir, cliargs.output_file])
+def test_an_output_path_where_no_file_can_be_made_is_refused_when_parsed(kind, tmp_path):
+    """os.access grants root every folder, /proc among them; the parse tries a nameless file."""
+    with pytest.raises(argparse.ArgumentTypeError, match="cannot create it"):
+        kind("/proc/amstack-test/out")
+    assert kind(str(tmp_path / "new" / "out")) == tmp_path / "new" / "out"
+    assert list(tmp_path.iterdir()) == []  # the probe leaves nothing behind

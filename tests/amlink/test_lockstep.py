@@ -191,6 +191,35 @@ def test_simulator_unreachable_names_address():
         client.close()
 
 
+def test_an_endpoint_that_cannot_be_opened_says_so_at_once_not_that_heartbeat_went_unanswered(tmp_path):
+    """No such serial device: the reason is the OS's, given at once, and nothing about a
+    HEARTBEAT (none was sent) or a timeout."""
+    from amlink.client import EndpointOpenError
+
+    device = f"{tmp_path / 'no_such_tty'}:115200"
+    client = CompanionClient(2, sim=device)
+    t0 = time.monotonic()
+    with pytest.raises(EndpointOpenError) as err:
+        client.connect(5.0)
+    assert time.monotonic() - t0 < 1.0
+    assert str(err.value) == f"cannot open {device}: No such file or directory"
+    assert err.value.address == device and err.value.timeout_s is None
+    assert isinstance(err.value, SimulatorUnreachableError)  # what callers of connect() catch
+
+
+def test_a_tcp_simulator_never_connected_to_is_a_connection_failure_not_an_unanswered_heartbeat():
+    with socket.socket() as s:  # a free port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        address = f"tcp:127.0.0.1:{s.getsockname()[1]}"
+    from amlink.client import EndpointOpenError
+
+    client = CompanionClient(2, sim=address)
+    with pytest.raises(EndpointOpenError) as err:
+        client.connect(0.5)
+    assert str(err.value) == f"cannot connect to {address} within 0.5 s: Connection refused"
+    assert err.value.timeout_s == 0.5
+
+
 def _drain(sock):
     sock.setblocking(False)
     out = []

@@ -116,3 +116,36 @@ def test_keys_writes_a_runs_telemetry_keys_for_processes_by_hand(tmp_path, capsy
     assert main(["keys", str(folder), "--config", str(short)]) == 2
     assert "already holds telemetry.key" in capsys.readouterr().err
     assert bytes.fromhex(files["telemetry.key"].read_text().strip()) == master  # untouched
+
+
+UNCREATABLE = "/proc/nope"  # its parent exists and, for root, passes os.access; mkdir still fails
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs Linux /proc")
+def test_keys_and_plots_into_a_folder_that_cannot_be_created_exit_2_naming_it(good_log, capsys, monkeypatch):
+    """The same mistake as `record --out` in a missing folder: one line naming the flag, exit 2, no traceback.
+    Past the parse's own check (tests/amcore/test_cliargs.py), as a folder that goes away after it is."""
+    from amcore import cliargs
+
+    monkeypatch.setattr(cliargs, "_creatable", lambda path, text: None)
+    short = Path(__file__).resolve().parents[2] / "configs" / "scenarios" / "two_am_short.toml"
+    assert main(["keys", UNCREATABLE, "--config", str(short)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("ground-station: error: ") and UNCREATABLE in err and err.count("\n") == 1, err
+    assert main(["review", str(good_log), "--plots", f"{UNCREATABLE}/plots"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("ground-station: error: ") and f"{UNCREATABLE}/plots" in err and err.count("\n") == 1, err
+
+
+def test_review_plots_that_cannot_be_written_exit_1_naming_the_file(good_log, tmp_path, capsys, monkeypatch):
+    import errno
+
+    from ground_station import plots
+
+    def full_disk(run, out_dir):
+        raise OSError(errno.ENOSPC, "No space left on device", str(out_dir / "am4.png"))
+
+    monkeypatch.setattr(plots, "write_plots", full_disk)
+    assert main(["review", str(good_log), "--plots", str(tmp_path / "plots")]) == 1
+    err = capsys.readouterr().err
+    assert f"--plots {tmp_path / 'plots'}: cannot write {tmp_path / 'plots' / 'am4.png'}: No space left" in err

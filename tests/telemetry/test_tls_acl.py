@@ -25,6 +25,24 @@ def test_shipped_configs_load(path):
     build_config(ZenohOptions(config_file=path))  # zenoh rejects unknown or mistyped keys
 
 
+@pytest.mark.parametrize("name,key", [("recorder-tls.json5", "root_ca_certificate"),
+                                      ("publisher-tls.json5", "root_ca_certificate")])
+def test_a_tls_file_that_is_not_there_is_named_before_any_session_opens(name, key, tmp_path):
+    """zenoh's own error names neither the key nor the file; the shipped configs' example paths
+    (/etc/amstack/tls/...) are not on this machine."""
+    from ground_station.recorder import Recorder
+    from telemetry.session import TelemetryConfigError
+
+    path = ROOT / "configs" / "zenoh" / name
+    assert not Path("/etc/amstack/tls/ca.pem").exists()
+    words = f"transport.link.tls.{key}: /etc/amstack/tls/ca.pem: no such file"
+    with pytest.raises(TelemetryConfigError, match=words):
+        TelemetryPublisher(ZenohOptions(config_file=path))
+    with pytest.raises(TelemetryConfigError, match=words):
+        Recorder(tmp_path / "r.mcap", ZenohOptions(role="recorder", config_file=path)).open()
+    assert not (tmp_path / "r.mcap").exists()  # refused before the log was created
+
+
 def _certificates(d: Path) -> None:
     """A throw-away CA and certificates for localhost with the given common names."""
     def run(*args):
