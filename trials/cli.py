@@ -19,12 +19,17 @@ an option on the same trials; `--set devices.estimator.gyro_cutoff_hz=0` sets a 
 sweeps and, in attitude mode, half the physics rate in two substeps): faster, its verdicts
 measured against the scenario's own world in docs/trials.md; confirm the ones that matter
 without it.
+Every --controller is checked against the scenario, and the --scheduler address parsed and
+connected to, before anything is drawn or written to DIR.
 Exit codes: 0 the campaign ran (whatever its success rate), 2 bad arguments or
-configuration, 1 a trial raised (a bug: failed missions are verdicts, not errors).
+configuration (a malformed --scheduler address, a --controller the scenario cannot fly), 1 a
+trial raised (a bug: failed missions are verdicts, not errors) or the --scheduler did not
+answer (a missing peer; nothing is written then).
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import copy
 import os
 import shutil
@@ -34,11 +39,12 @@ import time
 from pathlib import Path
 
 from amcore import cliargs
-from amcore.config import ConfigError, _read_toml, load_scenario, scenario_from_dict
+from amcore.config import CONTROLLERS, ConfigError, _read_toml, load_scenario, scenario_from_dict
 
 from . import report
 from .randomize import RandomizeSpec, draw_trial, load_randomize, randomize_from_table, relocate
-from .runner import TrialTask, executor, run_all
+from .runner import (SCHEDULER_ADDRESS_FORM, SchedulerUnreachable, TrialTask, executor, parse_scheduler_address,
+                     run_all)
 from .toml_write import dumps
 
 DEFAULT_RANDOMIZE = Path(__file__).resolve().parents[1] / "configs" / "randomize" / "default.toml"
@@ -94,17 +100,25 @@ def _seed(text: str) -> int:
     return v
 
 
+def _scheduler(text: str) -> str:
+    try:
+        return parse_scheduler_address(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: {exc}; expected {SCHEDULER_ADDRESS_FORM}") from None
+
+
 def parse_args(argv):
     ap = cliargs.ArgumentParser(prog="am-trials", description=" ".join(__doc__.split("\n\n")[0].split()),
                                  epilog="Exit codes: 0 the campaign ran, 2 bad arguments or configuration, "
-                                        "1 a trial raised.")
+                                        "1 a trial raised or the --scheduler did not answer.")
     ap.add_argument("scenario", type=Path, help="base scenario TOML")
     ap.add_argument("--trials", type=_positive_int, required=True, help="number of trials")
     ap.add_argument("--seed", type=_seed, required=True, help="campaign seed (0..2**32-1)")
     ap.add_argument("--out", type=Path, required=True, help="output folder (created; must not hold trials.csv)")
     ap.add_argument("--workers", type=_positive_int, default=None,
                     help="local worker processes (default: the machine's cores)")
-    ap.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://HOST:8786): run there")
+    ap.add_argument("--scheduler", type=_scheduler, default=None,
+                    help="Dask scheduler address (tcp://HOST:8786): run there")
     ap.add_argument("--randomize", type=Path, default=None, help="TOML file with a [randomize] table")
     ap.add_argument("--controller", action="append", default=None,
                     help="control law for every trial ([options].controller); repeat to compare laws")
@@ -158,6 +172,31 @@ def _randomization(a, base: dict, scenario: Path) -> tuple[RandomizeSpec, str]:
     return load_randomize(DEFAULT_RANDOMIZE), str(DEFAULT_RANDOMIZE)
 
 
+def with_controller(data: dict, controller: str | None) -> dict:
+    """Scenario data with [options].controller set to `controller` (None: the scenario's own);
+    `data` is left as it was."""
+    if controller is None:
+        return data
+    return {**data, "options": {**data.get("options", {}), "controller": controller}}
+
+
+def check_controllers(base: dict, scenario: Path, controllers: list[str]) -> None:
+    """Every --controller, before anything is drawn or flown: each named once, a known law
+    (amcore.config.CONTROLLERS), and one the scenario can fly (what the scenario's loader checks
+    of [options].controller, e.g. that the baseline flies [flight_controller].mode = 'torque'
+    only). `base` is the scenario data, already valid. Raises ConfigError naming the first bad one."""
+    twice = sorted({c for c in controllers if controllers.count(c) > 1})
+    if twice:
+        raise ConfigError(f"--controller {twice[0]!r} given twice: each law once")
+    for c in controllers:
+        if c not in CONTROLLERS:
+            raise ConfigError(f"--controller {c!r}: unknown controller (known: {', '.join(CONTROLLERS)})")
+        try:
+            scenario_from_dict(with_controller(base, c), scenario)
+        except ConfigError as exc:
+            raise ConfigError(f"--controller {c!r}: {scenario.name} cannot fly it: {exc}") from None
+
+
 def snapshot_vehicle(base: dict, scenario: Path, folder: Path) -> dict:
     """The base scenario data with its vehicle (TOML and URDF) copied into `folder`/vehicle/:
     a campaign's trials then read their own copy, so that editing the project's vehicle
@@ -188,8 +227,7 @@ def build_tasks(base: dict, scenario: Path, rand: RandomizeSpec, seed: int, n: i
     tasks = []
     for i in range(n):
         data, params = draw_trial(base, rand, seed, i)
-        if controller is not None:
-            data["options"] = {**data.get("options", {}), "controller": controller}
+        data = with_controller(data, controller)
         path = (folder / f"trial-{i:04d}.toml").resolve()
         data = relocate(data, scenario, folder)
         path.write_text(f"# trial {i} of am-trials {scenario.name} --seed {seed}\n" + dumps(data))
@@ -208,39 +246,55 @@ def main(argv: list[str] | None = None) -> int:
             a.overrides = [*screening, *a.overrides]
             print(f"am-trials: screening world: --set {' --set '.join(screening)}", file=sys.stderr)
         base = apply_overrides(_read_toml(scenario), a.overrides)
-        if a.overrides:
-            scenario_from_dict(base, scenario)  # an override the scenario cannot take stops here, named
+        if a.overrides:  # an override the scenario cannot take stops here, named
+            try:
+                scenario_from_dict(base, scenario)
+            except ConfigError as exc:
+                raise ConfigError(f"--set {' --set '.join(a.overrides)}: the scenario cannot take it: {exc}") from None
         rand, rand_source = _randomization(a, base, scenario)
+        controllers = a.controller or [None]
+        if a.controller:
+            check_controllers(base, scenario, a.controller)
     except ConfigError as exc:
         print(f"am-trials: error: {exc}", file=sys.stderr)
-        return 2
-    controllers = a.controller or [None]
-    if len(set(controllers)) != len(controllers):
-        print("am-trials: error: --controller: each law once", file=sys.stderr)
         return 2
     if a.out.exists() and not a.out.is_dir():
         print(f"am-trials: error: --out {a.out}: exists and is not a folder", file=sys.stderr)
         return 2
+    outs = {c: a.out / c if len(controllers) > 1 else a.out for c in controllers}
+    for out in outs.values():
+        if (out / "trials.csv").exists():
+            print(f"am-trials: error: {out / 'trials.csv'} exists: choose another --out", file=sys.stderr)
+            return 2
     workers = a.workers or os.cpu_count() or 1
+    where = f"Dask at {a.scheduler}" if a.scheduler else f"{workers} local worker(s)"
     summaries = []
     try:
-        for controller in controllers:
-            out = a.out / controller if len(controllers) > 1 else a.out
-            if (out / "trials.csv").exists():
-                print(f"am-trials: error: {out / 'trials.csv'} exists: choose another --out", file=sys.stderr)
-                return 2
+        with contextlib.ExitStack() as stack:
+            # a scheduler is connected to once, before anything is written; a local pool starts
+            # and stops with each campaign, inside the wall time the campaign measures
             try:
-                tasks = build_tasks(base, scenario, rand, a.seed, a.trials, out, controller)
-            except ConfigError as exc:
-                print(f"am-trials: error: a drawn trial is not a valid scenario: {exc}", file=sys.stderr)
+                dask = stack.enter_context(executor(workers, a.scheduler)) if a.scheduler else None
+            except ValueError as exc:  # tls:// without dask's TLS settings
+                print(f"am-trials: error: --scheduler: {exc}", file=sys.stderr)
                 return 2
-            except OSError as exc:
-                print(f"am-trials: error: --out {a.out}: {exc}", file=sys.stderr)
-                return 2
-            summaries.append(_campaign(a, tasks, out, controller, workers, rand_source))
+            for controller, out in outs.items():
+                try:
+                    tasks = build_tasks(base, scenario, rand, a.seed, a.trials, out, controller)
+                except ConfigError as exc:
+                    print(f"am-trials: error: a drawn trial is not a valid scenario: {exc}", file=sys.stderr)
+                    return 2
+                except OSError as exc:
+                    print(f"am-trials: error: --out {a.out}: {exc}", file=sys.stderr)
+                    return 2
+                pool = contextlib.nullcontext(dask) if dask is not None else executor(workers)
+                summaries.append(_campaign(a, tasks, out, controller, pool, where, rand_source))
     except KeyboardInterrupt:
         print("\nam-trials: interrupted", file=sys.stderr)
         return 130
+    except SchedulerUnreachable as exc:
+        print(f"am-trials: error: {exc}; nothing was written to {a.out}", file=sys.stderr)
+        return 1
     except RuntimeError as exc:
         print(f"am-trials: error: {exc}", file=sys.stderr)
         return 1
@@ -251,10 +305,12 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _campaign(a, tasks: list[TrialTask], out: Path, controller: str | None, workers: int, rand_source: str) -> dict:
+def _campaign(a, tasks: list[TrialTask], out: Path, controller: str | None,
+              pool: contextlib.AbstractContextManager, where: str, rand_source: str) -> dict:  # fmt: skip
+    """Run `tasks` on the executor that `pool` gives (entered and left here: a local pool's start
+    and stop count in the campaign's wall time) and write out/'s table, summary and plots."""
     from tqdm import tqdm
 
-    where = f"Dask at {a.scheduler}" if a.scheduler else f"{workers} local worker(s)"
     name = controller or "the scenario's controller"
     print(f"am-trials: {len(tasks)} trials of {a.scenario.name} ({name}), seed {a.seed}, on {where}; "
           f"variation from {rand_source}", file=sys.stderr)
@@ -274,7 +330,7 @@ def _campaign(a, tasks: list[TrialTask], out: Path, controller: str | None, work
             partial.flush()
             on_result(row)
 
-        with executor(workers, a.scheduler) as ex:
+        with pool as ex:
             rows = run_all(tasks, ex, keep)
     wall = time.perf_counter() - t0
     bar.close()

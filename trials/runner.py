@@ -3,6 +3,9 @@ multi-process SITL), on any `concurrent.futures.Executor`: a local process pool 
 or a Dask distributed cluster's executor (`dask.distributed.Client(address).get_executor()`),
 whose workers need this project installed. Results do not depend on the executor: a trial
 is a pure function of its scenario data.
+
+A scheduler's address is checked before anything connects (`parse_scheduler_address`), and one
+that does not answer within SCHEDULER_CONNECT_TIMEOUT_S raises `SchedulerUnreachable` naming it.
 """
 from __future__ import annotations
 
@@ -13,6 +16,69 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+
+# how long `executor` waits for a Dask scheduler to answer before it gives up [s]
+SCHEDULER_CONNECT_TIMEOUT_S = 30.0
+SCHEDULER_ADDRESS_FORM = "tcp://HOST:PORT (or tls:// with dask's TLS settings), e.g. tcp://sched.lab:8786"
+
+
+class SchedulerUnreachable(RuntimeError):
+    """No Dask scheduler answered at the address within the connect timeout (refused, no
+    route, a name that does not resolve, or nothing listening): a missing peer, not a bad
+    argument. Carries the address, the timeout [s] and the reason when the OS gave one."""
+
+    def __init__(self, address: str, timeout_s: float, reason: str | None) -> None:
+        self.address, self.timeout_s, self.reason = address, timeout_s, reason
+        why = f" ({reason})" if reason else ""
+        super().__init__(f"--scheduler {address}: no Dask scheduler reached within {timeout_s:g} s{why}")
+
+
+def parse_scheduler_address(text: str) -> str:
+    """A Dask scheduler's address, "tcp://HOST:PORT", "tls://HOST:PORT" or "HOST:PORT" (tcp,
+    dask's default scheme), as "SCHEME://HOST:PORT" (an IPv6 HOST in brackets, "tcp://[::1]:8786"):
+    split as `distributed.comm.addressing.parse_address` and `parse_host_port` split it, but
+    checked before anything connects. tls takes its certificates from dask's configuration
+    (distributed.comm.tls.*). Raises ValueError saying what is wrong: another scheme (inproc is
+    one process's own; ws and ucx are not set up here), no HOST, no PORT, or a PORT that is not
+    a whole number 1-65535."""
+    scheme, sep, loc = text.strip().rpartition("://")
+    if not sep:
+        scheme = "tcp"
+    if scheme not in ("tcp", "tls"):
+        raise ValueError(f"scheme {scheme!r}: am-trials reaches a scheduler over tcp:// or tls:// only")
+    if loc.startswith("["):  # IPv6: [addr]:port
+        host, closed, tail = loc[1:].partition("]")
+        if not closed or (tail and not tail.startswith(":")):
+            raise ValueError("an IPv6 HOST goes in brackets before the port: tcp://[::1]:8786")
+        port, shown = tail[1:], f"[{host}]"
+    else:
+        host, colon, port = loc.rpartition(":")
+        if not colon:
+            host, port = port, ""
+        elif ":" in host:
+            raise ValueError("an IPv6 HOST needs brackets: tcp://[::1]:8786")
+        shown = host
+    if not host:
+        raise ValueError("no HOST")
+    if not port:
+        raise ValueError("no PORT")
+    if not (port.isascii() and port.isdigit()):
+        raise ValueError(f"PORT {port!r} is not a whole number")
+    if not 1 <= int(port) <= 65535:
+        raise ValueError(f"PORT must be 1-65535, got {int(port)}")
+    return f"{scheme}://{shown}:{int(port)}"
+
+
+def _os_reason(exc: BaseException) -> str | None:
+    """The operating system's words for why a connection failed ("Connection refused"), from
+    the first exception in `exc`'s chain that carries them; None if none does (a timeout)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        if isinstance(exc, OSError) and exc.strerror:
+            return exc.strerror
+        exc = exc.__cause__ or exc.__context__
+    return None
 
 
 @dataclass(frozen=True)
@@ -70,19 +136,35 @@ def _peak_errors(companions: dict) -> dict:
 
 
 @contextlib.contextmanager
-def executor(workers: int, scheduler: str | None = None) -> Iterator[cf.Executor]:
+def executor(workers: int, scheduler: str | None = None,
+             connect_timeout_s: float | None = None) -> Iterator[cf.Executor]:  # fmt: skip
     """A local process pool of `workers` processes, or, given a scheduler address
-    ("tcp://host:8786"), that Dask cluster's executor."""
+    ("tcp://host:8786", `parse_scheduler_address`), that Dask cluster's executor. The scheduler
+    is connected to on entry: ValueError if its address is malformed, `SchedulerUnreachable` if
+    it does not answer within `connect_timeout_s` (default SCHEDULER_CONNECT_TIMEOUT_S)."""
     if scheduler is None:
         # spawn: each worker starts clean (no PyBullet client or pinocchio state inherited)
         with cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as ex:
             yield ex
         return
     try:
+        address = parse_scheduler_address(scheduler)
+    except ValueError as exc:
+        raise ValueError(f"scheduler address {scheduler!r}: {exc} (expected {SCHEDULER_ADDRESS_FORM})") from None
+    timeout_s = SCHEDULER_CONNECT_TIMEOUT_S if connect_timeout_s is None else connect_timeout_s
+    try:
         from dask.distributed import Client
     except ImportError as exc:  # pragma: no cover - a dependency of the project
         raise RuntimeError(f"--scheduler needs dask.distributed ({exc})") from None
-    with Client(scheduler, timeout=30) as client:
+    try:
+        # dask retries a refused or unresolved connection until the timeout, then raises
+        # OSError("Timed out trying to connect ..."), the cause of the last attempt chained
+        client = Client(address, timeout=timeout_s)
+    except OSError as exc:
+        raise SchedulerUnreachable(address, timeout_s, _os_reason(exc)) from None
+    except TypeError as exc:  # tls:// without dask's TLS settings (no SSL context)
+        raise ValueError(f"scheduler address {address!r}: {exc}") from None
+    with client:
         ex = client.get_executor()
         try:
             yield ex

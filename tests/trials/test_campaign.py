@@ -166,7 +166,8 @@ def test_set_changes_the_base_scenario_of_every_trial_and_only_what_it_names(tmp
 def test_a_bad_set_exits_2_naming_it(tmp_path, capsys, override, words):
     assert cli.main([str(SHORT), "--trials", "1", "--seed", "1", "--out", str(tmp_path / "o"),
                      "--set", override]) == 2
-    assert words in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert words in err and override in err.splitlines()[0], err  # the --set it came from, named
 
 
 @pytest.mark.parametrize("n", range(1, 120))
