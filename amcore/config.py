@@ -959,10 +959,13 @@ def _rotors(table, where: str) -> RotorParams:
     """[rotors] with its [[rotors.rotor]] rows (see `Rotor`, `RotorParams`)."""
     if not isinstance(table, dict):
         raise ConfigError(f"{where}: expected a table, got {table!r}")
+    old = sorted({"arm_length_m", "layout", "yaw_moment_coeff_m"} & set(table))
+    hint = (" (the rotors are now one [[rotors.rotor]] row each, as PX4's CA_ROTORn_*, yaw_moment_coeff_m "
+            "being each row's moment_ratio_m: see configs/vehicles/am3dof.toml)") if old else ""
     if "rotor" not in table:
-        hint = (" (the rotors are now one [[rotors.rotor]] row each, as PX4's CA_ROTORn_*: see "
-                "configs/vehicles/am3dof.toml)" if {"arm_length_m", "layout", "yaw_moment_coeff_m"} & set(table) else "")
         raise ConfigError(f"{where}: missing key 'rotor'{hint}")
+    if old:  # beside rows: an old key left in, or set by an override (am-trials --set rotors.<key>=...)
+        raise ConfigError(f"{where}: unknown key '{old[0]}'{hint}")
     rows = table["rotor"]
     if not isinstance(rows, list) or not all(isinstance(r, dict) for r in rows):
         raise ConfigError(f"{where}.rotor: expected an array of tables ([[rotors.rotor]]), got {rows!r}")

@@ -213,7 +213,8 @@ FL = 'position_m = [0.21213203435596426, 0.21213203435596426, 0.0]\naxis = [0.0,
     ("0.21213203435596426, -0.21213203435596426", "0.3, 0.0", None),
     ("moment_ratio_m = 0.016", "moment_ratio_m = -0.016", "moment_ratio_m: must be in (0, 1]"),
     ("thrust_min_n = 0.0", "thrust_min_n = 13.0", "thrust_min_n < thrust_max_n"),
-    ("thrust_max_n = 12.0 ", "arm_length_m = 0.3\nthrust_max_n = 12.0 ", "unknown key 'arm_length_m'"),
+    ("thrust_max_n = 12.0 ", "arm_length_m = 0.3\nthrust_max_n = 12.0 ", "unknown key 'arm_length_m' (the rotors are now"),
+    ("thrust_max_n = 12.0 ", "yaw_moment_coeff_m = 0.02\nthrust_max_n = 12.0 ", "being each row's moment_ratio_m"),
 ])
 def test_bad_rotor_geometry_names_file_and_key(tmp_path, old, new, words):
     assert old in QUAD_ROWS
