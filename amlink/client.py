@@ -50,6 +50,7 @@ class EndpointOpenError(SimulatorUnreachableError):
         self.address = address
         self.why = why
         self.timeout_s = timeout_s  # None: it failed at once
+        self.listening = False
         LinkError.__init__(self, f"cannot open {address}: {why}" if timeout_s is None
                            else f"cannot connect to {address} within {timeout_s:.3g} s: {why}")
 
@@ -167,7 +168,8 @@ class CompanionClient:
                     detail = getattr(self._link, "last_error", "")
                     if detail and self._dest() is None:  # a TCP client that never connected
                         raise EndpointOpenError(self.sim, _os_reason(detail), timeout_s)
-                    raise SimulatorUnreachableError(self.sim, timeout_s, detail)
+                    raise SimulatorUnreachableError(self.sim, timeout_s, detail,
+                                                    listening=self.endpoint.listens and self._dest() is None)
                 if now >= next_beat and self._dest() is not None:
                     self._send([self._heartbeat])
                     next_beat = now + HEARTBEAT_PERIOD_S

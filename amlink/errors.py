@@ -54,10 +54,12 @@ class PeerProtocolError(LinkError):
 class SimulatorUnreachableError(LinkError):
     """Companion side: no AM_SCENARIO from the simulator at ``address`` in time."""
 
-    def __init__(self, address: str, timeout_s: float, detail: str = ""):
+    def __init__(self, address: str, timeout_s: float, detail: str = "", listening: bool = False):
         self.address = address
         self.timeout_s = timeout_s
-        msg = f"simulator at {address} did not answer HEARTBEAT within {timeout_s:.3g} s"
+        self.listening = listening  # the companion waited on a listening endpoint and nobody came
+        msg = (f"no simulator reached {address} within {timeout_s:.3g} s" if listening
+               else f"simulator at {address} did not answer HEARTBEAT within {timeout_s:.3g} s")
         super().__init__(f"{msg}: {detail}" if detail else msg)
 
 

@@ -194,7 +194,10 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     except LinkError as exc:
         hint = ""
-        if isinstance(exc, SimulatorUnreachableError) and keys is not None:
+        if isinstance(exc, SimulatorUnreachableError) and exc.listening:
+            hint = (f" (is the simulator started with --bind udpout: or tcp: toward this host and port"
+                    f"{', and the same signing key' if keys is not None else ''}?)")
+        elif isinstance(exc, SimulatorUnreachableError) and keys is not None:
             hint = " (is it running, and does it use the same signing key? unsigned or wrongly signed packets are dropped)"
         print(f"{tag}: error: {exc}{hint}", file=sys.stderr)
         _save(tag, a.outcome, pilot.summary(error=str(exc)))

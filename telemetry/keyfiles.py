@@ -33,10 +33,21 @@ def write_secret(path: Path, text: str) -> Path:
 
 def write_run_keys(folder: Path, sysids, master: bytes | None = None) -> dict[str, Path]:
     """A random master key (or `master`) and the keys of the simulator and of the companions
-    `sysids`, in `folder` (created if need be): {"recorder": master file, "simulator": ..., "am<sysid>": ...}."""
+    `sysids`, in `folder` (created if need be): {"recorder": master file, "simulator": ..., "am<sysid>": ...}.
+    All or nothing: if one cannot be written (OSError), those written are removed again, so
+    that a retry is not refused for a master key left behind without its publishers' keys."""
     master = os.urandom(KEY_BYTES) if master is None else master
     Path(folder).mkdir(parents=True, exist_ok=True)
-    files = {"recorder": write_secret(Path(folder) / MASTER_FILE, master.hex())}
+    keys = {"recorder": (Path(folder) / MASTER_FILE, master.hex())}
     for name in ["simulator"] + [f"am{s}" for s in sysids]:
-        files[name] = write_secret(Path(folder) / publisher_file(name), publisher_key(master, name).hex())
+        keys[name] = (Path(folder) / publisher_file(name), publisher_key(master, name).hex())
+    files: dict[str, Path] = {}
+    try:
+        for name, (path, text) in keys.items():
+            files[name] = path  # before the write: a file that fails half-written goes too
+            write_secret(path, text)
+    except OSError:
+        for path in files.values():
+            path.unlink(missing_ok=True)
+        raise
     return files

@@ -220,6 +220,16 @@ def test_a_tcp_simulator_never_connected_to_is_a_connection_failure_not_an_unans
     assert err.value.timeout_s == 0.5
 
 
+@pytest.mark.parametrize("form", ["udpin", "tcpin"])
+def test_a_listening_companion_nobody_reaches_says_so_not_that_heartbeat_went_unanswered(form):
+    """Listening, it sends nothing until the simulator speaks: the error says nobody came."""
+    client = CompanionClient(2, sim=f"{form}:127.0.0.1:0")
+    with pytest.raises(SimulatorUnreachableError) as err:
+        client.connect(0.3)
+    assert err.value.listening and "HEARTBEAT" not in str(err.value)
+    assert str(err.value).startswith(f"no simulator reached {form}:127.0.0.1:0 within 0.3 s")
+
+
 def _drain(sock):
     sock.setblocking(False)
     out = []

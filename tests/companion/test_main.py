@@ -83,3 +83,10 @@ def test_an_outcome_that_cannot_be_written_at_the_end_is_an_error_not_a_tracebac
     err = capsys.readouterr().err
     assert "error: --sim: cannot open /dev/nonexistent_tty:115200" in err
     assert f"companion[4]: error: --outcome {outcome}: cannot write it: " in err
+
+
+def test_a_listening_companion_that_nobody_reaches_says_how_to_point_the_simulator_at_it(companion_args, capsys):
+    assert main(companion_args + ["--sim", "udpin:127.0.0.1:0", "--connect-timeout", "0.3"]) == 1
+    err = capsys.readouterr().err
+    assert "companion[4]: error: no simulator reached udpin:127.0.0.1:0 within 0.3 s" in err
+    assert "--bind udpout: or tcp: toward this host and port" in err and "HEARTBEAT" not in err
