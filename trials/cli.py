@@ -33,8 +33,10 @@ import contextlib
 import copy
 import os
 import shutil
+import signal
 import sys
 import json
+import threading
 import time
 from pathlib import Path
 
@@ -236,7 +238,21 @@ def build_tasks(base: dict, scenario: Path, rand: RandomizeSpec, seed: int, n: i
     return tasks
 
 
+def _interrupted_by_sigterm(signum, _frame):
+    raise KeyboardInterrupt  # a supervisor's stop ends the campaign as a Ctrl-C does: exit 130
+
+
 def main(argv: list[str] | None = None) -> int:
+    if threading.current_thread() is not threading.main_thread():  # signals go to the main thread only
+        return _main(argv)
+    previous = signal.signal(signal.SIGTERM, _interrupted_by_sigterm)
+    try:
+        return _main(argv)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _main(argv: list[str] | None) -> int:
     a = parse_args(argv)
     scenario = a.scenario.resolve()
     try:

@@ -65,12 +65,14 @@ def summary_line(s: dict) -> str:
                 if n else "none flown")
 
     failed = ", ".join(f"{c} {n}" for c, n in s["failure_classes"].items() if n)
+    tail = f"; failures: {failed}" if failed else ""
+    if s.get("incomplete"):  # cut short before the hover window ended: neither success nor failure
+        tail += f"; incomplete {s['incomplete']} (the run ended before the hover window did)"
     if not s.get("refused"):
-        return rate(s["successes"], s["trials"], s["wilson95"]) + (f"; failures: {failed}" if failed else "")
+        return rate(s["successes"], s["trials"], s["wilson95"]) + tail
     return (f"{s['refused']} of {s['trials']} refused before flight (outside the team's envelope); of the "
             f"{s['flown']} flown, " + rate(s["successes"], s["flown"], s["wilson95_flown"])
-            + (f"; failures: {failed}" if failed else "") + "; over all trials "
-            + rate(s["successes"], s["trials"], s["wilson95"]))
+            + tail + "; over all trials " + rate(s["successes"], s["trials"], s["wilson95"]))
 
 
 def write_csv(rows: list[dict], path: Path) -> None:
@@ -150,12 +152,13 @@ def plot_parameters(rows: list[dict], params: list[str], out_dir: Path, title: s
 
 def comparison_table(summaries: list[dict]) -> str:
     """A Markdown table of several campaigns' summaries (one row per controller)."""
-    head = "| controller | trials | success | Wilson 95 % | refused | " + " | ".join(FAILURE_CLASSES) + " |"
-    rule = "|---" * (5 + len(FAILURE_CLASSES)) + "|"
+    head = ("| controller | trials | success | Wilson 95 % | refused | incomplete | " + " | ".join(FAILURE_CLASSES)
+            + " |")
+    rule = "|---" * (6 + len(FAILURE_CLASSES)) + "|"
     lines = [head, rule]
     for s in summaries:
         lo, hi = s["wilson95"]
         lines.append(f"| {s.get('controller', '?')} | {s['trials']} | {100 * s['success_rate']:.0f} % | "
-                     f"{100 * lo:.0f}-{100 * hi:.0f} % | {s.get('refused', 0)} | "
+                     f"{100 * lo:.0f}-{100 * hi:.0f} % | {s.get('refused', 0)} | {s.get('incomplete', 0)} | "
                      + " | ".join(str(s["failure_classes"][c]) for c in FAILURE_CLASSES) + " |")
     return "\n".join(lines) + "\n"

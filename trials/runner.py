@@ -144,8 +144,21 @@ def executor(workers: int, scheduler: str | None = None,
     it does not answer within `connect_timeout_s` (default SCHEDULER_CONNECT_TIMEOUT_S)."""
     if scheduler is None:
         # spawn: each worker starts clean (no PyBullet client or pinocchio state inherited)
-        with cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as ex:
+        ex = cf.ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
+        try:
             yield ex
+        except BaseException:
+            # interrupted (KeyboardInterrupt, am-trials' SIGTERM) or failed: the queued trials are
+            # dropped and the running ones stopped, not waited for (a trial is a pure function
+            # of its data: nothing of it is lost that a rerun would not give again)
+            workers_running = list((ex._processes or {}).values())  # the pool's own processes
+            ex.shutdown(wait=False, cancel_futures=True)
+            for proc in workers_running:
+                proc.terminate()
+            for proc in workers_running:
+                proc.join(5.0)
+            raise
+        ex.shutdown(wait=True)
         return
     try:
         address = parse_scheduler_address(scheduler)

@@ -110,3 +110,42 @@ def test_controllers_the_scenario_can_fly_pass_the_check():
         cli.check_controllers(_read_toml(ATTITUDE), ATTITUDE, ["passivity", "baseline"])
     with pytest.raises(cli.ConfigError, match="--controller 'baseline' given twice"):
         cli.check_controllers(base, SHORT, ["baseline", "passivity", "baseline"])
+
+
+@pytest.mark.parametrize("sig", ["SIGTERM", "SIGINT"])
+def test_a_campaign_stopped_by_a_signal_exits_130_within_seconds_and_leaves_no_worker(tmp_path, sig):
+    """A supervisor's SIGTERM, or a SIGINT to am-trials alone (its workers not signalled), ends
+    the campaign as Ctrl-C does: exit 130, the running trials stopped rather than waited for,
+    no pool worker left behind."""
+    import os
+    import signal
+    import subprocess
+
+    from tests.sitl.runner import script
+
+    out = tmp_path / "o"
+    p = subprocess.Popen([script("am-trials"), str(ROOT / "configs" / "scenarios" / "two_am_robust_attitude.toml"),
+                          "--trials", "4", "--seed", "1", "--out", str(out), "--workers", "2", "--no-plots",
+                          "--no-progress"], stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not (out / "trials.partial.jsonl").exists():  # the pool is flying trials (20 s each)
+            assert p.poll() is None and time.monotonic() < deadline, p.stderr.read() if p.poll() is not None else ""
+            time.sleep(0.2)
+        time.sleep(3.0)
+        workers = subprocess.run(["pgrep", "-P", str(p.pid)], capture_output=True, text=True).stdout.split()
+        assert workers  # the pool's processes
+        t0 = time.monotonic()
+        p.send_signal(getattr(signal, sig))
+        _, err = p.communicate(timeout=60)
+        took = time.monotonic() - t0
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+    assert p.returncode == 130, err
+    assert "am-trials: interrupted" in err and "Traceback" not in err
+    assert took < 15.0  # not the 20 s trials run to their end
+    deadline = time.monotonic() + 5.0  # the pool's workers are stopped; its resource tracker ends on their heels
+    while [w for w in workers if os.path.exists(f"/proc/{w}")] and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not [w for w in workers if os.path.exists(f"/proc/{w}")]

@@ -36,6 +36,20 @@ def test_the_summary_counts_refused_trials_apart_from_flown_ones():
     assert summary_line(summarize([_row("success"), _row("failed", "dropped")])).startswith("1/2 succeeded")
 
 
+def test_incomplete_trials_are_counted_in_the_line_and_the_comparison():
+    """A campaign cut short (--set scenario.duration_s below the hover window's end) has trials
+    that neither succeeded nor failed: the line and the table say how many, so their rows add up."""
+    from trials.report import comparison_table
+
+    s = summarize([_row("incomplete")] * 2 + [_row("failed", "dropped")])
+    line = summary_line(s)
+    assert line.startswith("0/3 succeeded") and "failures: dropped 1" in line
+    assert "incomplete 2 (the run ended before the hover window did)" in line
+    head, _, row = comparison_table([{**s, "controller": "baseline"}]).splitlines()
+    cells = dict(zip((c.strip() for c in head.strip("|").split("|")), (c.strip() for c in row.strip("|").split("|"))))
+    assert cells["trials"] == "3" and cells["incomplete"] == "2" and cells["dropped"] == "1"
+
+
 def test_a_refused_trial_does_not_fly_and_says_why(tmp_path):
     data = _read_toml(ROBUST)
     data["object"]["mass_kg"] = 2.5
