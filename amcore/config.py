@@ -1180,7 +1180,12 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
         raise ConfigError(f"{where}: [scenario]: missing key 'vehicle'")
     if not isinstance(sc["vehicle"], str) or not sc["vehicle"]:
         raise ConfigError(f"{where}: [scenario].vehicle: expected the path of a vehicle TOML, got {sc['vehicle']!r}")
-    vpath = (path.parent / sc.pop("vehicle")).resolve()
+    vtext = sc.pop("vehicle")
+    vpath = (path.parent / vtext).resolve()
+    if not vpath.is_file():  # a scenario copied away from configs/scenarios/: name the key that points there
+        raise ConfigError(f"{where}: [scenario].vehicle = {vtext!r}: {vpath}: "
+                          f"{'is a directory, not a TOML file' if vpath.is_dir() else 'file not found'} "
+                          f"(a relative path is read from the scenario's folder, {path.parent})")
     vdata = _read_toml(vpath)
     for tbl in _VEHICLE_OVERRIDES:
         if tbl in data:

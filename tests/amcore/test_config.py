@@ -98,6 +98,18 @@ def test_missing_urdf_and_missing_file_are_config_errors(tmp_path):
         load_scenario(tmp_path / "absent.toml")
 
 
+def test_a_scenario_copied_away_from_its_vehicle_names_the_key_that_points_there(tmp_path):
+    """A user's copy of a shipped scenario keeps its relative vehicle path, read from the copy's folder."""
+    (tmp_path / "sub").mkdir()
+    p = tmp_path / "sub" / "my.toml"
+    p.write_text(BASE)
+    assert 'vehicle = "../vehicles/am3dof.toml"' in BASE
+    with pytest.raises(ConfigError) as e:
+        load_scenario(p)
+    assert str(e.value) == (f"{p}: [scenario].vehicle = '../vehicles/am3dof.toml': {tmp_path / 'vehicles' / 'am3dof.toml'}: "
+                            f"file not found (a relative path is read from the scenario's folder, {tmp_path / 'sub'})")
+
+
 def test_impossible_gains_are_rejected(tmp_path):
     v = tmp_path / "v.toml"
     v.write_text(VEHICLE.read_text().replace("k_R = 30.0", "k_R = 0.0").replace('urdf = "am3dof.urdf"',
