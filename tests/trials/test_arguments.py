@@ -4,6 +4,7 @@ controller mode cannot fly, exit 2 naming the argument and its value; a schedule
 cannot be reached exits 1 naming its address. None of them leaves anything in --out."""
 from __future__ import annotations
 
+import re
 import socket
 import time
 from pathlib import Path
@@ -83,8 +84,10 @@ def test_an_unreachable_scheduler_exits_1_naming_it_before_anything_is_written(t
     assert code == 1, err
     assert time.perf_counter() - t0 < 10.0  # the timeout it was given, not the default
     [line] = err.strip().splitlines()  # one line, no traceback
-    assert line.startswith(f"am-trials: error: --scheduler tcp://127.0.0.1:{port}: no Dask scheduler reached "
-                           f"within 1 s (Connection refused); nothing was written to ")
+    # the OS's reason when dask's last attempt was refused; none when the timeout cut an attempt short
+    # (a loaded machine), as it may within dask's retry loop
+    assert re.fullmatch(rf"am-trials: error: --scheduler tcp://127\.0\.0\.1:{port}: no Dask scheduler reached "
+                        rf"within 1 s( \(Connection refused\))?; nothing was written to {re.escape(str(out))}", line), line
     assert not out.exists()
 
 
