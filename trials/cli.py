@@ -272,16 +272,13 @@ def _main(argv: list[str] | None) -> int:
         if a.controller:
             check_controllers(base, scenario, a.controller)
     except ConfigError as exc:
-        print(f"am-trials: error: {exc}", file=sys.stderr)
-        return 2
+        return cliargs.fail("am-trials", str(exc))
     if a.out.exists() and not a.out.is_dir():
-        print(f"am-trials: error: --out {a.out}: exists and is not a folder", file=sys.stderr)
-        return 2
+        return cliargs.fail("am-trials", f"--out {a.out}: exists and is not a folder")
     outs = {c: a.out / c if len(controllers) > 1 else a.out for c in controllers}
     for out in outs.values():
         if (out / "trials.csv").exists():
-            print(f"am-trials: error: {out / 'trials.csv'} exists: choose another --out", file=sys.stderr)
-            return 2
+            return cliargs.fail("am-trials", f"{out / 'trials.csv'} exists: choose another --out")
     workers = a.workers or os.cpu_count() or 1
     where = f"Dask at {a.scheduler}" if a.scheduler else f"{workers} local worker(s)"
     summaries = []
@@ -292,17 +289,14 @@ def _main(argv: list[str] | None) -> int:
             try:
                 dask = stack.enter_context(executor(workers, a.scheduler)) if a.scheduler else None
             except ValueError as exc:  # tls:// without dask's TLS settings
-                print(f"am-trials: error: --scheduler: {exc}", file=sys.stderr)
-                return 2
+                return cliargs.fail("am-trials", f"--scheduler: {exc}")
             for controller, out in outs.items():
                 try:
                     tasks = build_tasks(base, scenario, rand, a.seed, a.trials, out, controller)
                 except ConfigError as exc:
-                    print(f"am-trials: error: a drawn trial is not a valid scenario: {exc}", file=sys.stderr)
-                    return 2
+                    return cliargs.fail("am-trials", f"a drawn trial is not a valid scenario: {exc}")
                 except OSError as exc:
-                    print(f"am-trials: error: --out {a.out}: {exc}", file=sys.stderr)
-                    return 2
+                    return cliargs.fail("am-trials", f"--out {a.out}: {exc}")
                 pool = contextlib.nullcontext(dask) if dask is not None else executor(workers)
                 summaries.append(_campaign(a, tasks, out, controller, pool, where, rand_source))
     except KeyboardInterrupt:
