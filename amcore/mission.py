@@ -31,6 +31,12 @@ from .task import TaskFrame, angle_of, task_terms
 from .trajectory import SmoothPath, path_through
 
 
+# Free-running flight (the wall-clock companion, simulator.freerun): the vehicles stand landed
+# below their mission's start; once OFFBOARD is engaged the references blend from the ground to
+# the start over this time [s] (JoinBlend), and the mission's t = 0 is this long after the engage.
+TAKEOFF_S = 3.0
+
+
 @dataclass(frozen=True)
 class NominalGeometry:
     """At q_nominal with a level base: end-effector and CoM offsets from {b}'s origin [m]."""

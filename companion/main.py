@@ -78,6 +78,31 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--telemetry-every", type=cliargs.count, default=1, help="publish the controller state every N steps")
     ap.add_argument("--tlog", type=cliargs.output_file, default=None,
                     help="write every MAVLink frame of the link to this .tlog (stock tools read it)")
+    ap.add_argument("--clock", choices=("lockstep", "wall"), default="lockstep",
+                    help="lockstep: the simulator's step-numbered lockstep (reproducible; default). wall: a PX4 "
+                         "(the free-running simulator's, or a real one) in OFFBOARD over standard MAVLink on the "
+                         "wall clock, the arm over Dynamixel Protocol 2.0 and the wrist F/T over Net F/T RDT "
+                         "(docs/freerun.md)")
+    ap.add_argument("--fc", default=None, metavar="ENDPOINT",
+                    help="--clock wall: the autopilot (default udpin:0.0.0.0:14540+i, PX4 SITL's onboard port of this "
+                         "AM's place i in [[am]]); mavutil's forms, e.g. /dev/ttyACM0:921600")
+    ap.add_argument("--arm", default=None, metavar="ENDPOINT",
+                    help="--clock wall: the servo bus, a serial DEVICE[:BAUD] (/dev/ttyUSB0:4000000) or tcp:HOST:PORT "
+                         "(default tcp:127.0.0.1:7200+i, the simulator's)")
+    ap.add_argument("--ft", default=None, metavar="ENDPOINT",
+                    help="--clock wall: the Net F/T sensor, udp:HOST:PORT (default udp:127.0.0.1:49152+i); 'none': "
+                         "no wrist sensor (a zero wrench)")
+    ap.add_argument("--mocap", default=None, metavar="ENDPOINT",
+                    help="--clock wall: the object's pose stream, when the scenario plans from it (default "
+                         "udp:127.0.0.1:7400)")
+    ap.add_argument("--mission-start", type=cliargs.seconds, default=None, metavar="S",
+                    help="--clock wall: the autopilot's boot time [s] at which the mission's t = 0 comes (a team on "
+                         "one clock starts together); default: 3 s of take-off after OFFBOARD is engaged")
+    ap.add_argument("--type-mask", type=cliargs.number(0, 255, integer=True), default=None,
+                    help="--clock wall: SET_ATTITUDE_TARGET.type_mask (default 0: attitude, body rates and thrust; "
+                         "7 ignores the rates, as MAVSDK's set_attitude)")
+    ap.add_argument("--no-predict", action="store_true",
+                    help="--clock wall: use each sample as it is, without carrying it over its age")
     add_zenoh_arguments(ap, role="publisher")
     a = ap.parse_args(argv)
     tag = f"companion[{a.sysid}]"
@@ -141,6 +166,13 @@ def main(argv: list[str] | None = None) -> int:
     if jit.compiled:
         print(f"{tag}: compiled the control law in {jit.seconds:.1f} s (once per machine: cached in "
               f"{jitcache.cache_dir()})", file=sys.stderr, flush=True)
+    if a.clock == "wall":
+        from .wallmain import run_wall  # the wall-clock companion's wiring
+        try:
+            return run_wall(a, spec, pilot, tele, am_tele, keys, tlog, tag, _Stop)
+        finally:
+            if tlog is not None:
+                tlog.close()
     why = "simulator ended the run"
     cpu = procstats.CpuMeter()
     tele.open()  # never blocks: publishes are queued, dropped and counted while nobody listens

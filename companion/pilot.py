@@ -110,6 +110,18 @@ class Pilot:
             m = twin.mission
             adapted(m.reference(0.0), m.frame, twin.trim_dr, HeadingState(1e-3), m.contact_point_W, LateralState(1e-3))
 
+    def start_takeoff(self, values, t: float, takeoff_s: float) -> None:
+        """Free-running flight: the first step comes at mission time t = -(take-off time left),
+        with the vehicle standing where it landed. Its references blend from there into the
+        mission's start (t = 0) along the restart's blend (amcore.mission.JoinBlend), so that the
+        first command holds the vehicle where it stands. `values`: the first frame's values."""
+        if self._started:
+            raise RuntimeError("start_takeoff must come before the pilot's first step")
+        self._started = True
+        state = state_from_frame(sensor_frame_from_wire(0, t, values, self.model.n, 0))
+        duration = max(-t, 1e-3 * takeoff_s)
+        self._blend = join_blend(self.model, self.mission, self.params.components, state, t, duration)
+
     def command(self, frame: SensorFrame) -> tuple[TorqueSetpoint | AttitudeSetpoint, AttitudeTarget | None, StepResult]:
         """The controller's answer to `frame`, and nothing else: in lockstep the simulator is
         waiting for it, so the companion sends it before it does any bookkeeping (`record`)."""
@@ -127,7 +139,8 @@ class Pilot:
         if self._blend is not None:
             ref = self._blend.apply(ref, t)
         phase = self.mission.phase(t)
-        if self.trim is not None and self._r_c_err is not None and phase == "approach":
+        if self.trim is not None and self._r_c_err is not None and phase == "approach" and t >= 0.0:
+            # (not in the take-off of a free-running flight, t < 0: the blend is no hover)
             self.trim_dr = trim_update(self.trim, self.trim_dr, self._r_c_err, float(np.linalg.norm(ref.r_c_d1)),
                                        t - self._t_last)
         if self._wrench_E_f is not None:

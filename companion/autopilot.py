@@ -1,0 +1,115 @@
+"""The wall-clock loop's view of its autopilot: the PX4 link (`amlink.px4link`) with the offboard
+handshake (`amlink.offboard_handshake`) attached, under the few names the loop uses
+(`companion.wallclock`). A thin adapter: no policy of its own beyond the type_mask it sends.
+
+type_mask. PX4's MavlinkReceiver::handle_message_set_attitude_target (v1.14) takes the
+quaternion and the collective thrust of an attitude setpoint; of its body rates only the
+yaw rate can reach the attitude controller (as yaw_sp_move_rate, a feed-forward), and roll
+and pitch rates are read only when the attitude is ignored. The controller's attitude target
+comes with its body rates (R_b,d and w_b,d of eq. Rd), so the companion sends them with
+`TYPE_MASK` = 0 (nothing ignored): PX4 uses what it uses, and an autopilot that feeds the
+rates forward gets them all. `--type-mask 7` sends what MAVSDK's set_attitude sends.
+"""
+from __future__ import annotations
+
+import time
+
+from amlink.offboard_handshake import OffboardHandshake, control_streams
+from amlink.px4link import Px4Link
+
+TYPE_MASK = 0
+
+
+class Autopilot:
+    def __init__(self, link: Px4Link, handshake: OffboardHandshake, type_mask: int = TYPE_MASK) -> None:
+        self.link, self.hs, self.type_mask = link, handshake, type_mask
+        link.attach(handshake)
+        self._opened_ns: int | None = None
+
+    @classmethod
+    def for_rate(cls, link: Px4Link, control_rate_hz: float, type_mask: int = TYPE_MASK) -> "Autopilot":
+        """The handshake asking for the control streams at the loop's rate (the autopilot caps them)."""
+        return cls(link, OffboardHandshake(control_streams(control_rate_hz)), type_mask)
+
+    def open(self) -> None:
+        self.link.open()
+        self._opened_ns = self.link.clock()
+
+    def close(self) -> None:
+        self.link.close()
+
+    # -- time and liveness ---------------------------------------------------------
+    def wait(self, timeout_s: float) -> None:
+        """Serve the link until a frame arrives or `timeout_s` passes."""
+        self.link.poll(timeout_s=max(0.0, timeout_s))
+
+    def poll(self, _now_ns: int | None = None) -> None:
+        self.link.poll()
+
+    def clock_rate(self) -> float | None:
+        tb = self.link.timebase
+        return tb.rate if tb.converged else None
+
+    def fc_time_us(self, now_ns: int) -> float | None:
+        return self.link.fc_time_us(now_ns) if self.link.timebase.ready else None
+
+    def silent_for_s(self, now_ns: int) -> float:
+        last = self.link.last_rx_ns if self.link.last_rx_ns is not None else self._opened_ns
+        return 0.0 if last is None else (now_ns - last) * 1e-9
+
+    # -- the handshake -------------------------------------------------------------
+    @property
+    def state(self) -> str:
+        return str(self.hs.state.value if hasattr(self.hs.state, "value") else self.hs.state)
+
+    @property
+    def error(self) -> str | None:
+        e = self.hs.error
+        return str(e) if e is not None else self.hs.yield_reason
+
+    @property
+    def engaged_fc_us(self) -> float | None:
+        return self.hs.engaged_fc_us
+
+    def hand_back(self, reason: str) -> None:
+        """Ask for HOLD and yield; the link is served a little so that the command leaves."""
+        self.hs.hand_back(self.link.clock(), reason)
+        deadline = time.monotonic() + 1.0
+        while time.monotonic() < deadline and str(self.state) != "yielded":
+            self.link.poll(timeout_s=0.05)
+
+    # -- samples ---------------------------------------------------------------------
+    def _value(self, source: str):
+        s = self.link.store.latest(source)
+        return None if s is None else s.value
+
+    def _rx(self, source: str) -> int | None:
+        s = self.link.store.latest(source)
+        return None if s is None else s.rx_ns
+
+    @property
+    def odometry(self):
+        """The autopilot's estimate (amlink.px4samples.Odometry: t_us, p_WB, q_WB_wxyz, v_B, w_B; ENU/FLU)."""
+        return self._value("odometry")
+
+    @property
+    def odometry_rx_ns(self) -> int | None:
+        return self._rx("odometry")
+
+    @property
+    def attitude(self):
+        """ATTITUDE_QUATERNION (t_us, q_WB_wxyz, w_B), ENU/FLU."""
+        return self._value("attitude")
+
+    @property
+    def attitude_target(self):
+        """The target the autopilot reports flying (ATTITUDE_TARGET, amlink.types.AttitudeTarget)."""
+        return self._value("attitude_target")
+
+    # -- setpoints -------------------------------------------------------------------
+    def send_setpoint(self, att) -> None:
+        self.link.send_attitude_target(att.quat_wxyz, att.rates_rad_s, min(1.0, max(0.0, att.thrust_normalized)),
+                                       self.type_mask)
+
+    def stream_idle(self, att) -> None:
+        self.send_setpoint(att)
