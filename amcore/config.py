@@ -220,6 +220,12 @@ class ControllerOptions:
     # Beyond the paper (amcore.adapt.Trim): in the approach's hover the CoM reference moves to
     # cancel a steady horizontal force (a tilted thrust), at this bandwidth [Hz]; held from the grasp on. 0: off.
     trim_hz: float = 0.0
+    # The next three keys sample the law for the interface: their defaults depend on
+    # [flight_controller].mode (MODE_OPTION_DEFAULTS, applied by the loader to the keys the
+    # vehicle and scenario files leave unset). Attitude mode: "reported", 40.0, true, what a
+    # stock autopilot's link needs (docs/flight_controller.md, "A lossy link"). Torque mode, and
+    # the values below: the law as first written; a scenario writes them to fly that in attitude mode.
+    #
     # Attitude mode only (amcore.offboard): where the arm law's body-torque estimate takes the
     # last period's thrust and joint torques from. "sent": what the companion sent (the law
     # as first written); "reported": what the autopilot reports it flies (ATTITUDE_TARGET's
@@ -228,14 +234,21 @@ class ControllerOptions:
     offboard_inputs: str = "sent"
     # Attitude mode only: bandwidth [Hz] of the body-torque estimate. 0: the gyro's backward
     # difference over one control period (as first written); > 0: that estimate through a
-    # 2nd-order Butterworth low-pass at this cutoff (amcore.offboard).
+    # 2nd-order Butterworth low-pass at this cutoff (amcore.offboard); attitude mode's 40 Hz is
+    # PX4's IMU_GYRO_CUTOFF default, not tuned.
     offboard_torque_cutoff_hz: float = 0.0
     # Beyond the paper (amcore.law.discrete_damping): eq. u3's task damping D_y as the damping
     # that, held over one control period, does what the continuous damper does in that time.
     # A mode with little task inertia (the pad's pitch, Lambda_y ~2.4e-4) and Lambda_y^-1 D_y dt
     # near 2 rings at half the control rate; a setpoint lost on the link (held two periods)
-    # then makes it grow. false: D_y as the paper writes it.
+    # then makes it grow. false: D_y as the paper writes it (torque mode's default: its
+    # scenarios run the companions at 1 kHz, where they hold; docs/flight_controller.md).
     discrete_damping: bool = False
+    # Attitude mode only, beyond the paper (amcore.offboard): the link's one-way latency [s] from
+    # a setpoint leaving the companion to the vehicle acting on it, as measured on that link; > 0:
+    # eq. u3 acts on the task error predicted that far ahead from the commands in flight (a
+    # Smith predictor). 0: off (the measured error).
+    offboard_latency_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -330,7 +343,15 @@ class FlightControllerParams:
 
 
 FC_MODES = ("torque", "attitude")
+# [options] defaults that follow [flight_controller].mode (see ControllerOptions): a key the
+# vehicle or scenario file sets wins; a mode not listed takes ControllerOptions' own defaults.
+MODE_OPTION_DEFAULTS: dict[str, dict[str, object]] = {
+    "attitude": {"offboard_inputs": "reported", "offboard_torque_cutoff_hz": 40.0, "discrete_damping": True},
+}
 OFFBOARD_INPUTS = ("sent", "reported")  # [options].offboard_inputs
+# [options].offboard_latency_s at most [s]: half of PX4's default COM_OF_LOSS_T (1 s), after which the
+# autopilot leaves offboard; a longer delay is a lost link, not one to predict over
+OFFBOARD_LATENCY_MAX_S = 0.5
 
 
 @dataclass(frozen=True)
@@ -878,12 +899,19 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     if "rotors" in data:
         sub["rotors"] = _rotors(data["rotors"], f"{where}: [rotors]")
     for name, cls in (("task", TaskSpec), ("gains", Gains),
-                      ("safety", Safety), ("options", ControllerOptions), ("pad", PadSpec),
+                      ("safety", Safety), ("pad", PadSpec),
                       ("baseline", BaselineGains), ("flight_controller", FlightControllerParams)):
         if name in data:
             sub[name] = cls(**_build(cls, data[name], f"{where}: [{name}]"))
         elif name in ("rotors", "task", "gains"):
             raise ConfigError(f"{where}: missing table [{name}]")
+    mode = sub.get("flight_controller", FlightControllerParams()).mode
+    options = data.get("options", {})
+    if not isinstance(options, dict):
+        raise ConfigError(f"{where}: [options] must be a table")
+    # the mode's defaults under the keys the files set (MODE_OPTION_DEFAULTS): resolved here only
+    sub["options"] = ControllerOptions(**_build(ControllerOptions, {**MODE_OPTION_DEFAULTS.get(mode, {}), **options},
+                                                f"{where}: [options]"))
     urdf = (path.parent / kw.pop("urdf")).resolve()
     if not urdf.is_file():
         raise ConfigError(f"{where}: [vehicle].urdf: file not found: {urdf}")
@@ -941,6 +969,9 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     if not v.options.offboard_torque_cutoff_hz >= 0.0:
         raise ConfigError(f"{where}: [options].offboard_torque_cutoff_hz: must be >= 0 (0: backward difference), "
                           f"got {v.options.offboard_torque_cutoff_hz!r}")
+    if not 0.0 <= v.options.offboard_latency_s <= OFFBOARD_LATENCY_MAX_S:
+        raise ConfigError(f"{where}: [options].offboard_latency_s: must be in [0, {OFFBOARD_LATENCY_MAX_S:g}] s "
+                          f"(0: no prediction), got {v.options.offboard_latency_s!r}")
     if v.options.controller not in CONTROLLERS:
         raise ConfigError(f"{where}: [options].controller: unknown controller '{v.options.controller}' "
                           f"(known: {', '.join(CONTROLLERS)})")

@@ -53,6 +53,17 @@ vehicle actually receives is unknown to the companion. Two things change.
      estimate of the body torque with a stated bandwidth, its noise and its lag the filter's.
      (The filter's own derivative, sampled at the control steps, would read a ramp ~8 % low
      at 40 Hz and 250 Hz: its input is held over each period.)
+   - offboard_latency_s = L > 0 (off by default): the link's one-way latency, from a
+     setpoint leaving the companion to the vehicle acting on it, as measured on the vehicle's
+     link. The command computed at t_k acts from t_k + L, so eq. u3 is evaluated at the task
+     error predicted for then (a Smith predictor in task space): from the measured y~, y~' at
+     t_k, with y~'' piecewise constant, each command j sent at t_j making
+         a_j = Lambda_y^-1 (F_y - D_y y~'_j - K_y sat(y~_j))        (eq. desired_task_behavior)
+     from t_j + L until the next one acts (`predicted_task_error`). The prediction enters as a
+     shift of the task reference, y_d - (y^~ - y~) and y_d' - (y^~' - y~'), so the law itself
+     is unchanged; it costs a second evaluation of `step` (the first gives y~' at t_k). The
+     base's loops are not predicted (their bandwidth is some ten times lower). A lost setpoint
+     leaves its predecessor acting where the prediction assumed it arrived.
 
 2. The wrench bookkeeping. Eq. ori_controller's -F_wb is applied by no one now (the
    autopilot's integrator takes up a steady external moment); the measured wrench enters
@@ -83,14 +94,17 @@ BUTTERWORTH_ZETA = 1.0 / math.sqrt(2.0)
 @dataclass(frozen=True)
 class OffboardParams:
     """The attitude-mode options (module doc): inputs "sent" or "reported"; torque_cutoff_hz
-    0 (backward difference) or the estimate's bandwidth [Hz]."""
+    0 (backward difference) or the estimate's bandwidth [Hz]; latency_s 0 (no prediction) or
+    the link's one-way latency [s]."""
 
     inputs: str = "sent"
     torque_cutoff_hz: float = 0.0
+    latency_s: float = 0.0  # > 0: eq. u3 at the task error predicted this far ahead [s] (module doc)
 
     @staticmethod
     def from_vehicle(v: VehicleParams) -> "OffboardParams":
-        return OffboardParams(v.options.offboard_inputs, v.options.offboard_torque_cutoff_hz)
+        o = v.options
+        return OffboardParams(o.offboard_inputs, o.offboard_torque_cutoff_hz, o.offboard_latency_s)
 
     @cached_property
     def torque_filter(self) -> LowPass2 | None:
@@ -117,6 +131,9 @@ class OffboardMemory:
     tau_q_nm: np.ndarray | None = None  # the joint torques sent [N m]
     w_filter: FilterState | None = None  # offboard_torque_cutoff_hz > 0: LP(w_b)
     r_filter: FilterState | None = None  # ... and LP(r) (module doc)
+    # offboard_latency_s > 0: (t_j [s], a_j) of the commands that may still act in the window
+    # [t, t + L], oldest first, a_j the task-error acceleration each commanded (module doc)
+    pending: tuple[tuple[float, np.ndarray], ...] = ()
 
 
 @dataclass
@@ -200,6 +217,38 @@ def joint_torques_for_body_torque(res: StepResult, tau_b: np.ndarray) -> np.ndar
     return c.tau_q_nm - linalg3.solve(A, rhs)
 
 
+def predicted_task_error(y_err: np.ndarray, ydot_err: np.ndarray, pending, t_s: float, latency_s: float
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """(y~, y~') at t_s + latency_s [task units, per s], from the measured ones at t_s and the
+    commands `pending`, (t_j, a_j) oldest first: a_j [per s^2] acts from t_j + latency_s until the
+    next command acts (zero before the first). Exact for that piecewise-constant y~''."""
+    y, v = np.array(y_err, dtype=float), np.array(ydot_err, dtype=float)
+    end = t_s + latency_s
+    starts = [t_j + latency_s for t_j, _ in pending]
+    cuts = sorted({t_s, end, *(t for t in starts if t_s < t < end)})
+    for t0, t1 in zip(cuts, cuts[1:]):
+        acting = [a_j for (_, a_j), start in zip(pending, starts) if start <= t0]
+        h = t1 - t0
+        if acting:
+            a = np.asarray(acting[-1])
+            y += v * h + 0.5 * a * (h * h)
+            v += a * h
+        else:
+            y += v * h
+    return y, v
+
+
+def commanded_task_acceleration(params: ControllerParams, res: StepResult, ydot_err: np.ndarray) -> np.ndarray:
+    """a = Lambda_y^-1 (F_y - D y~' - K_y sat(y~)) [per s^2]: the task-error acceleration the
+    step's command makes (eq. desired_task_behavior), D the damping eq. u3 used (D_y, or its
+    discretized form with [options].discrete_damping)."""
+    d = res.diagnostics
+    L = d.Lambda_y
+    D = law.discrete_damping(L, params.D_y, params.damping_dt) if params.damping_dt > 0.0 else params.D_y
+    spring = params.K_y.dot(np.clip(d.y_err, -params.y_err_max, params.y_err_max))
+    return np.linalg.solve(L, d.F_y - D.dot(ydot_err) - spring)
+
+
 def offboard_step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmState, ref: Reference,
                   wrench_E: np.ndarray, memory: OffboardMemory, t_s: float,
                   task_frame: TaskFrame | None = None, oparams: OffboardParams = OffboardParams(),
@@ -213,6 +262,17 @@ def offboard_step(model: AmModel, data: pin.Data, params: ControllerParams, stat
     compiled call), else as the numpy functions above (the form the tests compare it with;
     the two agree to rounding)."""
     res = step(model, data, params, state, ref, wrench_E, memory.controller, t_s, task_frame)
+    pending = ()
+    if oparams.latency_s > 0.0:  # eq. u3 at the error predicted for when this command acts
+        d0 = res.diagnostics
+        y_d, y_err, ydot_err = ref.y, d0.y_err.copy(), d0.ydot - ref.y_d1
+        y_p, v_p = predicted_task_error(y_err, ydot_err, memory.pending, t_s, oparams.latency_s)
+        res = step(model, data, params, state, ref._replace(y=y_d - (y_p - y_err), y_d1=ref.y_d1 - (v_p - ydot_err)),
+                   wrench_E, memory.controller, t_s, task_frame)
+        acting = [p for p in memory.pending if p[0] + oparams.latency_s <= t_s][-1:]  # the one acting at t_s
+        coming = [p for p in memory.pending if p[0] + oparams.latency_s > t_s]
+        pending = tuple(acting + coming + [(t_s, commanded_task_acceleration(params, res, v_p))])
+        res.diagnostics.y_d, res.diagnostics.y_err = y_d, y_err  # the reports keep the measured error
     c, d = res.command, res.diagnostics
     reported = applied if oparams.inputs == "reported" else None
     if compiled:
@@ -232,7 +292,7 @@ def offboard_step(model: AmModel, data: pin.Data, params: ControllerParams, stat
         d.u = d.terms.T_inv.T.dot(tau)
     d.tau = tau  # the bookkeeping: what the vehicle received (u = T^-T tau above)
     cmd = Command(c.thrust_n, tau[3:6], tau[6:])
-    mem = OffboardMemory(res.memory, t_s, tuple(state.w_B.tolist()), c.thrust_n, cmd.tau_q_nm, w_f, r_f)
+    mem = OffboardMemory(res.memory, t_s, tuple(state.w_B.tolist()), c.thrust_n, cmd.tau_q_nm, w_f, r_f, pending)
     return OffboardResult(StepResult(cmd, d, res.memory), mem, cmd.tau_B_nm if estimated else None)
 
 

@@ -308,6 +308,37 @@ def test_attitude_mode_options_are_checked(tmp_path, old, new, words):
     assert words in str(e.value) and "v.toml" in str(e.value)
 
 
-def test_the_paper_s_law_is_the_default_in_attitude_mode():
-    o = load_vehicle(VEHICLE).options
-    assert (o.offboard_inputs, o.offboard_torque_cutoff_hz, o.discrete_damping) == ("sent", 0.0, False)
+LITERAL = ("sent", 0.0, False)  # the law as first written ([options] offboard_inputs, offboard_torque_cutoff_hz, discrete_damping)
+SAMPLED = ("reported", 40.0, True)  # attitude mode's defaults (amcore.config.MODE_OPTION_DEFAULTS)
+
+
+def _sampling(spec_or_vehicle) -> tuple:
+    o = getattr(spec_or_vehicle, "vehicle", spec_or_vehicle).options
+    return o.offboard_inputs, o.offboard_torque_cutoff_hz, o.discrete_damping
+
+
+def test_the_sampling_options_default_by_mode_and_a_file_s_own_values_win(tmp_path):
+    """Torque mode keeps the paper's law; attitude mode defaults to the autopilot's reports, the
+    40 Hz estimate and the discretized damping; a scenario that writes the literal values (all
+    three, or one of them) flies them, and the mode's defaults fill only what it leaves unset."""
+    from amcore.config import ControllerOptions
+
+    scenarios = ROOT / "configs" / "scenarios"
+    assert _sampling(load_vehicle(VEHICLE)) == LITERAL  # the vehicle file says mode = "torque"
+    assert (ControllerOptions().offboard_inputs, ControllerOptions().offboard_torque_cutoff_hz,
+            ControllerOptions().discrete_damping) == LITERAL
+    assert _sampling(load_scenario(scenarios / "two_am_comp.toml")) == LITERAL
+    assert _sampling(load_scenario(scenarios / "two_am_comp_attitude.toml")) == SAMPLED
+    attitude = BASE.replace("rate_hz = 1000.0", "rate_hz = 1000.0\ncontrol_rate_hz = 250.0").replace(
+        "[object]", '[flight_controller]\nmode = "attitude"\n[object]')
+    assert _sampling(load_scenario(_write(tmp_path, attitude))) == SAMPLED
+    literal = attitude + '\n[options]\noffboard_inputs = "sent"\noffboard_torque_cutoff_hz = 0.0\ndiscrete_damping = false\n'
+    assert _sampling(load_scenario(_write(tmp_path, literal))) == LITERAL
+    one = attitude + "\n[options]\ndiscrete_damping = false\n"
+    assert _sampling(load_scenario(_write(tmp_path, one))) == ("reported", 40.0, False)
+    # a vehicle file in attitude mode takes the same defaults, and its own values win over them
+    v = _vehicle_with(tmp_path, QUAD_ROWS.replace('mode = "torque"', 'mode = "attitude"'))
+    assert _sampling(load_vehicle(v)) == SAMPLED
+    v = _vehicle_with(tmp_path, QUAD_ROWS.replace('mode = "torque"', 'mode = "attitude"').replace(
+        "\n[options]\n", '\n[options]\noffboard_inputs = "sent"\n'))
+    assert _sampling(load_vehicle(v)) == ("sent", 40.0, True)

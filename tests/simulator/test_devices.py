@@ -272,7 +272,7 @@ def test_the_autopilot_rate_is_the_gyro_less_its_estimated_bias_unfiltered():
 
 def test_attitude_mode_with_devices_flies_its_rate_loop_without_saturating():
     """The emulated autopilot on the hexarotor with every device at its default level, the
-    companion with the attitude-mode options: its take-off saturates the rotors on less than the
+    companion with attitude mode's default options: its take-off saturates the rotors on less than the
     verdict's 5 % of the steps (measured: 0 and 59 of 1500, the 59 in the first 70 ms on the
     ground, rotors near idle, before the estimator has the turn-on gyro bias). Fed the odometry's
     low-passed rate, which it filtered a second time, the rate loop oscillated: 552 of 1500."""
@@ -286,7 +286,6 @@ def test_attitude_mode_with_devices_flies_its_rate_loop_without_saturating():
     data = _read_toml(path)
     data["devices"] = load_randomize(root / "configs" / "randomize" / "default.toml").devices
     data["scenario"]["seed"] = 17
-    data["options"] = {"offboard_inputs": "reported", "discrete_damping": True, "offboard_torque_cutoff_hz": 40.0}
     res = inprocess.run(scenario_from_dict(data, path), duration_s=1.5)
     for s, am in res["ams"].items():
         assert am["rotor_saturated_steps"] < 75, (s, am["axis_saturated_steps"])

@@ -10,6 +10,20 @@ from .runner import SCENARIOS, am_run
 
 pytestmark = pytest.mark.sitl
 
+# attitude mode's sampling options at the law's literal form (they default to "reported", 40 Hz and
+# the discretized damping in attitude mode: amcore.config.MODE_OPTION_DEFAULTS)
+LITERAL_OPTIONS = '\n[options]\noffboard_inputs = "sent"\noffboard_torque_cutoff_hz = 0.0\ndiscrete_damping = false\n'
+
+
+def _attitude_scenario(tmp_path, name: str, text_edit=lambda t: t, literal: bool = False):
+    """two_am_comp_attitude.toml copied to tmp_path/name (its vehicle path made absolute), edited,
+    with the literal options appended if `literal`."""
+    text = (SCENARIOS / "two_am_comp_attitude.toml").read_text().replace(
+        'vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{SCENARIOS.parent / "vehicles" / "am3dof.toml"}"')
+    path = tmp_path / name
+    path.write_text(text_edit(text) + (LITERAL_OPTIONS if literal else ""))
+    return path
+
 
 def test_in_process_run_is_bit_identical_to_the_multi_process_one(tmp_path):
     spec = load_scenario(SCENARIOS / "two_am_comp.toml")
@@ -43,15 +57,15 @@ def test_an_actuation_delay_is_bit_identical_in_process_and_through_the_processe
     """[flight_controller].actuation_delay_steps: the UDP simulator steps physics while the
     companions compute, and their setpoints act d steps after their frames; the in-process
     runner applies them at the same steps, so the two agree bit for bit, and the run differs
-    from one without the delay (the delay acts)."""
-    text = (SCENARIOS / "two_am_comp_attitude.toml").read_text().replace(
-        'vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{SCENARIOS.parent / "vehicles" / "am3dof.toml"}"')
-    path = tmp_path / "delayed.toml"
-    path.write_text(text.replace('mode = "attitude"', f'mode = "attitude"\nactuation_delay_steps = {delay}', 1))
+    from one without the delay (the delay acts). The law at its literal form, whose failure a
+    whole period late is pinned below."""
+    path = _attitude_scenario(tmp_path, "delayed.toml", literal=True, text_edit=lambda t: t.replace(
+        'mode = "attitude"', f'mode = "attitude"\nactuation_delay_steps = {delay}', 1))
     spec = load_scenario(path)
     assert spec.vehicle.flight_controller.actuation_delay_steps == delay
+    assert spec.vehicle.options.offboard_inputs == "sent" and not spec.vehicle.options.discrete_damping
     ours = run(spec, duration_s=0.4)
-    plain = run(load_scenario(SCENARIOS / "two_am_comp_attitude.toml"), duration_s=0.4)
+    plain = run(load_scenario(_attitude_scenario(tmp_path, "plain.toml", literal=True)), duration_s=0.4)
     assert ours["state_digest"] != plain["state_digest"]
     sitl = am_run(str(path), tmp_path / "r", "--duration", "0.4", "--no-telemetry", timeout_s=300)
     # a whole period late the literal attitude-mode law's joint torques diverge (docs/flight_controller.md,
@@ -67,8 +81,7 @@ def test_an_actuation_delay_is_bit_identical_in_process_and_through_the_processe
 
 @pytest.mark.parametrize("scenario,options", [
     ("two_am_comp.toml", {}),
-    ("two_am_comp_attitude.toml", {"offboard_inputs": "reported", "offboard_torque_cutoff_hz": 40.0,
-                                   "discrete_damping": True}),
+    ("two_am_comp_attitude.toml", {}),  # attitude mode's defaults: the reports, the 40 Hz estimate
 ], ids=["torque", "attitude"])
 def test_a_drawn_trial_is_bit_identical_in_process_and_through_the_processes(tmp_path, scenario, options):
     """A trial of the stress randomization (sensor devices and the estimator at twice their
@@ -153,17 +166,25 @@ def test_baseline_squeezes_two_am_robusts_object_with_the_planned_force():
         assert out["ams"][str(s)]["base_contacts"] == []
 
 
-def test_attitude_mode_in_process_run_is_bit_identical_to_the_multi_process_one(tmp_path):
+@pytest.mark.parametrize("literal", [False, True], ids=["defaults", "literal"])
+def test_attitude_mode_in_process_run_is_bit_identical_to_the_multi_process_one(tmp_path, literal):
     """Attitude mode at 250 Hz: the lockstep exchanges on control steps only, the emulated
-    autopilot flies between them; SET_ATTITUDE_TARGET's float32 rounding is the same in both."""
-    spec = load_scenario(SCENARIOS / "two_am_comp_attitude.toml")
+    autopilot flies between them; SET_ATTITUDE_TARGET's float32 rounding is the same in both.
+    With its default options and with the law's literal form ("sent", 0, false), which still
+    flies (no refusal, no failsafe) and is another run (the options act)."""
+    path = _attitude_scenario(tmp_path, "attitude.toml", literal=literal)
+    spec = load_scenario(path)
+    assert spec.vehicle.options.discrete_damping is not literal
     ours = run(spec, duration_s=0.4)
-    sitl = am_run("two_am_comp_attitude.toml", tmp_path / "r", "--duration", "0.4", "--no-telemetry", timeout_s=300)
+    sitl = am_run(str(path), tmp_path / "r", "--duration", "0.4", "--no-telemetry", timeout_s=300)
     assert sitl.code == 0, sitl.stderr
     assert ours["steps"] == sitl.outcome["steps"] == 400
     assert ours["flight_controller"] == sitl.outcome["flight_controller"] == "attitude"
     assert ours["fc_link"]["4"]["sent"] == sitl.outcome["fc_link"]["4"]["sent"] == 100  # one setpoint per 4 steps
     assert ours["state_digest"] == sitl.outcome["state_digest"]
+    assert ours["rejected_setpoints"] == sitl.outcome["rejected_setpoints"] == 0 and ours["events"] == []
+    other = run(load_scenario(_attitude_scenario(tmp_path, "other.toml", literal=not literal)), duration_s=0.4)
+    assert other["state_digest"] != ours["state_digest"]
 
 
 def test_a_world_in_physics_substeps_is_bit_identical_in_process_and_through_the_processes(tmp_path):

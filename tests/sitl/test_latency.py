@@ -1,0 +1,31 @@
+"""A link that delays every setpoint ([link].delay_s, jitter_s) and the arm law's prediction over
+it ([options].offboard_latency_s, amcore.offboard): in the in-process SITL, the law on the
+measured error sends implausible joint torques within half a second, the law on the predicted
+error none (docs/flight_controller.md, "Latency")."""
+from __future__ import annotations
+
+import pytest
+
+from amcore.config import load_scenario
+from simulator.inprocess import run
+
+from .runner import SCENARIOS
+
+pytestmark = pytest.mark.sitl
+
+
+def _delayed(tmp_path, latency_s: float):
+    text = (SCENARIOS / "two_am_comp_attitude.toml").read_text().replace(
+        'vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{SCENARIOS.parent / "vehicles" / "am3dof.toml"}"')
+    path = tmp_path / f"delayed-{latency_s}.toml"
+    path.write_text(text + f"\n[link]\ndelay_s = 0.005\njitter_s = 0.002\n\n[options]\noffboard_latency_s = {latency_s}\n")
+    return load_scenario(path)
+
+
+def test_a_prediction_over_the_link_s_latency_keeps_the_arm_s_torques_plausible(tmp_path):
+    blind = run(_delayed(tmp_path, 0.0), duration_s=0.5)
+    assert blind["fc_link"]["4"]["delayed"] == blind["fc_link"]["4"]["sent"] > 0  # every setpoint came late
+    assert blind["rejected_setpoints"] > 0
+    predicted = run(_delayed(tmp_path, 0.006), duration_s=0.5)
+    assert predicted["rejected_setpoints"] == 0 and predicted["events"] == []
+    assert predicted["verdict"]["status"] == "incomplete"  # nothing failed
