@@ -14,10 +14,12 @@ from __future__ import annotations
 
 import time
 
-from amlink.offboard_handshake import OffboardHandshake, control_streams
+from amlink.offboard_handshake import (MSG_ATTITUDE_QUATERNION, MSG_ATTITUDE_TARGET, MSG_ODOMETRY, OffboardHandshake,
+                                      control_streams)
 from amlink.px4link import Px4Link
 
 TYPE_MASK = 0
+ENGAGE_TIMEOUT_S = 6.0
 
 
 class Autopilot:
@@ -29,7 +31,10 @@ class Autopilot:
     @classmethod
     def for_rate(cls, link: Px4Link, control_rate_hz: float, type_mask: int = TYPE_MASK) -> "Autopilot":
         """The handshake asking for the control streams at the loop's rate (the autopilot caps them)."""
-        return cls(link, OffboardHandshake(control_streams(control_rate_hz)), type_mask)
+        # what the loop reads: not HIGHRES_IMU (the law takes the autopilot's estimate, not its raw IMU)
+        streams = control_streams(control_rate_hz, (MSG_ODOMETRY, MSG_ATTITUDE_QUATERNION, MSG_ATTITUDE_TARGET))
+        # the engage shows in a HEARTBEAT, 1 Hz of the autopilot's clock: 6 s leaves room for a SITL at 0.5x
+        return cls(link, OffboardHandshake(streams, engage_timeout_s=ENGAGE_TIMEOUT_S), type_mask)
 
     def open(self) -> None:
         self.link.open()

@@ -106,6 +106,13 @@ class Pilot:
         values = [*x.p_WB, *R_to_quat_wxyz(x.R_WB), *x.v_B, *x.w_B, *x.q, *x.qdot, *_NO_WRENCH]
         for k in range(2):
             twin.step(sensor_frame_from_wire(k, k * self.spec.control_dt_s, values, self.model.n, 0))
+        # a free-running flight's first step: the take-off's blend (join_blend's terms and profile)
+        take = Pilot(self.spec, self.am.sysid, model=self.model, object_pose=self.object_pose)
+        x_low = [*values]
+        x_low[2] -= 0.5
+        take.start_takeoff(x_low, -3.0, 3.0)
+        for k in range(2):
+            take.command(sensor_frame_from_wire(k, -3.0 + k * self.spec.control_dt_s, x_low, self.model.n, 0))
         if twin._adapts:  # the options' compiled shaping acts from the first contact on (amcore.adapt.adapted)
             m = twin.mission
             adapted(m.reference(0.0), m.frame, twin.trim_dr, HeadingState(1e-3), m.contact_point_W, LateralState(1e-3))

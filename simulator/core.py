@@ -128,9 +128,12 @@ def kernel_group(spec: ScenarioSpec):
 class SitlCore:
     def __init__(self, spec: ScenarioSpec, log: Callable[[str], None] = lambda _msg: None,
                  on_truth: Callable[[object], None] | None = None,
-                 failsafe_after_rejected: int | None = None) -> None:
+                 failsafe_after_rejected: int | None = None,
+                 initial: Mapping[int, AmState] | None = None) -> None:
         """failsafe_after_rejected: K of the rejection policy (module docstring); None: the
-        scenario's [flight_controller].failsafe_after_rejected."""
+        scenario's [flight_controller].failsafe_after_rejected. initial: each vehicle's start
+        (sysid -> state; None: `initial_state`, the mission's start; the free-running
+        simulator starts them on the ground, simulator.freerun)."""
         self.spec, self.log, self.on_truth = spec, log, on_truth
         self._truth_every = truth_every(spec.rate_hz)
         K = spec.vehicle.flight_controller.failsafe_after_rejected if failsafe_after_rejected is None \
@@ -143,7 +146,8 @@ class SitlCore:
         # [mission].object_pose = "mocap": the team plans from the motion capture's first frame of the
         # object, and each vehicle starts where its plan starts (it has flown there before the run)
         self.object_pose = measure_object(spec) if spec.mission.object_pose == "mocap" else None
-        self.world = World(spec, {am.sysid: initial_state(spec, am, self.model, self.object_pose) for am in spec.ams})
+        self.world = World(spec, dict(initial) if initial is not None else
+                           {am.sysid: initial_state(spec, am, self.model, self.object_pose) for am in spec.ams})
         self._phase = am_mission(spec, spec.ams[0], self.model).phase  # the phases are timed alike for every AM
         ms = spec.mission
         self.outcome = RunOutcome(self.sysids, (ms.grasp_end_s + ms.lift_move_s + 1.0, ms.hover_end_s),

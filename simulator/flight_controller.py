@@ -232,6 +232,16 @@ class FlightController:
             return self._s[fc_kernels.S_RATE_INT:fc_kernels.S_RATE_INT + 3].tolist()
         return self._rate_int
 
+    @rate_int.setter
+    def rate_int(self, values) -> None:
+        """Set the integral (the free-running autopilot keeps it while landed, as PX4's
+        RateControl::update(..., landed) does not integrate on the ground)."""
+        v = [float(x) for x in values]
+        if self.compiled:
+            self._s[fc_kernels.S_RATE_INT:fc_kernels.S_RATE_INT + 3] = v
+        else:
+            self._rate_int = v
+
     def _update_compiled(self, q, w, target) -> FcOutput:
         """`_update` with steps 1 and 2 compiled (simulator.fc_kernels), taking the last
         allocation's saturation there; step 3 compiled in `amcore.allocation_kernels`."""

@@ -18,6 +18,16 @@ simulator.outcome, and the mission verdict, simulator.verdict) and gcs.tlog. Exi
 run complete and its mission a success (or not failed so far, when --duration cut the
 mission short), 4 the mission failed (the verdict names the criterion and when), 2 bad
 configuration, 1 link failure (a missing or silent companion, named), 130 interrupted.
+
+    simulator --realtime [--speed F] [--onboard ENDPOINT]... [--duration S]
+
+runs it free-running instead (simulator.freerun): physics paced to the wall clock (F times real
+time), each vehicle played as PX4 SITL on its onboard MAVLink port (vehicle i: bind
+127.0.0.1:14580+i, send to 127.0.0.1:14540+i, or --onboard per vehicle), flown by any PX4
+offboard program; the arm by its own bus. It prints the ports at the start and the deadline
+misses and worst lateness at the end; outcome.json says the same and more. Without --duration it
+ends when the mission clock (first OFFBOARD engage + amcore.mission.TAKEOFF_S) reaches
+[scenario].duration_s. Exit codes as above; 1 also when no vehicle engaged OFFBOARD.
 """
 from __future__ import annotations
 
@@ -44,6 +54,8 @@ from telemetry.session import TelemetryConfigError, add_zenoh_arguments, options
 from telemetry.wiring import SimulatorTelemetry
 
 from .core import SitlCore, kernel_group
+from .freerun import FreeRun, endpoints_for
+from .px4.port import PortError
 from .gcs import GcsSession, snapshot_every
 from .gcs_link import GcsLink
 from .progress import SimBar
@@ -122,8 +134,24 @@ def main(argv: list[str] | None = None) -> int:
                     help="signing master key (64 hex digits); overrides [link].key_file of the scenario")
     ap.add_argument("--progress", choices=("bar", "jsonl", "none"), default=None,
                     help="progress display (default: bar on a terminal, else none)")
+    ap.add_argument("--realtime", action="store_true",
+                    help="free-running: physics paced to the wall clock, each vehicle played as PX4 SITL on its "
+                         "onboard MAVLink port (simulator.freerun); any PX4 offboard program flies it")
+    ap.add_argument("--speed", type=cliargs.number(0.0, lo_open=True), default=None, metavar="F",
+                    help="free-running real-time factor (implies --realtime; default 1.0)")
+    ap.add_argument("--mission-start", type=cliargs.seconds, default=None, metavar="S",
+                    help="free-running: the autopilots' boot time [s] of the mission's t = 0, as the companions are "
+                         "told (companion --mission-start); default: the first OFFBOARD engage + 3 s of take-off")
+    ap.add_argument("--onboard", action="append", metavar="ENDPOINT",
+                    help="free-running: vehicle i's onboard port, repeatable, one per [[am]] in order (default PX4 "
+                         "SITL's: bind 127.0.0.1:14580+i, send to 127.0.0.1:14540+i); udpout:HOST:PORT or "
+                         "udpin:HOST:PORT")
     add_zenoh_arguments(ap, role="publisher")
     a = ap.parse_args(argv)
+    if a.speed is not None:
+        a.realtime = True
+    if a.onboard and not a.realtime:
+        return cliargs.fail("simulator", "--onboard needs --realtime (the lockstep's companions use --bind)")
     try:
         binds = [parse_endpoint(b) for b in (a.bind or [SIM_BIND])]
     except EndpointError as exc:
@@ -142,6 +170,13 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, signing.SigningKeyError) as exc:
         print(f"simulator: error: {exc}", file=sys.stderr)
         return 2
+    if a.realtime:  # the PX4 ports are unsigned (as PX4 SITL's); the lockstep's link and GCS are not used
+        if a.duration is not None:
+            try:
+                check_duration(spec, a.duration, "--duration")
+            except ConfigError as exc:
+                return cliargs.fail("simulator", str(exc))
+        return _main_freerun(a, spec)
     if warning:
         print(f"simulator: warning: {warning}", file=sys.stderr)
     if keys is not None and gcs_key is None and gcs_endpoint is not None:
@@ -320,6 +355,100 @@ def main(argv: list[str] | None = None) -> int:
     print(f"simulator: {said}; {sim_time:.3f} s simulated in {wall:.1f} s; outcome in {run_dir / 'outcome.json'}",
           file=sys.stderr)
     return code
+
+
+def _main_freerun(a, spec) -> int:
+    """--realtime: the free-running simulator (simulator.freerun), wired: its ports, the run,
+    outcome.json. Exit codes as the lockstep's; 1 also when no vehicle engaged OFFBOARD."""
+    try:
+        endpoints = endpoints_for(spec, a.onboard)
+        arms, wrists, mocap = freerun_devices(spec)
+        run = FreeRun(spec, endpoints, speed=a.speed or 1.0, arms=arms, wrist_sensors=wrists, mocap=mocap,
+                      mission_t0_s=a.mission_start,
+                      log=lambda msg: print(f"simulator: {msg}", file=sys.stderr, flush=True))
+    except (PortError, ValueError) as exc:
+        return cliargs.fail("simulator", str(exc))
+    run_dir = a.run_dir or Path("runs") / f"{spec.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        return cliargs.fail("simulator", f"--run-dir {run_dir}: cannot write there: {exc.strerror or exc}")
+    signal.signal(signal.SIGTERM, _on_signal)
+    signal.signal(signal.SIGINT, _on_signal)
+    status, code, result = "run complete", 0, {}
+    try:
+        jit = jitcache.warm_groups([kernel_group(spec)])
+        if jit.compiled:
+            print(f"simulator: compiled the simulator's kernels in {jit.seconds:.1f} s", file=sys.stderr, flush=True)
+        run.open()
+        ports = "; ".join(f"sysid {p.sysid}: {p.describe()}" for p in run.ports)
+        print(f"simulator: '{spec.name}' free-running at {run.speed:g}x real time; PX4 onboard ports: {ports}",
+              file=sys.stderr, flush=True)
+        buses = "; ".join(f"sysid {s}: servo bus tcp:{arm.address[0]}:{arm.address[1]}, F/T udp:{ft.address[0]}:"
+                          f"{ft.address[1]}" for s, arm, ft in zip(run.sysids, arms, wrists))
+        print(f"simulator: devices: {buses}" + (f"; motion capture udp:{mocap.address[0]}:{mocap.address[1]}"
+                                                 if mocap is not None else ""), file=sys.stderr, flush=True)
+        progress_ready(a, spec, run, arms, wrists, mocap)
+        result = run.run(a.duration)
+        status = result["status"]
+        if status.startswith("no vehicle"):
+            code = 1
+        elif result["verdict"]["status"] == "failed":
+            code = MISSION_FAILED
+    except _Stop as stop:
+        status, code = f"interrupted by {stop}", 130
+    except OSError as exc:
+        status, code = str(exc), 1
+        print(f"simulator: error: {exc}", file=sys.stderr)
+    except Exception as exc:  # a bug: the outcome so far is still written, with the error
+        import traceback
+        traceback.print_exc()
+        status, code = f"internal error: {type(exc).__name__}: {exc}", 1
+    finally:
+        if not result and run.core is not None:
+            result = run.result()
+        run.close()
+    result = {"scenario": spec.name, "scenario_id": scenario_id(spec), **result, "status": status, "exit_code": code}
+    (run_dir / "outcome.json").write_text(json.dumps(result, indent=1))
+    timing = result.get("timing", {})
+    verdict = result.get("verdict", {}).get("text", "")
+    print(f"simulator: {status}; {verdict}; {result.get('sim_time_s', 0.0):.3f} s simulated in "
+          f"{result.get('wall_s') or 0.0:.1f} s; {timing.get('deadline_misses', 0)} deadline misses of "
+          f"{timing.get('steps', 0)} steps, worst lateness {1e3 * timing.get('worst_lateness_s', 0.0):.2f} ms; "
+          f"outcome in {run_dir / 'outcome.json'}", file=sys.stderr)
+    return code
+
+
+def freerun_devices(spec):
+    """Each vehicle's arm as a Dynamixel bus (simulator.servo_bus, TCP 7200+i) and wrist sensor
+    as a Net F/T (simulator.netft, UDP 49152+i), and the object's motion-capture stream
+    (simulator.mocap_stream, UDP 7400) when the scenario plans from it."""
+    from amlink.mocap_protocol import MOCAP_PORT
+
+    from . import netft, servo_bus
+    from .freerun import start_joints
+    from .mocap_stream import MocapStream
+    v, d = spec.vehicle, spec.devices
+    q0 = start_joints(spec)
+    noise = {"effort": d.effort, "noise_scale": d.scale} if d.enabled else {"noise_scale": 0.0}
+    arms = [servo_bus.ServoBus(v.n_joints, q0_rad=q0[am.sysid], torque_max_nm=v.joint_torque_max_nm, seed=spec.seed,
+                               sysid=am.sysid, endpoint=servo_bus.default_endpoint(i), **noise)
+            for i, am in enumerate(spec.ams)]
+    wrists = [netft.NetFtServer(rate_hz=spec.rate_hz, endpoint=netft.default_endpoint(i))  # a record per physics step
+              for i in range(len(spec.ams))]
+    mocap = MocapStream(endpoint=f"udpin:127.0.0.1:{MOCAP_PORT}") if spec.mission.object_pose == "mocap" else None
+    return arms, wrists, mocap
+
+
+def progress_ready(a, spec, run, arms, wrists, mocap) -> None:
+    """The ready event (--progress jsonl, for am-run): every endpoint a companion reaches."""
+    if a.progress != "jsonl":
+        return
+    print(json.dumps({"event": "ready", "realtime": True, "speed": run.speed, "scenario": spec.name,
+                      "sysids": run.sysids, "onboard": [p.describe() for p in run.ports],
+                      "arms": [f"tcp:{x.address[0]}:{x.address[1]}" for x in arms],
+                      "ft": [f"udp:{x.address[0]}:{x.address[1]}" for x in wrists],
+                      "mocap": None if mocap is None else f"udp:{mocap.address[0]}:{mocap.address[1]}"}), flush=True)
 
 
 def _told(first: dict) -> str:

@@ -403,6 +403,14 @@ class World:
             joints = joints[:-1]
         return [*p, *quat, *_mtv(R, v_W), *_mtv(R, w_W), *[j[0] for j in joints], *[j[1] for j in joints], *wrench]
 
+    def flight_values(self, sysid: int) -> list[float]:
+        """`sensor_values` without the wrist sensor's wrench: p_WB, quat_WB (w, x, y, z; w >= 0),
+        v_B, w_B, q, qdot on Python floats (the free-running simulator's per-step read of the
+        base and the joints, simulator.freerun; no F/T read)."""
+        c, am = self._c(), self._am(sysid)
+        p, quat, _, v_B, w_B, q, qdot = self._base_and_joints(c, sysid, am)
+        return [*p, *quat, *v_B, *w_B, *q, *qdot]
+
     def base_values(self, sysid: int) -> list[float]:
         """The first 13 of `sensor_values` (p_WB, quat_WB, v_B, w_B), the base alone: what an
         IMU and a motion capture see, without the arm's and the wrist sensor's reads."""
@@ -471,6 +479,11 @@ class World:
         m_E = (m_env[0] + ry * f_env[2] - rz * f_env[1], m_env[1] + rz * f_env[0] - rx * f_env[2],
                m_env[2] + rx * f_env[1] - ry * f_env[0])
         return [*_mtv(RE, f_env), *_mtv(RE, m_E)]
+
+    def object_pose(self) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+        """The object's pose now: p_W [m] and q_W (w, x, y, z)."""
+        p, (x, y, z, w) = pb.getBasePositionAndOrientation(self._object_id, physicsClientId=self._c())
+        return tuple(p), (w, x, y, z)
 
     def ground_truth(self) -> GroundTruth:
         c = self._c()

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import os
 import re
+import select
 import socket
 import time
 from collections.abc import Callable
@@ -42,6 +43,7 @@ from amlink.endpoint import SERIAL, TCP_OUT, EndpointError, parse_endpoint
 from . import DeviceError
 
 DXL_DEFAULT_BAUD = 57600  # X series factory Baud Rate(8) = 1
+READ_WAIT_S = 0.001  # TcpPortHandler.readPort's longest wait for bytes (the SDK re-checks its timeout after)
 TCP_NOMINAL_BAUD = 4_000_000  # what the SDK's byte-time arithmetic assumes over TCP
 _SDK_BAUDS = (9600, 19200, 38400, 57600, 115200, 230400, 460800, 500000, 576000, 921600, 1000000, 1152000, 2000000,
               2500000, 3000000, 3500000, 4000000)  # PortHandler.getCFlagBaud's list (dynamixel-sdk 4.1.0)
@@ -109,6 +111,14 @@ class TcpPortHandler(PortHandler):
         self.ser.reset_input_buffer()
         self.tx_time_per_byte = (1000.0 / self.baudrate) * 10.0
         return True
+
+    def readPort(self, length):  # noqa: N802 (the SDK's name)
+        """As the SDK's, but waiting up to READ_WAIT_S for bytes instead of returning none at once:
+        the SDK polls readPort in a loop until its packet timeout, which on a socket that has
+        nothing yet spins a core the simulator (or the rest of the companion) needs."""
+        if not self.ser.in_waiting:
+            select.select([self.ser.fileno()], [], [], READ_WAIT_S)
+        return self.ser.read(length)
 
 
 @dataclass(frozen=True)
