@@ -20,6 +20,7 @@ from amlink.px4link import Px4Link
 
 TYPE_MASK = 0
 ENGAGE_TIMEOUT_S = 6.0
+ANCHOR_MAX_NS = 50_000_000  # fc_time_us anchors on a sample at most this old [ns]
 
 
 class Autopilot:
@@ -56,7 +57,26 @@ class Autopilot:
         return tb.rate if tb.converged else None
 
     def fc_time_us(self, now_ns: int) -> float | None:
-        return self.link.fc_time_us(now_ns) if self.link.timebase.ready else None
+        """The autopilot's time now [us]: the newest sample's timestamp carried forward over the time
+        since it arrived (at the TIMESYNC rate) plus the link's one-way delay (half its round trip).
+        Anchoring on the newest sample, not on the TIMESYNC line alone, keeps a SITL whose clock
+        stalls and catches up (a loaded machine) from making every sample look stale: the line's
+        rate is a 3 s average, the anchor is at most a few milliseconds old. Before any sample,
+        or once the newest is older than the line's own word (a silent autopilot), the line."""
+        tb = self.link.timebase
+        if not tb.ready:
+            return None
+        line = self.link.fc_time_us(now_ns)
+        newest = None
+        for source in ("attitude", "odometry"):
+            s = self.link.store.latest(source)
+            if s is not None and s.fc_us is not None and (newest is None or s.rx_ns > newest.rx_ns):
+                newest = s
+        if newest is None or now_ns - newest.rx_ns > ANCHOR_MAX_NS:
+            return line
+        rate = tb.rate or 1.0
+        half_rtt_us = 0.5e-3 * (tb.rtt_ns or 0)
+        return newest.fc_us + (now_ns - newest.rx_ns) * 1e-3 * rate + half_rtt_us * rate
 
     def silent_for_s(self, now_ns: int) -> float:
         last = self.link.last_rx_ns if self.link.last_rx_ns is not None else self._opened_ns

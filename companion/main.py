@@ -95,6 +95,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--mocap", default=None, metavar="ENDPOINT",
                     help="--clock wall: the object's pose stream, when the scenario plans from it (default "
                          "udp:127.0.0.1:7400)")
+    ap.add_argument("--instance", type=cliargs.number(0, 1000, integer=True), default=0, metavar="N",
+                    help="--clock wall: the simulator's vehicles are PX4 SITL instances N+i (simulator --instance N); "
+                         "shifts every default endpoint by N")
     ap.add_argument("--mission-start", type=cliargs.seconds, default=None, metavar="S",
                     help="--clock wall: the autopilot's boot time [s] at which the mission's t = 0 comes (a team on "
                          "one clock starts together); default: 3 s of take-off after OFFBOARD is engaged")

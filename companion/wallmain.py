@@ -21,7 +21,7 @@ from .wallrun import WallRun, default_endpoints, fly
 
 def _endpoints(a, index: int) -> dict[str, str]:
     """The defaults for place `index`, overridden by --fc/--arm/--ft/--mocap; ValueError naming a bad one."""
-    eps = default_endpoints(index)
+    eps = default_endpoints(index, getattr(a, "instance", 0))
     for key in ("fc", "arm", "ft", "mocap"):
         given = getattr(a, key)
         if given is not None:

@@ -18,6 +18,7 @@ import time
 
 from amcore.mission import ObjectPose
 from amlink import dxl_protocol, px4, rdt_protocol
+from amlink.mocap_protocol import MOCAP_PORT
 from amlink.px4link import LinkOpenError, Px4Link
 
 from .autopilot import Autopilot
@@ -30,12 +31,14 @@ from .sampling import StalenessLimits
 from .wallclock import WallClockLoop
 
 
-def default_endpoints(index: int) -> dict[str, str]:
-    """The free-running simulator's endpoints of the AM at place `index` of [[am]]."""
-    return {"fc": f"udpin:0.0.0.0:{px4.onboard_port(index)}",
-            "arm": f"tcp:127.0.0.1:{dxl_protocol.servo_bus_port(index)}",
-            "ft": f"udp:127.0.0.1:{rdt_protocol.netft_port(index)}",
-            "mocap": MOCAP_DEFAULT}
+def default_endpoints(index: int, instance: int = 0) -> dict[str, str]:
+    """The free-running simulator's endpoints of the AM at place `index` of [[am]] (its vehicles
+    PX4 SITL instances `instance` + index)."""
+    i = instance + index
+    return {"fc": f"udpin:0.0.0.0:{px4.onboard_port(i)}",
+            "arm": f"tcp:127.0.0.1:{dxl_protocol.servo_bus_port(i)}",
+            "ft": f"udp:127.0.0.1:{rdt_protocol.netft_port(i)}",
+            "mocap": MOCAP_DEFAULT if instance == 0 else f"udp:127.0.0.1:{MOCAP_PORT + instance}"}
 
 
 class WallRun:

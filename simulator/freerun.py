@@ -52,6 +52,7 @@ reaches [scenario].duration_s, or after `duration_s` of simulated time if given.
 from __future__ import annotations
 
 import dataclasses
+import gc
 import math
 import select
 import time
@@ -117,6 +118,35 @@ class HoldJoints:
         self.last = (t_s, np.asarray(q), np.asarray(qdot), np.asarray(tau_nm))
 
 
+_LATE_NS = (100_000, 1_000_000, 10_000_000, 100_000_000)  # the Pacer's lateness bins [ns]
+
+
+class _GcTimer:
+    """A gc.callbacks entry timing Python's garbage collections (by generation) on `clock`
+    [ns]: a pause of the collector is a pause of the physics loop."""
+
+    def __init__(self, clock: Callable[[], int]) -> None:
+        self.clock = clock
+        self._t0 = 0
+        self.count = [0, 0, 0]
+        self.sum_ns = [0, 0, 0]
+        self.max_ns = [0, 0, 0]
+
+    def __call__(self, phase: str, info: dict) -> None:
+        if phase == "start":
+            self._t0 = self.clock()
+            return
+        g = info.get("generation", 0)
+        d = self.clock() - self._t0
+        self.count[g] += 1
+        self.sum_ns[g] += d
+        self.max_ns[g] = max(self.max_ns[g], d)
+
+    def to_dict(self) -> dict:
+        return {f"gen{g}": {"collections": self.count[g], "total_s": self.sum_ns[g] * 1e-9,
+                            "max_s": self.max_ns[g] * 1e-9} for g in range(3)}
+
+
 class Pacer:
     """Drift-free pacing: step k starts at deadline_k = t0 + k period_ns. `wait(k)` calls
     `serve(timeout_s)` (which may return early, on I/O) until the clock reaches deadline_k and
@@ -132,6 +162,7 @@ class Pacer:
         self.worst_ns = self.sum_ns = 0
         self.worst_step = -1
         self.busy_sum_ns = self.busy_max_ns = self._started = 0
+        self.late_counts = [0] * len(_LATE_NS)  # starts later than each of _LATE_NS
 
     def start(self) -> int:
         self.t0_ns = self.clock()
@@ -154,6 +185,9 @@ class Pacer:
             self.worst_ns, self.worst_step = late, k
         if late > self.period_ns:
             self.misses += 1
+        for i, limit in enumerate(_LATE_NS):
+            if late > limit:
+                self.late_counts[i] += 1
         return late
 
     def done(self) -> None:
@@ -167,7 +201,8 @@ class Pacer:
         return {"steps": self.steps, "deadline_misses": self.misses, "worst_lateness_s": self.worst_ns * 1e-9,
                 "worst_step": self.worst_step, "mean_lateness_s": self.sum_ns * 1e-9 / n,
                 "mean_step_compute_s": self.busy_sum_ns * 1e-9 / n, "max_step_compute_s": self.busy_max_ns * 1e-9,
-                "period_s": self.period_ns * 1e-9}
+                "period_s": self.period_ns * 1e-9,
+                "late_steps": {f">{limit * 1e-6:g} ms": c for limit, c in zip(_LATE_NS, self.late_counts)}}
 
 
 def start_joints(spec: ScenarioSpec, model=None) -> dict[int, np.ndarray]:
@@ -259,6 +294,7 @@ class FreeRun:
         self._v_prev: dict[int, tuple[float, float, float]] = {}
         self._targets: dict[int, tuple] = {}  # per vehicle: (setpoint, its AttitudeTarget)
         self.pacer: Pacer | None = None
+        self._gc: dict | None = None  # the run's garbage collections (`_GcTimer`)
         self._truth_every = truth_every(spec.rate_hz)
         self.mission_steps = 0
         self.status = ""
@@ -317,6 +353,8 @@ class FreeRun:
         dt_ns = 1e9 / spec.rate_hz
         self.pacer = Pacer(self.clock, dt_ns / self.speed, self._serve)
         wall0 = time.perf_counter()
+        gc_timer = _GcTimer(self.clock)
+        gc.callbacks.append(gc_timer)
         self.pacer.start()
         k = 0
         self.status = "run complete"
@@ -337,24 +375,39 @@ class FreeRun:
             if should_stop():
                 self.status = "stopped"
                 break
+        gc.callbacks.remove(gc_timer)
+        self._gc = gc_timer.to_dict()
         return self.result(time.perf_counter() - wall0)
 
-    def _serve(self, timeout_s: float) -> None:
+    def _readable(self, timeout_s: float) -> set[int]:
+        """The descriptors of the ports, arms and devices that select() finds readable within
+        timeout_s [s] (0: a look, no wait)."""
         fds = [p.fileno() for p in self.ports]
         for arm in [*self.arms.values(), *self._devices()]:
             fds.extend(getattr(arm, "fds", lambda: [])())
         try:
             readable, _, _ = select.select(fds, [], [], max(0.0, timeout_s))
         except InterruptedError:
-            return
-        if readable:
+            return set()
+        return set(readable)
+
+    def _poll_arms(self, now: float, ready: set[int]) -> None:
+        for arm in self.arms.values():
+            if hasattr(arm, "fds"):
+                arm.poll(now, ready)  # only what is readable costs a system call
+            else:
+                arm.poll(now)
+
+    def _serve(self, timeout_s: float) -> None:
+        ready = self._readable(timeout_s)
+        if ready:
             now = self.boot_s()
-            ready = set(readable)
             for port in self.ports:
                 if port.fileno() in ready:
                     port.poll(now)
-            for arm in [*self.arms.values(), *self._devices()]:
-                arm.poll(now)
+            self._poll_arms(now, ready)
+            for dev in self._devices():
+                dev.poll(now)
 
     def _step(self) -> None:
         """One physics step: I/O, every vehicle (`_vehicle`), physics, the mission clock and the
@@ -363,8 +416,9 @@ class FreeRun:
         now = w.time_s  # the autopilots' time: this physics step's start
         for port in self.ports:
             port.poll(now)
-        for dev in [*self.arms.values(), *self._devices()]:
-            dev.poll(now)
+        self._poll_arms(now, self._readable(0.0))
+        for dev in self._devices():
+            dev.poll(now)  # (they stream: polled every step)
         reports = {s: self._vehicle(s, now) for s in self.sysids}
         if self.mocap is not None and w.step_index % self._mocap_every == 0:
             p_obj, q_obj = w.object_pose()
@@ -521,6 +575,8 @@ class FreeRun:
         failsafe_at_end = [s for s, c in self.commanders.items() if c.failsafe]
         verdict = judge(core.outcome, spec.success, self.mission_steps, failsafe_at_end, (), (), self._commanded())
         timing = self.pacer.to_dict() if self.pacer is not None else {}
+        if self._gc is not None:
+            timing["gc"] = self._gc
         sim_s = core.world.time_s if self._opened else 0.0
         vehicles = {}
         for port in self.ports:

@@ -41,6 +41,11 @@ from .progress import SimBar
 from .verdict import MISSION_FAILED
 
 INTERRUPTED = 130  # exit code, as every process of the stack exits when interrupted
+# --realtime: the real-time factor two AMs hold on this project's two-core machines (docs/freerun.md),
+# and the autopilots' boot time of the mission's start: the companions' start-up (~2-4 s), the offboard
+# handshake (>= 1 s of setpoints, TIMESYNC, the engage's HEARTBEAT) and TAKEOFF_S come before it
+REALTIME_SPEED = 0.5
+MISSION_START_S = 10.0
 
 
 class _Interrupted(Exception):
@@ -141,9 +146,26 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--gcs-key-file", type=Path, default=None, metavar="FILE",
                     help="the GCS signing passphrase (one line; keep it mode 0600), the same for every run, so a "
                          "GCS set up once keeps working; default: a new random one per run, gcs.key in the run folder")
+    ap.add_argument("--realtime", action="store_true",
+                    help="free-running: the simulator paced to the wall clock, each vehicle a PX4 SITL on its onboard "
+                         "port, each companion on its own clock (--clock wall) over standard MAVLink, Dynamixel "
+                         "and Net F/T (docs/freerun.md); no telemetry log yet")
+    ap.add_argument("--speed", type=cliargs.number(0.0, lo_open=True), default=None, metavar="F",
+                    help=f"free-running real-time factor (implies --realtime; default {REALTIME_SPEED:g}: what two "
+                         f"AMs hold on two cores, docs/freerun.md)")
+    ap.add_argument("--mission-start", type=cliargs.seconds, default=None, metavar="S",
+                    help=f"free-running: the autopilots' boot time [s] at which every companion's mission starts "
+                         f"(default {MISSION_START_S:g} s: start-up, handshake and take-off before it)")
+    ap.add_argument("--instance", type=cliargs.number(0, 1000, integer=True), default=0, metavar="N",
+                    help="free-running: the vehicles are PX4 SITL instances N, N+1, ... (their ports shifted by N), "
+                         "so that two runs share a machine")
     ap.add_argument("--tlog-companions", action="store_true",
                     help="each companion also writes its link to companion-<sysid>.tlog (1 kHz: large)")
     a = ap.parse_args(argv)
+    if a.speed is not None or a.mission_start is not None:
+        a.realtime = True
+    if a.realtime:
+        a.no_telemetry = True  # the free-running simulator publishes no telemetry yet
     try:
         if a.gcs.strip().lower() != "none":
             parse_endpoint(a.gcs)
@@ -179,11 +201,18 @@ def main(argv: list[str] | None = None) -> int:
     signals = _Signals()
     cfg = str(Path(a.scenario).resolve())
     key_args = _fresh_key(spec, run_dir)
-    sim_cmd = _command("simulator") + key_args + _gcs_key(spec, run_dir, a.gcs_key_file) + [
-        "--config", cfg, "--bind", "udpin:127.0.0.1:0", "--gcs", a.gcs, "--run-dir", str(run_dir),
-        "--progress", "jsonl", "--peer-timeout", str(a.startup_timeout)]
-    if a.duration is not None:
-        sim_cmd += ["--duration", str(a.duration)]
+    speed = a.speed or REALTIME_SPEED
+    start = MISSION_START_S if a.mission_start is None else a.mission_start
+    if a.realtime:  # PX4 SITL's onboard ports are unsigned, as PX4's; no lockstep link, no GCS link yet
+        sim_cmd = _command("simulator") + ["--config", cfg, "--realtime", "--speed", str(speed), "--mission-start",
+                                           str(start), "--run-dir", str(run_dir), "--progress", "jsonl",
+                                           "--instance", str(a.instance)]
+    else:
+        sim_cmd = _command("simulator") + key_args + _gcs_key(spec, run_dir, a.gcs_key_file) + [
+            "--config", cfg, "--bind", "udpin:127.0.0.1:0", "--gcs", a.gcs, "--run-dir", str(run_dir),
+            "--progress", "jsonl", "--peer-timeout", str(a.startup_timeout)]
+    if a.duration is not None:  # free-running: the mission's duration, from the mission's start
+        sim_cmd += ["--duration", str(a.duration + start if a.realtime else a.duration)]
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     tele_args = ["--no-telemetry"] if a.no_telemetry else []
     tele_keys = {} if a.no_telemetry else _telemetry_keys(spec, run_dir)
@@ -193,8 +222,12 @@ def main(argv: list[str] | None = None) -> int:
     interrupted = None
     # a bar on a terminal only, as the simulator's own default: redirected output gets the summary lines
     bar = SimBar(spec.duration_s if a.duration is None else a.duration, disabled=a.no_progress or not sys.stderr.isatty())
-    print(f"am-run: scenario '{spec.name}' with {len(spec.ams)} AMs; run folder {run_dir}; GCS link {a.gcs}",
-          file=sys.stderr)
+    if a.realtime:
+        print(f"am-run: scenario '{spec.name}' with {len(spec.ams)} AMs, free-running at {speed:g}x real time, the "
+              f"mission from autopilot time {start:g} s; run folder {run_dir}", file=sys.stderr)
+    else:
+        print(f"am-run: scenario '{spec.name}' with {len(spec.ams)} AMs; run folder {run_dir}; GCS link {a.gcs}",
+              file=sys.stderr)
     try:
         signals.armed = True
         if not a.no_telemetry:
@@ -219,21 +252,33 @@ def main(argv: list[str] | None = None) -> int:
             if not line:
                 raise RuntimeError(f"the simulator did not start (exit {sim.poll()}); see {run_dir / 'simulator.log'}")
             ev = json.loads(line)
-            if ev.get("event") == "ready":
+            if ev.get("event") == "ready" and a.realtime:
+                bind = ev
+            elif ev.get("event") == "ready":
                 bind = ev["connect"]
                 if ev.get("gcs") and parse_endpoint(a.gcs).port == 0:  # the port a GCS connects to
                     print(f"am-run: the GCS link listens on {ev['gcs']}", file=sys.stderr)
-        for am in spec.ams:
+        for i, am in enumerate(spec.ams):
             clog = open(run_dir / f"companion-{am.sysid}.log", "w")
             logs.append(clog)
             tlog = ["--tlog", str(run_dir / f"companion-{am.sysid}.tlog")] if a.tlog_companions else []
+            if a.realtime:  # each companion reaches its own vehicle's ports, as on a real AM
+                link = ["--clock", "wall", "--arm", bind["arms"][i], "--ft", bind["ft"][i], "--mission-start",
+                        str(start), "--frame-timeout", "3", "--instance", str(a.instance)] + (
+                    ["--mocap", bind["mocap"]] if bind.get("mocap") else [])
+            else:
+                link = key_args + ["--sim", bind]
             procs[f"companion {am.sysid}"] = subprocess.Popen(
-                _command("companion") + key_args + ["--sysid", str(am.sysid), "--sim", bind, "--config", cfg,
+                _command("companion") + link + ["--sysid", str(am.sysid), "--config", cfg,
                                          "--outcome", str(run_dir / f"am{am.sysid}.json"),
                                          "--connect-timeout", str(a.startup_timeout)] + tlog + tele_args
                 + (["--telemetry-key-file", tele_keys[f"am{am.sysid}"]] if tele_keys else []),
                 stdout=clog, stderr=subprocess.STDOUT, env=env)
-        failed = _follow(sim, procs, bar)
+        failed = _follow(sim, procs, bar, started=a.realtime)
+        if a.realtime:  # the run is over when the simulator ends it: its vehicles are gone, not silent
+            for name, p in procs.items():
+                if name.startswith("companion") and p.poll() is None:
+                    p.send_signal(signal.SIGTERM)
     except _Interrupted as stop:
         interrupted = str(stop)
         failed = []
@@ -365,13 +410,13 @@ def _readable(stream, deadline: float) -> bool:
     return bool(select.select([stream], [], [], max(0.0, deadline - time.monotonic()))[0])
 
 
-def _follow(sim: subprocess.Popen, procs: dict[str, subprocess.Popen], bar: SimBar) -> list[str]:
+def _follow(sim: subprocess.Popen, procs: dict[str, subprocess.Popen], bar: SimBar, started: bool = False) -> list[str]:
     """Show progress until the simulator exits. A process that fails before the run starts
     stops everything (the simulator would only wait for it); once the run is under way, a
     companion that dies is reported and its vehicle flies on under the flight controller's
     failsafe, as on a real vehicle, until the simulator ends the run; a dead logger never
     stops a run."""
-    started, reported, failed = False, set(), []
+    reported, failed = set(), []  # (free-running: under way from the start; the simulator waits for nobody)
     while True:
         if _readable(sim.stdout, time.monotonic() + 0.2):
             line = sim.stdout.readline()
@@ -382,6 +427,10 @@ def _follow(sim: subprocess.Popen, procs: dict[str, subprocess.Popen], bar: SimB
             if ev.get("event") == "progress":
                 started = True
                 bar.show(ev["t"], ev["rtf"])
+            elif ev.get("event") == "end":  # free-running: the run is over, its vehicles are about to go
+                for name, p in procs.items():
+                    if name.startswith("companion") and p.poll() is None:
+                        p.send_signal(signal.SIGTERM)
         for name, p in procs.items():
             code = p.poll()
             if code in (None, 0) or p is sim or name in reported:
@@ -429,6 +478,11 @@ def _print_summary(run_dir: Path, spec, procs) -> None:
     obj = o["object"]
     rtf = o.get("real_time_factor") or 0.0
     print(f"\n{spec.name}: {o['status']}; {o['sim_time_s']:.2f} s simulated, {rtf:.2f}x real time", file=sys.stderr)
+    timing = o.get("timing")
+    if timing:  # free-running
+        print(f"pacing: {timing['deadline_misses']} of {timing['steps']} physics steps missed their deadline, worst "
+              f"lateness {1e3 * timing['worst_lateness_s']:.1f} ms, {1e3 * timing['mean_step_compute_s']:.2f} ms of "
+              f"compute per step of {1e3 * timing['period_s']:.2f} ms", file=sys.stderr)
     if "verdict" in o:
         print(f"verdict: {o['verdict']['text']}", file=sys.stderr)
     hl = obj.get("hover_min_lift_m")
@@ -455,6 +509,14 @@ def _print_summary(run_dir: Path, spec, procs) -> None:
         print(f"{am.sysid:>5} {mm(a5.get('r_c_err')):>11} {rad(a5.get('e_R')):>10} {mm(end.get('r_c_err')):>10} "
               f"{rad(end.get('e_R')):>9} {up:7.2f}N {share:6.2f}N {g['hover_mean_normal_force_n']:6.2f}N "
               f"{g['slip_max_m'] * 1e3:5.2f}mm {g['saturated_steps']:>6}", file=sys.stderr)
+    for am in spec.ams:  # free-running: each companion's loop as it measured itself
+        cp = run_dir / f"am{am.sysid}.json"
+        loop = json.loads(cp.read_text()).get("loop") if cp.is_file() else None
+        if loop:
+            p, lat = loop.get("period_ms", {}), loop.get("sample_to_setpoint_ms", {})
+            print(f"companion {am.sysid}: period p50 {p.get('p50')} / p99 {p.get('p99')} / max {p.get('max')} ms "
+                  f"(target {loop.get('period_target_ms')} ms), {loop.get('deadline_misses')} deadline misses, "
+                  f"sample to setpoint p50 {lat.get('p50')} / p99 {lat.get('p99')} ms", file=sys.stderr)
     print(f"(F/T up: mean vertical force the wrist sensor measures in the hover window "
           f"{o['hover_window_s'][0]:g}-{o['hover_window_s'][1]:g} s; share: m_obj g / N; slip: pad "
           f"relative to the object since t = {o['slip_from_s']:g} s)", file=sys.stderr)

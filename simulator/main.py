@@ -142,6 +142,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--mission-start", type=cliargs.seconds, default=None, metavar="S",
                     help="free-running: the autopilots' boot time [s] of the mission's t = 0, as the companions are "
                          "told (companion --mission-start); default: the first OFFBOARD engage + 3 s of take-off")
+    ap.add_argument("--instance", type=cliargs.number(0, 1000, integer=True), default=0, metavar="N",
+                    help="free-running: vehicle i is PX4 SITL instance N+i (as px4 -i): its ports are shifted by N, "
+                         "so that two runs share a machine (companion --instance N)")
     ap.add_argument("--onboard", action="append", metavar="ENDPOINT",
                     help="free-running: vehicle i's onboard port, repeatable, one per [[am]] in order (default PX4 "
                          "SITL's: bind 127.0.0.1:14580+i, send to 127.0.0.1:14540+i); udpout:HOST:PORT or "
@@ -361,8 +364,10 @@ def _main_freerun(a, spec) -> int:
     """--realtime: the free-running simulator (simulator.freerun), wired: its ports, the run,
     outcome.json. Exit codes as the lockstep's; 1 also when no vehicle engaged OFFBOARD."""
     try:
-        endpoints = endpoints_for(spec, a.onboard)
-        arms, wrists, mocap = freerun_devices(spec)
+        onboard = a.onboard or ([f"udpout:127.0.0.1:{14540 + a.instance + i}" for i in range(len(spec.ams))]
+                                if a.instance else None)
+        endpoints = endpoints_for(spec, onboard)
+        arms, wrists, mocap = freerun_devices(spec, a.instance)
         run = FreeRun(spec, endpoints, speed=a.speed or 1.0, arms=arms, wrist_sensors=wrists, mocap=mocap,
                       mission_t0_s=a.mission_start,
                       log=lambda msg: print(f"simulator: {msg}", file=sys.stderr, flush=True))
@@ -390,6 +395,8 @@ def _main_freerun(a, spec) -> int:
                                                  if mocap is not None else ""), file=sys.stderr, flush=True)
         progress_ready(a, spec, run, arms, wrists, mocap)
         result = run.run(a.duration)
+        if a.progress == "jsonl":  # before the ports close: am-run ends the companions as the run ends
+            print(json.dumps({"event": "end", "status": result["status"]}), flush=True)
         status = result["status"]
         if status.startswith("no vehicle"):
             code = 1
@@ -419,7 +426,7 @@ def _main_freerun(a, spec) -> int:
     return code
 
 
-def freerun_devices(spec):
+def freerun_devices(spec, instance: int = 0):
     """Each vehicle's arm as a Dynamixel bus (simulator.servo_bus, TCP 7200+i) and wrist sensor
     as a Net F/T (simulator.netft, UDP 49152+i), and the object's motion-capture stream
     (simulator.mocap_stream, UDP 7400) when the scenario plans from it."""
@@ -432,11 +439,12 @@ def freerun_devices(spec):
     q0 = start_joints(spec)
     noise = {"effort": d.effort, "noise_scale": d.scale} if d.enabled else {"noise_scale": 0.0}
     arms = [servo_bus.ServoBus(v.n_joints, q0_rad=q0[am.sysid], torque_max_nm=v.joint_torque_max_nm, seed=spec.seed,
-                               sysid=am.sysid, endpoint=servo_bus.default_endpoint(i), **noise)
+                               sysid=am.sysid, endpoint=servo_bus.default_endpoint(instance + i), **noise)
             for i, am in enumerate(spec.ams)]
-    wrists = [netft.NetFtServer(rate_hz=spec.rate_hz, endpoint=netft.default_endpoint(i))  # a record per physics step
+    wrists = [netft.NetFtServer(rate_hz=spec.rate_hz, endpoint=netft.default_endpoint(instance + i))  # a record per physics step
               for i in range(len(spec.ams))]
-    mocap = MocapStream(endpoint=f"udpin:127.0.0.1:{MOCAP_PORT}") if spec.mission.object_pose == "mocap" else None
+    mocap = (MocapStream(endpoint=f"udpin:127.0.0.1:{MOCAP_PORT + instance}") if spec.mission.object_pose == "mocap"
+             else None)
     return arms, wrists, mocap
 
 

@@ -167,6 +167,7 @@ class ArmClient:
         self._sync_read: GroupSyncRead | None = None
         self._sync_write: GroupSyncWrite | None = None
         self._torque_on = False
+        self._request_ns: int | None = None  # a sync read's instruction out since then (request)
 
     @property
     def torque_limits_nm(self) -> np.ndarray:
@@ -267,11 +268,46 @@ class ArmClient:
         self._torque_on = True
 
     def read(self) -> JointSample:
-        """One SYNC READ of every servo's present current, velocity and position."""
+        """One SYNC READ of every servo's present current, velocity and position (`request`
+        then `collect`)."""
+        self.request()
+        return self.collect()
+
+    @property
+    def requested(self) -> bool:
+        """Whether a sync read's instruction is out and its answers not yet collected."""
+        return self._request_ns is not None
+
+    def request(self) -> None:
+        """Send the SYNC READ instruction, without waiting for the answers: the servos answer
+        while the caller does other work, and `collect` takes them (a bus with one master: the
+        next instruction must wait for `collect`). A request already out is collected first."""
         if self._sync_read is None:
             raise ArmError(f"servo bus {self.ep}: not open")
+        if self._request_ns is not None:
+            self.collect()
         t0 = self.clock()
-        result = self._sync_read.txRxPacket()
+        try:
+            result = self._sync_read.txPacket()
+        except (serial.SerialException, OSError) as e:  # the bus went away (the simulator ended, a cable)
+            raise ArmError(f"servo bus {self.ep}: sync read: {e}") from None
+        if result != COMM_SUCCESS:
+            self._count(result)
+            raise ArmError(f"servo bus {self.ep}: sync read: {self._ph.getTxRxResult(result)}")
+        self._request_ns = t0
+
+    def collect(self) -> JointSample:
+        """The answers to the SYNC READ `request` sent (one is sent now if none is out) as a
+        JointSample: t_ns when the last answer was in, rtt_ns from the request."""
+        if self._sync_read is None:
+            raise ArmError(f"servo bus {self.ep}: not open")
+        if self._request_ns is None:
+            self.request()
+        t0, self._request_ns = self._request_ns, None
+        try:
+            result = self._sync_read.rxPacket()
+        except (serial.SerialException, OSError) as e:
+            raise ArmError(f"servo bus {self.ep}: sync read: {e}") from None
         t_ns = self.clock()
         self._count(result)
         if result != COMM_SUCCESS:
@@ -306,7 +342,10 @@ class ArmClient:
         w.clearParam()
         for i, u in zip(self.ids, units.astype(int)):
             w.addParam(i, list(int(u).to_bytes(2, "little", signed=True)))
-        result = w.txPacket()
+        try:
+            result = w.txPacket()
+        except (serial.SerialException, OSError) as e:
+            raise ArmError(f"servo bus {self.ep}: sync write: {e}") from None
         self._count(result)
         if result != COMM_SUCCESS:
             raise ArmError(f"servo bus {self.ep}: sync write: {self._ph.getTxRxResult(result)}")
@@ -317,6 +356,11 @@ class ArmClient:
         """Leave the servos holding in position control (hold_on_close), close the port."""
         if self._port is None:
             return
+        if self._request_ns is not None:  # answers still on their way: take them off the bus first
+            try:
+                self.collect()
+            except ArmError:
+                pass
         try:
             if self.hold_on_close and self._torque_on:
                 ph, port = self._ph, self._port

@@ -184,3 +184,103 @@ def test_a_mode_switched_away_is_yielded_to(spec):
     res = loop.run(stop=lambda: False)
     assert res.code == 0 and res.why.startswith("yielded") and "POSCTL" in res.why
     assert ap.handed_back is None  # it does not fight back, nor ask for anything
+
+
+class SplitArm(FakeArm):
+    """An arm client with the split sync read (request, collect): records the order of events."""
+
+    def __init__(self, n, clock, events):
+        super().__init__(n, clock)
+        self.events, self._out = events, False
+
+    @property
+    def requested(self):
+        return self._out
+
+    def request(self):
+        assert not self._out, "a second request before the first was collected"
+        self._out = True
+        self.events.append("request")
+
+    def collect(self):
+        assert self._out, "collect without a request"
+        self._out = False
+        self.events.append("collect")
+        return FakeArm.read(self)
+
+    def read(self):
+        self.events.append("read")
+        return FakeArm.read(self)
+
+
+def test_the_servo_read_is_requested_before_the_link_is_served_and_collected_each_step(spec):
+    clock = Clock()
+    pilot = Pilot(spec, spec.ams[0].sysid)
+    ap = FakeAutopilot(clock, pilot, engage_s=0.5)
+    events = []
+    polled = ap.poll
+
+    def poll(now_ns=None):
+        events.append("poll")
+        return polled(now_ns)
+
+    ap.poll = poll
+    arm = SplitArm(pilot.model.n, clock, events)
+    loop = WallClockLoop(pilot, ap, arm, None, clock=clock)
+    stop_at = clock.t + round(2.0 * 1e9)
+    res = loop.run(stop=lambda: clock.t >= stop_at)
+    assert res.steps > 100 and len(arm.written) == res.steps
+    engaged = events[events.index("request"):]
+    # every engaged step: request, then the link, then the answers; never a blocking read
+    assert "read" not in engaged and not arm.requested
+    steps = [engaged[k:k + 3] for k in range(0, len(engaged) - 2, 3)]
+    assert all(s == ["request", "poll", "collect"] for s in steps[1:])
+    assert engaged.count("collect") == res.steps
+
+
+class _Tb:
+    ready, converged = True, True
+
+    def __init__(self, rate, rtt_ns):
+        self.rate, self.rtt_ns = rate, rtt_ns
+
+
+class _Store:
+    def __init__(self, samples):
+        self.samples = samples
+
+    def latest(self, source):
+        return self.samples.get(source)
+
+
+class _Link:
+    """What Autopilot.fc_time_us reads of a Px4Link: a TIMESYNC line that runs 2 % fast, the store."""
+
+    def __init__(self, samples, rate=1.0, rtt_ns=400_000):
+        self.timebase, self.store = _Tb(rate * 1.02, rtt_ns), _Store(samples)
+        self.rate = rate
+
+    def attach(self, _hs):
+        pass
+
+    def fc_time_us(self, now_ns):
+        return now_ns * 1e-3 * self.timebase.rate
+
+
+def test_the_autopilot_time_is_anchored_on_the_newest_sample_not_on_the_fitted_line():
+    from amlink.px4samples import Sample
+    from companion.autopilot import ANCHOR_MAX_NS, Autopilot
+
+    now = 1_000_000_000
+    # attitude sent at autopilot time 500.0 ms, received 0.2 ms later, 3 ms ago
+    att = Sample("attitude", None, 500_000, now - 3_000_000, 1, 0)
+    odo = Sample("odometry", None, 480_000, now - 20_000_000, 1, 0)
+    ap = Autopilot(_Link({"attitude": att, "odometry": odo}, rate=0.5), handshake=None)
+    t = ap.fc_time_us(now)
+    # carried 3 ms at the autopilot's rate (x 1.02 as the line says) plus half the 0.4 ms round trip
+    assert t == pytest.approx(500_000 + 3_000 * 0.51 + 200 * 0.51)
+    # the odometry's age from it: what the autopilot's clock ran since, not the line's 2 % drift
+    assert (t - odo.fc_us) * 1e-3 == pytest.approx(21.6, abs=0.1)
+    # a silent autopilot (nothing for longer than ANCHOR_MAX_NS): the line, so ages keep growing
+    late = now + ANCHOR_MAX_NS + 1
+    assert ap.fc_time_us(late) == pytest.approx(late * 1e-3 * 0.51)
