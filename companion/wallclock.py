@@ -3,8 +3,10 @@ simulator's, or a real one) in OFFBOARD, with its own timer.
 
 What a step does, at [scenario].control_rate_hz on a drift-free timer (`looptimer.DeadlineTimer`):
 
-1. serve the links without blocking: the autopilot's (samples, TIMESYNC, ACKs), the F/T sensor's;
-2. read the servos (one sync read: joint angles, rates, measured torques), timestamped at the read;
+1. (engaged) send the servos' sync read instruction; serve the links without blocking: the
+   autopilot's (samples, TIMESYNC, ACKs), the F/T sensor's;
+2. collect the servos' answers (joint angles, rates, measured torques), timestamped at the read:
+   the bus's round trip overlaps step 1 rather than adding to it;
 3. take each source's latest sample and its age in the autopilot's time base (TIMESYNC); a
    source older than its limit (`sampling.StalenessLimits`) makes the step hold its last
    setpoint, and beyond `handback_s` the companion hands the vehicle back (HOLD) and yields;
@@ -103,7 +105,9 @@ class WallClockLoop:
                 att = None  # the odometry's attitude then
         base = predict_base(odo, fc_now_us, att) if self.predict else (att and _with_attitude(odo, att) or odo)
         try:
-            joints = self.arm.read()  # one sync read, now: its age is the read's own time
+            # the sync read the step sent at its start (`_request_joints`), else one now; its
+            # age counts from its request
+            joints = self.arm.collect() if getattr(self.arm, "requested", False) else self.arm.read()
         except DeviceError as exc:
             joints = None
             self.arm_errors += 1
@@ -147,6 +151,8 @@ class WallClockLoop:
             late = self.timer.fire()
             start = self.clock()
             self.stats.step_started(start, late)
+            if ap.state == "engaged":
+                self._request_joints()  # the servos answer while the link is served
             ap.poll(start)
             if self.wrench is not None:
                 self.wrench.poll()
@@ -163,6 +169,7 @@ class WallClockLoop:
                 return self._end(f"yielded: {ap.error or 'the vehicle left OFFBOARD'}", 0)
             fc_now = ap.fc_time_us(start)
             if state != "engaged" or fc_now is None:
+                self._drop_joints()
                 ap.stream_idle(self._idle_target())  # PX4 accepts OFFBOARD only on a live stream
                 continue
             if self.t0_fc_us is None:
@@ -203,12 +210,34 @@ class WallClockLoop:
                 self.on_step(t, self.pilot.mission.phase(max(t, 0.0)), res)
         return self._end("stopped", 0)
 
+    def _request_joints(self) -> None:
+        """Send this step's servo sync read now (an arm client with `request`), to be collected
+        in `_inputs` after the autopilot's link has been served: the bus's round trip (the
+        simulator answers between its physics steps) overlaps the link's work instead of
+        adding to the step's latency. A failed request is counted there (the read is retried)."""
+        request = getattr(self.arm, "request", None)
+        if request is None:
+            return
+        try:
+            request()
+        except DeviceError:
+            pass  # `_inputs` reads again and counts the error
+
+    def _drop_joints(self) -> None:
+        """Take the answers of a sync read this step will not use off the bus."""
+        if getattr(self.arm, "requested", False):
+            try:
+                self.arm.collect()
+            except DeviceError:
+                pass
+
     def _idle_target(self) -> AttitudeTarget:
         """Level at the mission's heading, zero thrust: what the loop streams before OFFBOARD."""
         q = R_to_quat_wxyz(Rz(self._psi))
         return AttitudeTarget(0, quat_wxyz=q, rates_rad_s=np.zeros(3), thrust_normalized=0.0)
 
     def _end(self, why: str, code: int) -> WallClockResult:
+        self._drop_joints()
         stats = self.stats.to_dict(self.timer)
         stats["mission_t0_fc_s"] = None if self.t0_fc_us is None else self.t0_fc_us * 1e-6
         return WallClockResult(why=why, code=code, engaged_fc_us=self.ap.engaged_fc_us, steps=self.steps,

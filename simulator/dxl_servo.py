@@ -50,8 +50,9 @@ in the poll that read the instruction), Secondary ID, indirect addresses (not in
 What the next read returns (`observe(t_s, q, qdot, tau_nm)`): Present Position (2048 = 0 rad,
 plus Homing Offset), Present Velocity (0.229 rev/min units), Present Current: the applied
 torque / K_t through [devices.effort]'s first-order lag (lag_s, over the time between
-observations) and white noise (noise_nm, scaled by [devices].scale, in current units),
-rounded to one current unit (the register's own quantum: 6.48 mN m for the XM540-W270, the
+observations) and white noise (noise_nm, scaled by [devices].scale, in current units; drawn
+when a read first takes the observation, one draw per observation read, so a servo nobody
+reads costs no draws), rounded to one current unit (the register's own quantum: 6.48 mN m for the XM540-W270, the
 resolution_nm of configs/randomize/default.toml), Present PWM, Realtime Tick, Moving,
 Present Input Voltage 12.0 V and Present Temperature 36 degC (constants).
 """
@@ -114,6 +115,9 @@ class XServo:
         self._noise_units = noise_scale * effort.noise_nm / model.nm_per_current_unit
         self._rng = rng if rng is not None else np.random.default_rng(0)
         self._draws, self._di = np.empty(0), 0  # the noise's draws, taken in blocks
+        self._stale = False  # an observation not yet turned into the present values (`_refresh`)
+        self._obs = (0.0, 0.0, 0.0)  # the last observation: t [s], q [rad], qdot [rad/s]
+        self._lag_dt, self._lag_a = -1.0, 0.0  # the lag's last step and its gain, -expm1(-dt / lag_s)
         eeprom = {"model_number": model.model_number, "model_information": 0,
                   "firmware_version": model.firmware_version, "id": dxl_id, "baud_rate": 1, "return_delay_time": 250,
                   "drive_mode": 0, "operating_mode": dxl.MODE_POSITION, "secondary_id": 255, "protocol_type": 2,
@@ -127,6 +131,8 @@ class XServo:
 
     # -- the control table ------------------------------------------------------------
     def get(self, name: str) -> int:
+        if self._stale:
+            self._refresh()
         return self.v[name]
 
     def _set(self, name: str, value: int) -> None:
@@ -165,6 +171,8 @@ class XServo:
             return dxl.ERR_DATA_LENGTH, b""
         if address < 0 or address + length > TABLE_SIZE:
             return dxl.ERR_ACCESS, b""
+        if self._stale:
+            self._refresh()
         out = bytearray(length)
         for f, src, dst in _layout(address, length):
             out[dst] = f.encode(self.v[f.name])[src]
@@ -255,26 +263,24 @@ class XServo:
 
     def observe(self, t_s: float, q_rad: float, qdot_radps: float, tau_nm: float) -> None:
         """The present values after time t_s [s] with the joint at q, qdot and the servo
-        applying tau_nm (module doc)."""
+        applying tau_nm (module doc). Called every physics step, it does only what must
+        follow every step (the current's lag, the position integral); the registers are
+        formed from the last observation when something reads them (`_refresh`), and the
+        reading's white noise is drawn then, one draw per observation read."""
         v = self.v
         dt = 0.0 if self._t_last is None else max(0.0, t_s - self._t_last)
         self._t_last = t_s
-        pos = min(max(self.present_pulse(q_rad), -2**31), 2**31 - 1)
-        vel = min(max(dxl.radps_to_velocity(qdot_radps), -2**31), 2**31 - 1)
-        v["present_position"], v["present_velocity"] = pos, vel
+        self._obs = (t_s, q_rad, qdot_radps)
+        self._stale = True
         u = tau_nm / self.model.nm_per_current_unit
         if self._x_units is None or self._lag_s <= 0.0:
             self._x_units = u
         else:
-            self._x_units += -math.expm1(-dt / self._lag_s) * (u - self._x_units)
-        y = self._x_units + (self._noise_units * self._draw() if self._noise_units > 0.0 else 0.0)
-        v["present_current"] = min(max(int(round(y)), -32768), 32767)
-        v["present_pwm"] = int(round(self._duty * dxl.PWM_FULL))
-        v["realtime_tick"] = int(t_s * 1000.0) % 32768
-        v["moving"] = 1 if abs(vel) > v["moving_threshold"] else 0
-        v["position_trajectory"] = v["goal_position"]
-        v["present_input_voltage"], v["present_temperature"] = INPUT_VOLTAGE_UNITS, TEMPERATURE_C
+            if dt != self._lag_dt:  # a fixed physics step: the gain is computed once
+                self._lag_dt, self._lag_a = dt, -math.expm1(-dt / self._lag_s)
+            self._x_units += self._lag_a * (u - self._x_units)
         if v["torque_enable"] == 1 and v["operating_mode"] in (dxl.MODE_POSITION, dxl.MODE_EXTENDED_POSITION):
+            pos = min(max(self.present_pulse(q_rad), -2**31), 2**31 - 1)
             ki = v["position_i_gain"] / 65536.0
             self._integral += (v["goal_position"] - pos) * dt * 1000.0 / CONTROL_PERIOD_MS
             if ki > 0.0:
@@ -282,6 +288,22 @@ class XServo:
                 self._integral = min(max(self._integral, -lim), lim)
         else:
             self._integral = 0.0
+
+    def _refresh(self) -> None:
+        """The present-value registers from the last observation (`observe`)."""
+        self._stale = False
+        v = self.v
+        t_s, q_rad, qdot_radps = self._obs
+        pos = min(max(self.present_pulse(q_rad), -2**31), 2**31 - 1)
+        vel = min(max(dxl.radps_to_velocity(qdot_radps), -2**31), 2**31 - 1)
+        v["present_position"], v["present_velocity"] = pos, vel
+        y = self._x_units + (self._noise_units * self._draw() if self._noise_units > 0.0 else 0.0)
+        v["present_current"] = min(max(int(round(y)), -32768), 32767)
+        v["present_pwm"] = int(round(self._duty * dxl.PWM_FULL))
+        v["realtime_tick"] = int(t_s * 1000.0) % 32768
+        v["moving"] = 1 if abs(vel) > v["moving_threshold"] else 0
+        v["position_trajectory"] = v["goal_position"]
+        v["present_input_voltage"], v["present_temperature"] = INPUT_VOLTAGE_UNITS, TEMPERATURE_C
 
     def _draw(self) -> float:
         if self._di == self._draws.shape[0]:

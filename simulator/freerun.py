@@ -7,9 +7,15 @@ Time. Physics steps at [scenario].rate_hz of simulated time, paced to the wall c
 `time.monotonic_ns`-style callable, passed in) without drift: step k starts at
 deadline_k = t0 + k dt / speed (`Pacer`). Until a deadline the loop waits in select() over the
 ports' sockets (and the arms' descriptors), serving MAVLink as it arrives. A step that starts
-late is not skipped: the loop runs back to back until it has caught up. Counted: steps, the
-lateness of each start (mean, worst) and deadline misses, a step whose start came more than one
-period after its deadline (the next step's deadline had passed). The autopilots' clock (PX4's
+late is not skipped: the loop runs back to back until it has caught up, but by at most
+MAX_BEHIND_PERIODS periods: a start later than that moves the schedule (every later deadline)
+by its lateness, so that an overloaded machine runs the simulation slower than asked, as
+Gazebo's world loop does (it paces each step from the previous one's wall time), instead of
+racing the autopilots' clock ahead in a burst after a stall (a burst of 100 ms of simulated
+time in a few wall milliseconds is 100 ms the companions' loops never see). Counted: steps, the
+lateness of each start (mean, worst, in bins) and deadline misses, a step whose start came more
+than one period after its deadline (the next step's deadline had passed), the schedule's moves
+and the wall time they gave up. The autopilots' clock (PX4's
 boot time) is the simulated time since the start, as PX4 SITL's hrt is the simulator's: with
 --speed 0.5 PX4's clock, its streams and COM_OF_LOSS_T run at half the wall rate, and when the
 loop falls behind they fall behind with it. Between steps (I/O served while waiting) it reads the
@@ -32,7 +38,9 @@ failsafe `simulator.failsafe`):
   every 1 kHz step of several vehicles on the wall clock); on the ground (land detector)
   motors idle at 0 N;
 - the arm's joint torques always come from the vehicle's `arm` (a Dynamixel bus server, or
-  `HoldJoints` by default): the servos are not PX4's, and arming does not touch them;
+  `HoldJoints` by default): the servos are not PX4's, and arming does not touch them; a bus is
+  served at the step's start and again after the physics (one select() says which descriptors
+  have something, so an idle socket costs no accept()/recv() call), besides while waiting;
 - the port's report: the estimate the autopilot flies on (with [devices] the estimator's
   output, `SitlCore._sense`, as PX4 flies on EKF2's; without, the exact state; [sensors] noise
   is not applied here), and an ideal IMU (the body rate, and the specific force from the last
@@ -80,6 +88,8 @@ from .verdict import judge
 HOLD_FOREVER = FailsafeGains(hold_s=math.inf)  # HOLD: the failsafe's hold, never its landing
 START_TIMEOUT_S = 120.0  # no OFFBOARD engage this long after the start (autopilot time): the run ends
 HOLD_JOINTS_K_NM_PER_RAD = 20.0  # HoldJoints' stiffness (see there)
+TAKEOFF_TRACK_EVERY = 100  # steps between the take-off track's samples (`_track_takeoff`)
+MAX_BEHIND_PERIODS = 10  # the most physics periods the loop catches up back to back (module doc)
 
 
 class HoldJoints:
@@ -153,10 +163,16 @@ class Pacer:
     returns the start's lateness [ns], counted (module doc); `done()` after the step counts
     its compute time."""
 
-    def __init__(self, clock: Callable[[], int], period_ns: float, serve: Callable[[float], None]) -> None:
+    def __init__(self, clock: Callable[[], int], period_ns: float, serve: Callable[[float], None],
+                 max_behind_periods: float = math.inf) -> None:
         if not period_ns > 0:
             raise ValueError(f"period must be > 0 ns, got {period_ns}")
+        if not max_behind_periods >= 0:
+            raise ValueError(f"max_behind_periods must be >= 0, got {max_behind_periods}")
         self.clock, self.period_ns, self.serve = clock, period_ns, serve
+        self.max_behind_ns = max_behind_periods * period_ns
+        self.shift_ns = 0  # the schedule's moves so far (module doc)
+        self.shifts = 0
         self.t0_ns: int | None = None
         self.steps = self.misses = 0
         self.worst_ns = self.sum_ns = 0
@@ -169,7 +185,7 @@ class Pacer:
         return self.t0_ns
 
     def deadline(self, k: int) -> int:
-        return self.t0_ns + round(k * self.period_ns)
+        return self.t0_ns + self.shift_ns + round(k * self.period_ns)
 
     def wait(self, k: int) -> int:
         deadline = self.deadline(k)
@@ -188,6 +204,9 @@ class Pacer:
         for i, limit in enumerate(_LATE_NS):
             if late > limit:
                 self.late_counts[i] += 1
+        if late > self.max_behind_ns:  # too far behind to catch up: the schedule moves (module doc)
+            self.shift_ns += late
+            self.shifts += 1
         return late
 
     def done(self) -> None:
@@ -202,6 +221,7 @@ class Pacer:
                 "worst_step": self.worst_step, "mean_lateness_s": self.sum_ns * 1e-9 / n,
                 "mean_step_compute_s": self.busy_sum_ns * 1e-9 / n, "max_step_compute_s": self.busy_max_ns * 1e-9,
                 "period_s": self.period_ns * 1e-9,
+                "schedule_shifts": self.shifts, "schedule_shifted_s": self.shift_ns * 1e-9,
                 "late_steps": {f">{limit * 1e-6:g} ms": c for limit, c in zip(_LATE_NS, self.late_counts)}}
 
 
@@ -258,6 +278,7 @@ class FreeRun:
         if len(endpoints) != n:
             raise ValueError(f"{len(endpoints)} onboard endpoints for {n} vehicles (one per [[am]], in order)")
         self.spec, self.speed, self.clock, self.log = spec, float(speed), clock, log
+        self.max_behind_periods = MAX_BEHIND_PERIODS
         self.mission_t0_s = mission_t0_s
         self._t0_given = mission_t0_s is not None
         self.model = build_model(v)
@@ -295,6 +316,10 @@ class FreeRun:
         self._targets: dict[int, tuple] = {}  # per vehicle: (setpoint, its AttitudeTarget)
         self.pacer: Pacer | None = None
         self._gc: dict | None = None  # the run's garbage collections (`_GcTimer`)
+        self.takeoff_track: dict[str, list[dict]] = {}  # by sysid: the vehicles before the mission (`_track_takeoff`)
+        self._cpu_s: float | None = None  # the loop's thread CPU time over the run [s]
+        self._fixed_fds: list[int] | None = None  # (`_readable`)
+        self._arm_fds: list = []
         self._truth_every = truth_every(spec.rate_hz)
         self.mission_steps = 0
         self.status = ""
@@ -328,6 +353,7 @@ class FreeRun:
         return [*self.wrist_sensors.values(), *([self.mocap] if self.mocap is not None else [])]
 
     def close(self) -> None:
+        self._fixed_fds = None
         for port in self.ports:
             port.close()
         for arm in self.arms.values():
@@ -351,8 +377,9 @@ class FreeRun:
         physics step) says so; the result (`result`)."""
         spec = self.spec
         dt_ns = 1e9 / spec.rate_hz
-        self.pacer = Pacer(self.clock, dt_ns / self.speed, self._serve)
+        self.pacer = Pacer(self.clock, dt_ns / self.speed, self._serve, self.max_behind_periods)
         wall0 = time.perf_counter()
+        cpu0 = time.thread_time_ns()  # the loop's own CPU time (apart from time lost to other processes)
         gc_timer = _GcTimer(self.clock)
         gc.callbacks.append(gc_timer)
         self.pacer.start()
@@ -377,14 +404,20 @@ class FreeRun:
                 break
         gc.callbacks.remove(gc_timer)
         self._gc = gc_timer.to_dict()
+        self._cpu_s = (time.thread_time_ns() - cpu0) * 1e-9
         return self.result(time.perf_counter() - wall0)
 
     def _readable(self, timeout_s: float) -> set[int]:
         """The descriptors of the ports, arms and devices that select() finds readable within
         timeout_s [s] (0: a look, no wait)."""
-        fds = [p.fileno() for p in self.ports]
-        for arm in [*self.arms.values(), *self._devices()]:
-            fds.extend(getattr(arm, "fds", lambda: [])())
+        if self._fixed_fds is None:  # the ports' and devices' sockets: fixed once open
+            self._fixed_fds = [p.fileno() for p in self.ports]
+            for dev in self._devices():
+                self._fixed_fds.extend(getattr(dev, "fds", lambda: [])())
+            self._arm_fds = [arm.fds for arm in self.arms.values() if hasattr(arm, "fds")]
+        fds = list(self._fixed_fds)
+        for arm_fds in self._arm_fds:  # (a bus's client comes and goes)
+            fds.extend(arm_fds())
         try:
             readable, _, _ = select.select(fds, [], [], max(0.0, timeout_s))
         except InterruptedError:
@@ -425,12 +458,17 @@ class FreeRun:
             self.mocap.publish(now, np.asarray(p_obj) + self._object_bias, q_obj)
         w.step()  # (not core.step: the lockstep's servo-current model is the arm's business here)
         t_next = w.time_s
+        # a servo bus is answered twice a step: a companion's sync read that came in during the
+        # physics waits half as long (its loop blocks on the answer)
+        self._poll_arms(t_next, self._readable(0.0))
         if self.mission_t0_s is None:
             engaged = [c.offboard_engaged_s for c in self.commanders.values() if c.offboard_engaged_s is not None]
             if engaged:
                 self.mission_t0_s = min(engaged) + TAKEOFF_S
                 self.log(f"t = {min(engaged):.3f} s: OFFBOARD engaged; mission clock starts at "
                          f"t = {self.mission_t0_s:.3f} s (take-off {TAKEOFF_S:g} s)")
+        if w.step_index % TAKEOFF_TRACK_EVERY == 0 and (self.mission_t0_s is None or t_next < self.mission_t0_s):
+            self._track_takeoff(t_next, reports)
         if self.mission_t0_s is not None and t_next - self.mission_t0_s >= -1e-9:
             self.mission_steps += 1
             if w.step_index % self._truth_every == 0:
@@ -529,6 +567,18 @@ class FreeRun:
             self._targets[s] = (sp, target)
         return target
 
+    def _track_takeoff(self, t: float, reports: dict) -> None:
+        """Before the mission clock's zero: each vehicle's height, tilt and mode (the take-off, which
+        the mission's outcome does not see), every TAKEOFF_TRACK_EVERY steps."""
+        for s, r in reports.items():
+            w, x, y, z = r.quat_WB
+            tilt = math.degrees(math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y)))))
+            c = self.commanders[s]
+            self.takeoff_track.setdefault(str(s), []).append(
+                {"t_s": round(t, 3), "z_m": round(r.p_W[2], 4), "tilt_deg": round(tilt, 2),
+                 "thrust": round(self._throttle[s], 3), "armed": c.armed, "landed": c.landed,
+                 "mode": cm.nav_name(c.nav_state)})
+
     def _motors_off(self, s: int, tau_q) -> None:
         self._throttle[s] = 0.0
         self.core.world.apply_rotors(s, [0.0] * self.spec.vehicle.rotors.count, tau_q)
@@ -577,6 +627,11 @@ class FreeRun:
         timing = self.pacer.to_dict() if self.pacer is not None else {}
         if self._gc is not None:
             timing["gc"] = self._gc
+        if self._cpu_s is not None and timing.get("steps"):
+            # on-CPU time per step (waits in select are off-CPU): the step's compute without the time
+            # the processor ran something else, which mean_step_compute_s (wall) includes
+            timing["cpu_s"] = self._cpu_s
+            timing["mean_step_cpu_s"] = self._cpu_s / timing["steps"]
         sim_s = core.world.time_s if self._opened else 0.0
         vehicles = {}
         for port in self.ports:
@@ -589,7 +644,7 @@ class FreeRun:
                 "start_p_WB_m": self.starts[port.sysid].p_WB.tolist()}
         return {"mode": "free-running", "speed": self.speed, "rate_hz": spec.rate_hz, "status": self.status,
                 "mission_t0_s": t0, "mission_t0_given": self._t0_given, "takeoff_s": TAKEOFF_S,
-                "sim_time_s": sim_s, "wall_s": wall_s, "timing": timing,
+                "sim_time_s": sim_s, "wall_s": wall_s, "timing": timing, "takeoff_track": self.takeoff_track,
                 "real_time_factor": sim_s / wall_s if wall_s else None,
                 "ports": [vehicles[str(s)]["port"] for s in self.sysids], "vehicles": vehicles,
                 "verdict": verdict.to_dict() if complete else {

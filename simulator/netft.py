@@ -71,8 +71,10 @@ class NetFtServer:
         self.stats = NetFtStats()
         self._sock: socket.socket | None = None
         self._t0: float | None = None
-        self._counts = (0,) * 6
+        self._wrench = (0.0,) * 6  # the latest published wrench (converted to counts when a record needs it)
+        self._counts: tuple[int, ...] | None = (0,) * 6  # its counts (None: not converted yet)
         self._bias = (0,) * 6
+        self._record_counts: tuple[int, ...] | None = None  # the records' counts (raw less bias), None: to form
         self._client: tuple | None = None
         self._buffered = False
         self._remaining = 0  # records left of a counted request (0: unlimited)
@@ -112,7 +114,14 @@ class NetFtServer:
         """The gauges' reading now: wrench_E [Fx, Fy, Fz [N], Tx, Ty, Tz [N m]] on {e}."""
         if self._t0 is None:
             self._t0 = now_s
-        self._counts = rdt.to_counts(wrench_E, self.cpf, self.cpt)
+        self._wrench, self._counts = wrench_E, None  # converted when a record or a bias needs it
+        self._record_counts = None
+
+    def _raw_counts(self) -> tuple[int, ...]:
+        """The latest published wrench as counts (`rdt.to_counts`), converted once per publish."""
+        if self._counts is None:
+            self._counts = rdt.to_counts(self._wrench, self.cpf, self.cpt)
+        return self._counts
 
     def poll(self, now_s: float) -> None:
         """Take the requests that arrived, send the records due by now_s [s]. Never blocks."""
@@ -153,7 +162,8 @@ class NetFtServer:
             self._flush()
             self._client = None
         elif c == rdt.CMD_SET_SOFTWARE_BIAS:
-            self._bias = self._counts  # the raw reading now reads zero
+            self._bias = self._raw_counts()  # the raw reading now reads zero
+            self._record_counts = None
             self.stats.biases += 1
         elif c == rdt.CMD_RESET_THRESHOLD_LATCH:
             pass
@@ -166,7 +176,12 @@ class NetFtServer:
             skip = due - self._next_slot - self.max_burst + 1
             self.stats.late_slots += skip
             self._next_slot += skip
-        counts = tuple(max(min(c - b, 2 ** 31 - 1), -(2 ** 31)) for c, b in zip(self._counts, self._bias))
+        if self._next_slot > due:
+            return  # nothing due: no conversion
+        if self._record_counts is None:  # once per published wrench (or bias)
+            self._record_counts = tuple(max(min(c - b, 2 ** 31 - 1), -(2 ** 31))
+                                        for c, b in zip(self._raw_counts(), self._bias))
+        counts = self._record_counts
         while self._next_slot <= due and self._client is not None:
             self._rdt_seq += 1
             rec = rdt.Record(self._rdt_seq, self._next_slot, 0, counts)

@@ -176,13 +176,17 @@ class ServoBus:
         out = [s.fileno() for s in (self._listener, self._client) if s is not None]
         return out + ([self._master] if self._master >= 0 else [])
 
-    def poll(self, now_s: float) -> None:
+    def poll(self, now_s: float, readable: set[int] | frozenset[int] | None = None) -> None:
         """Accept a client, read what arrived, answer it (never blocks). now_s: the caller's
-        clock [s] (unused by the servos; they answer at once)."""
-        self._accept()
-        if self._client is not None:
+        clock [s] (unused by the servos; they answer at once). readable: the descriptors of
+        `fds()` a select() just found readable, so that one with nothing to read costs no
+        system call (answers still queued are sent regardless); None: try every one."""
+        if readable is None or (self._listener is not None and self._listener.fileno() in readable):
+            self._accept()
+        if self._client is not None and (readable is None or self._client_link.outbox
+                                         or self._client.fileno() in readable):
             self._serve_client()
-        if self._pty is not None:
+        if self._pty is not None and (readable is None or self._pty.outbox or self._master in readable):
             self._serve_pty()
 
     def _accept(self) -> None:

@@ -138,6 +138,7 @@ class NetFtClient:
         if self._sock is None:
             return 0
         new = 0
+        newest = None  # (record, its datagram's arrival): only the newest becomes the sample
         for _ in range(_MAX_DRAIN):
             try:
                 data = self._sock.recv(rdt.RECORD_SIZE * 40)
@@ -164,9 +165,12 @@ class NetFtClient:
                 self._last_seq = rec.rdt_sequence
                 if rec.status:
                     self.stats.nonzero_status += 1
-                self._latest = FtSample(np.array(rdt.from_counts(rec.counts, self.cpf, self.cpt)), t_ns,
-                                        rec.rdt_sequence, rec.ft_sequence, rec.status)
+                newest = (rec, t_ns)
                 new += 1
+        if newest is not None:
+            rec, t_ns = newest
+            self._latest = FtSample(np.array(rdt.from_counts(rec.counts, self.cpf, self.cpt)), t_ns,
+                                    rec.rdt_sequence, rec.ft_sequence, rec.status)
         return new
 
     def read(self, max_age_s: float | None = None) -> FtSample | None:

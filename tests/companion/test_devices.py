@@ -227,3 +227,33 @@ def test_the_objects_pose_from_the_mocap_stream():
         listen.close()
     finally:
         stream.close()
+
+
+def test_the_arms_sync_read_split_into_request_and_collect():
+    bus = ServoBus(3, q0_rad=Q0, torque_max_nm=TAU_MAX, endpoint="tcpin:127.0.0.1:0")
+    bus.open()
+    try:
+        with serving(bus) as lock:
+            arm = ArmClient("tcp:%s:%d" % bus.address, 3)
+            arm.open()
+            q, qdot, tau = Q0 + [0.02, 0.01, -0.03], np.array([0.1, 0.2, -0.3]), np.array([0.5, 1.0, -1.5])
+            with lock:
+                bus.observe(0.5, q, qdot, tau)
+            assert not arm.requested
+            arm.request()
+            assert arm.requested
+            s = arm.collect()
+            assert not arm.requested and s.rtt_ns > 0
+            np.testing.assert_allclose(s.q, q, atol=dxl.RAD_PER_PULSE / 2 + 1e-12)
+            np.testing.assert_allclose(s.tau_measured_nm, np.round(tau / NMU) * NMU, rtol=1e-12)
+            arm.request()
+            arm.request()  # the first one's answers are taken off the bus before the second goes out
+            np.testing.assert_allclose(arm.collect().qdot, qdot, atol=dxl.RADPS_PER_VELOCITY_UNIT / 2 + 1e-12)
+            arm.write_torques([1.0, -1.0, 0.5])
+            arm.request()
+            arm.close()  # with answers still out: taken first, then the hold on close works
+            with lock:
+                assert all(s.torque_on and s.get("operating_mode") == dxl.MODE_POSITION for s in bus.servos)
+        assert arm.stats.reads == 4 and arm.stats.crc_errors == arm.stats.timeouts == 0
+    finally:
+        bus.close()

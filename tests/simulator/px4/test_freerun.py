@@ -156,3 +156,31 @@ def test_the_rate_integral_can_be_kept(spec, compiled):
     assert fc.rate_int == [0.0, 0.0, 0.0]
     fc.rate_int = kept
     assert fc.rate_int == kept
+
+
+def test_pacer_catches_up_at_most_max_behind_periods_then_moves_its_schedule():
+    """A start later than max_behind_periods moves every later deadline by its lateness (the
+    simulation runs slower, as Gazebo's does); within that bound it catches up back to back."""
+    now = [0]
+
+    def serve(timeout_s):  # an exact wait
+        now[0] += max(1, int(math.ceil(timeout_s * 1e9)))
+
+    period = 1_000_000
+    p = Pacer(lambda: now[0], period, serve, max_behind_periods=10)
+    p.start()
+    for k in range(10):
+        p.wait(k)
+    now[0] += 5 * period  # a 5-period stall: caught up (the deadlines stay where they were)
+    assert p.wait(10) == 4 * period and p.shifts == 0
+    assert p.deadline(20) == 20 * period
+    for k in range(11, 30):
+        p.wait(k)
+    now[0] += 50 * period  # a 50-period stall: too far to catch up; the schedule moves by it
+    late = p.wait(30)
+    assert late == 49 * period and p.shifts == 1 and p.shift_ns == late
+    assert p.wait(31) == 0  # the next start is on its (moved) deadline, not back to back
+    assert p.deadline(32) == 32 * period + late
+    assert p.to_dict()["schedule_shifts"] == 1
+    with pytest.raises(ValueError, match="max_behind_periods"):
+        Pacer(lambda: 0, period, serve, max_behind_periods=-1)
