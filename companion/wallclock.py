@@ -87,7 +87,7 @@ class WallClockLoop:
     def _age_s(self, fc_now_us: float, sample_fc_us: float) -> float:
         return max(0.0, (fc_now_us - sample_fc_us) * 1e-6)
 
-    def _inputs(self, now_ns: int, fc_now_us: float):
+    def _inputs(self, now_ns: int, fc_now_us: float, mission_t: float = 0.0):
         """(values, attitude_target, joint_effort, stale sources, freshest rx ns) of this step."""
         stale = []
         odo = self.ap.odometry
@@ -132,7 +132,10 @@ class WallClockLoop:
                 self.stats.sample_age("wrench", round(a_w * 1e9), a_w > self.limits.wrench_hold_s)
                 if a_w > self.limits.wrench_hold_s:
                     stale.append("wrench")
-                wrench = w.wrench_E
+                # in the take-off (t < 0) the pad may still rest on the ground and the sensor is not
+                # tared: what it reads is no contact the law is to compensate (the lockstep's flight
+                # starts in the air), so the law takes none until the mission starts
+                wrench = w.wrench_E if mission_t >= 0.0 else (0.0,) * 6
         rx = self.ap.odometry_rx_ns  # the latency below is from the estimate's arrival
         values = frame_values(base, q, qdot, wrench)
         return values, self.ap.attitude_target, effort, stale, rx
@@ -179,7 +182,7 @@ class WallClockLoop:
                 self.log(f"OFFBOARD engaged at autopilot time {ap.engaged_fc_us * 1e-6:.3f} s; the mission "
                          f"starts at {self.t0_fc_us * 1e-6:.3f} s")
             t = (fc_now - self.t0_fc_us) * 1e-6
-            values, att_report, effort, stale, rx = self._inputs(start, fc_now)
+            values, att_report, effort, stale, rx = self._inputs(start, fc_now, t)
             if stale:
                 since_stale_ns = since_stale_ns or start
                 if (start - since_stale_ns) * 1e-9 > self.limits.handback_s:

@@ -54,6 +54,10 @@ def run_wall(a, spec, pilot: Pilot, tele, am_tele, keys, tlog, tag: str, _stop_e
     stopping: list[str] = []
 
     def on_signal(signum, _frame):
+        """The first SIGINT or SIGTERM ends the loop after its step; later ones are ignored (a
+        supervisor's second signal, even during the interpreter's exit, does not cut the end short)."""
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_IGN)
         if not stopping:
             stopping.append(signal.Signals(signum).name)
 

@@ -1,0 +1,126 @@
+"""The wall-clock companion flying the free-running simulator, through the real processes: the
+PX4 offboard handshake, the take-off from the ground, the mission's start on the autopilot
+clock; a mode switched away by another client (the companion yields and does not fight back);
+a companion killed in flight (its vehicle fails over after COM_OF_LOSS_T, the other flies on)."""
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from amlink import px4
+from amlink.wire import Encoder, mav
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENARIO = ROOT / "configs" / "scenarios" / "two_am_comp_attitude.toml"
+BIN = Path(sys.executable).parent
+
+pytestmark = pytest.mark.sitl
+INSTANCE = 30  # PX4 SITL instances 30, 31: ports apart from a run on the defaults
+
+
+def _env():
+    return dict(os.environ, PYTHONUNBUFFERED="1")
+
+
+def test_am_run_realtime_takes_off_and_flies_the_approach(tmp_path):
+    """am-run --realtime: both AMs engage OFFBOARD, take off from the ground and are on their
+    mission's approach at its start; the loops report their period and misses."""
+    run = tmp_path / "run"
+    r = subprocess.run([str(BIN / "am-run"), str(SCENARIO), "--realtime", "--duration", "3", "--run-dir", str(run),
+                        "--no-progress", "--instance", "20"], capture_output=True, text=True, env=_env(), timeout=240, cwd=ROOT)
+    assert r.returncode in (0, 4), r.stderr[-3000:]
+    o = json.loads((run / "outcome.json").read_text())
+    assert o["mode"] == "free-running" and o["speed"] == 0.5 and o["mission_t0_given"]
+    assert "pacing:" in r.stderr and "deadline" in r.stderr
+    for sysid in ("4", "5"):
+        v = o["vehicles"][sysid]
+        assert v["offboard_engaged_s"] is not None and v["offboard_engaged_s"] < o["mission_t0_s"] - 3.0
+        assert any(e["event"] == "takeoff" for e in v["events"]), v["events"]
+        assert v["armed_at_end"] and v["mode_at_end"] == "OFFBOARD"
+        c = json.loads((run / f"am{sysid}.json").read_text())
+        assert c["clock"] == "wall" and c["error"] is None, c.get("ended")
+        loop = c["loop"]
+        # 250 Hz of the autopilot's clock at 0.5x real time: 8 ms of wall time
+        assert loop["period_target_ms"] == pytest.approx(8.0, rel=0.01)
+        assert loop["period_ms"]["p50"] == pytest.approx(8.0, rel=0.1)
+        assert {"odometry", "joints", "wrench"} <= set(loop["sample_age_ms"])
+        # the take-off ended at the mission's start: the CoM on its reference within centimetres,
+        # and the 3 s of approach flown after it track it
+        approach = c["phases"]["approach"]
+        assert approach["steps"] > 500
+        assert approach["final"]["r_c_err"] < 0.05, approach
+    ams = o["ams"]
+    assert all(not a["base_contacts"] for a in ams.values()), ams
+
+
+def _start_sim(run: Path, duration: float, mission_start: float):
+    return subprocess.Popen([str(BIN / "simulator"), "--realtime", "--speed", "0.5", "--config", str(SCENARIO),
+                             "--run-dir", str(run), "--duration", str(duration), "--mission-start", str(mission_start),
+                             "--instance", str(INSTANCE)],
+                            stdout=subprocess.DEVNULL, stderr=open(run / "simulator.log", "w"), env=_env(), cwd=ROOT)
+
+
+def _start_companion(run: Path, sysid: int, mission_start: float):
+    return subprocess.Popen([str(BIN / "companion"), "--sysid", str(sysid), "--clock", "wall", "--config",
+                             str(SCENARIO), "--no-telemetry", "--mission-start", str(mission_start), "--outcome",
+                             str(run / f"am{sysid}.json"), "--frame-timeout", "3", "--instance", str(INSTANCE)],
+                            stdout=subprocess.DEVNULL, stderr=open(run / f"companion-{sysid}.log", "w"), env=_env(),
+                            cwd=ROOT)
+
+
+def test_a_mode_switched_away_is_yielded_to_and_a_killed_companion_fails_over(tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    start = 8.0
+    sim = _start_sim(run, duration=start + 4.0, mission_start=start)
+    time.sleep(2.0)
+    c4, c5 = _start_companion(run, 4, start), _start_companion(run, 5, start)
+    gcs = None
+    try:
+        # another client on vehicle 0's onboard port: PX4 executes its commands (its answers go to the
+        # first partner, the companion); once both fly, it switches vehicle 0 to HOLD
+        deadline = time.monotonic() + 90.0
+        seen = ""
+        while time.monotonic() < deadline and "starts at" not in seen:
+            time.sleep(0.5)
+            seen = (run / "companion-4.log").read_text() + (run / "companion-5.log").read_text()
+            assert c4.poll() is None and c5.poll() is None, seen
+        time.sleep(3.0)  # into the take-off
+        port = re.search(r"sysid 4: udp 127\.0\.0\.1:(\d+) ->", (run / "simulator.log").read_text()).group(1)
+        gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        enc = Encoder(250, 190)  # MAVLink 2 (pymavlink's mavutil sends MAVLink 1 unless MAVLINK20 is set)
+        hold = mav.MAVLink_command_long_message(4, 1, mav.MAV_CMD_DO_SET_MODE, 0, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                                                float(px4.MAIN_AUTO), float(px4.SUB_AUTO_LOITER), 0, 0, 0, 0)
+        gcs.sendto(enc.pack([hold]), ("127.0.0.1", int(port)))
+        c4.wait(timeout=20)  # the companion sees HOLD in the next HEARTBEATs and yields
+        c5.send_signal(signal.SIGKILL)  # companion 5 dies in flight
+        c5.wait(timeout=10)
+        sim.wait(timeout=120)
+    finally:
+        for p in (c4, c5, sim):
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+        if gcs is not None:
+            gcs.close()
+    log4 = (run / "companion-4.log").read_text()
+    assert c4.returncode == 0, log4
+    a4 = json.loads((run / "am4.json").read_text())
+    assert a4["ended"].startswith("yielded") and "HOLD" in a4["ended"], a4["ended"]
+    o = json.loads((run / "outcome.json").read_text())
+    ev4 = o["vehicles"]["4"]["events"]
+    # vehicle 0 went to HOLD on the request and stayed there: the companion did not ask for OFFBOARD again
+    holds = [i for i, e in enumerate(ev4) if e.get("event") == "mode" and e.get("to") == "HOLD" and e.get("armed")]
+    assert holds, ev4
+    assert not any(e.get("event") == "mode request" and e.get("mode") == "OFFBOARD" for e in ev4[holds[0]:]), ev4
+    ev5 = o["vehicles"]["5"]["events"]
+    assert any(e.get("event") == "failsafe" and "offboard" in e.get("cause", "") for e in ev5), ev5
