@@ -16,6 +16,21 @@ were read.
 """
 from __future__ import annotations
 
+import select
+import time
+
 
 class DeviceError(Exception):
     """A device could not be reached or answered wrongly; the message names it."""
+
+
+def wait_for_sample(dev, timeout_s: float, fail):
+    """Poll a UDP device client (`poll()`, `_latest`, `_sock`) until it has a sample, waiting on its
+    socket; after timeout_s [s] without one, raise `fail(elapsed_s)` (the client's own error)."""
+    deadline = time.monotonic() + timeout_s
+    while dev.poll() == 0 and dev._latest is None:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise fail(timeout_s)
+        select.select([dev._sock], [], [], min(left, 0.05))
+    return dev._latest

@@ -14,7 +14,6 @@ from (centre and yaw). Frames lost are counted from the frame counter's gaps.
 """
 from __future__ import annotations
 
-import select
 import socket
 import time
 from collections.abc import Callable
@@ -26,7 +25,7 @@ from amcore.mission import ObjectPose
 from amlink import mocap_protocol as mp
 from amlink.endpoint import UDP_IN, UDP_OUT, EndpointError, as_destination, parse_endpoint
 
-from . import DeviceError
+from . import DeviceError, wait_for_sample
 
 DEFAULT_ENDPOINT = f"udp:127.0.0.1:{mp.MOCAP_PORT}"
 
@@ -164,14 +163,8 @@ class MocapClient:
 
     def wait(self, timeout_s: float) -> MocapSample:
         """Poll until a frame of the body arrives; MocapError after timeout_s [s]."""
-        deadline = time.monotonic() + timeout_s
-        while self.poll() == 0 and self._latest is None:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                why = "refused (nothing serves the stream there)" if self.stats.refused else "no frame arrived"
-                raise MocapError(f"mocap {self.endpoint}: {why} within {timeout_s:g} s")
-            select.select([self._sock], [], [], min(left, 0.05))
-        return self._latest
+        why = lambda: "refused (nothing serves the stream there)" if self.stats.refused else "no frame arrived"  # noqa: E731
+        return wait_for_sample(self, timeout_s, lambda t: MocapError(f"mocap {self.endpoint}: {why()} within {t:g} s"))
 
     def fileno(self) -> int:
         return -1 if self._sock is None else self._sock.fileno()

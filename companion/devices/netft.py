@@ -19,7 +19,6 @@ polls until a record arrives, or raises FtError saying whether the sensor refuse
 """
 from __future__ import annotations
 
-import select
 import socket
 import time
 from collections.abc import Callable
@@ -30,7 +29,7 @@ import numpy as np
 from amlink import rdt_protocol as rdt
 from amlink.endpoint import UDP_IN, UDP_OUT, EndpointError, as_destination, parse_endpoint
 
-from . import DeviceError
+from . import DeviceError, wait_for_sample
 
 _MAX_DRAIN = 512
 
@@ -182,14 +181,8 @@ class NetFtClient:
 
     def wait(self, timeout_s: float) -> FtSample:
         """Poll until a record arrives; FtError after timeout_s [s] without one."""
-        deadline = time.monotonic() + timeout_s
-        while self.poll() == 0 and self._latest is None:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                why = "refused (nothing listens there)" if self.stats.refused else "no record arrived"
-                raise FtError(f"Net F/T {self.endpoint}: {why} within {timeout_s:g} s")
-            select.select([self._sock], [], [], min(left, 0.05))
-        return self._latest
+        why = lambda: "refused (nothing listens there)" if self.stats.refused else "no record arrived"  # noqa: E731
+        return wait_for_sample(self, timeout_s, lambda t: FtError(f"Net F/T {self.endpoint}: {why()} within {t:g} s"))
 
     def fileno(self) -> int:
         return -1 if self._sock is None else self._sock.fileno()
