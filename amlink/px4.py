@@ -6,7 +6,9 @@ Ports. PX4 SITL instance i runs its onboard MAVLink instance as
 ``mavlink start -x -u 14580+i -r 4000000 -f -m onboard -o 14540+i`` (PX4
 ROMFS/px4fmu_common/init.d-posix/px4-rc.mavlink): it binds UDP 14580+i and sends to
 14540+i, and answers whoever last sent to it. A program written for PX4 listens on
-14540+i (MAVSDK's ``udpin://0.0.0.0:14540``). Vehicle i is the i-th [[am]] entry.
+14540+i (MAVSDK's ``udpin://0.0.0.0:14540``). Its GCS instance,
+``mavlink start -x -u 18570+i -r 4000000 -f`` (MAVLINK_MODE_NORMAL), binds 18570+i and sends
+to 127.0.0.1:14550, where QGroundControl and MAVProxy listen. Vehicle i is the i-th [[am]] entry.
 
 Identity. The autopilot of vehicle s speaks as (s, MAV_COMP_ID_AUTOPILOT1 = 1); its
 onboard computer as (s, MAV_COMP_ID_ONBOARD_COMPUTER = 191): PX4 counts an onboard
@@ -25,7 +27,8 @@ import math
 
 ONBOARD_PORT_BASE = 14540  # the program's port of instance i: 14540 + i (PX4 px4-rc.mavlink, -o)
 PX4_LOCAL_PORT_BASE = 14580  # the autopilot's own port of instance i: 14580 + i (-u)
-GCS_PORT = 14550  # PX4 SITL's GCS instance sends to 14550 (-o 14550, MAVLINK_MODE_NORMAL)
+GCS_PORT = 14550  # PX4 SITL's GCS instances send to 127.0.0.1:14550 (mavlink_main.h:96, mavlink_main.cpp:1002-1007)
+GCS_LOCAL_PORT_BASE = 18570  # ... from 18570 + i (px4-rc.mavlink: udp_gcs_port_local, -u), MAVLINK_MODE_NORMAL
 
 PX4_COMPID = 1  # MAV_COMP_ID_AUTOPILOT1
 ONBOARD_COMPID = 191  # MAV_COMP_ID_ONBOARD_COMPUTER
@@ -51,6 +54,11 @@ def onboard_port(index: int) -> int:
 def px4_local_port(index: int) -> int:
     """The UDP port the autopilot of vehicle `index` sends from."""
     return PX4_LOCAL_PORT_BASE + index
+
+
+def gcs_local_port(index: int) -> int:
+    """The UDP port the GCS instance of vehicle `index` binds and sends to GCS_PORT from."""
+    return GCS_LOCAL_PORT_BASE + index
 
 
 def custom_mode(main: int, sub: int = 0) -> int:

@@ -72,6 +72,7 @@ from amcore.allocation import Allocation
 from amcore.config import ScenarioSpec
 from amcore.mission import TAKEOFF_S
 from amcore.model import AmState, build_model
+from amlink import px4
 from amlink.endpoint import Endpoint
 
 from . import scene
@@ -260,12 +261,17 @@ class FreeRun:
     arms: one arm per vehicle (None: HoldJoints). speed: real-time factor. clock: monotonic
     nanoseconds. mission_t0_s: the mission clock's zero on the autopilot clock (None: first
     OFFBOARD engage + TAKEOFF_S). params: the commanders' PX4 parameters (None: PX4's, with
-    this vehicle's COM_OF_LOSS_T and hover thrust)."""
+    this vehicle's COM_OF_LOSS_T and hover thrust). gcs: one GCS endpoint per vehicle (None: no
+    GCS instances; an entry None: PX4 SITL's, 18570+i -> 127.0.0.1:14550); gcs_key and
+    gcs_signed: their signing (`simulator.px4.port`, Signing). instance: vehicle i is PX4 SITL
+    instance `instance` + i (its GCS instance binds 18570 + instance + i)."""
 
     def __init__(self, spec: ScenarioSpec, endpoints: Sequence[Endpoint | None] | None = None, *,
                  arms: Sequence | None = None, speed: float = 1.0, clock: Callable[[], int] = time.monotonic_ns,
                  mission_t0_s: float | None = None, params: cm.CommanderParams | None = None,
                  wrist_sensors: Sequence | None = None, mocap=None,
+                 gcs: Sequence[Endpoint | None] | None = None, gcs_key: bytes | None = None,
+                 gcs_signed: bool = True, instance: int = 0,
                  log: Callable[[str], None] = lambda _m: None) -> None:
         v = spec.vehicle
         if v.flight_controller.mode != "attitude":
@@ -289,6 +295,16 @@ class FreeRun:
         self.commanders = {s: cm.Commander(p) for s in self.sysids}
         self.ports = [Px4Port(i, s, self.commanders[s], endpoints[i], rotor_count=v.rotors.count, log=log)
                       for i, s in enumerate(self.sysids)]
+        if gcs is not None and len(gcs) != n:
+            raise ValueError(f"{len(gcs)} GCS endpoints for {n} vehicles (one per [[am]], in order)")
+        # each vehicle's GCS instance (simulator.px4.port, role "gcs"), HEARTBEATs forwarded both ways
+        self.gcs_ports = [] if gcs is None else [
+            Px4Port(i, s, self.commanders[s], gcs[i], role="gcs", signing_key=gcs_key, require_signed=gcs_signed,
+                    local_port=px4.gcs_local_port(instance + i), rotor_count=v.rotors.count, log=log)
+            for i, s in enumerate(self.sysids)]
+        for onboard, g in zip(self.ports, self.gcs_ports):
+            onboard.forward, g.forward = g.forwarded, onboard.forwarded
+        self.all_ports = [*self.ports, *self.gcs_ports]
         if arms is not None and len(arms) != n:
             raise ValueError(f"{len(arms)} arms for {n} vehicles (one per [[am]], in order)")
         q0 = start_joints(spec, self.model)
@@ -334,12 +350,12 @@ class FreeRun:
         self.core = SitlCore(self.spec, log=self.log, initial=self.starts)
         self.core.connect()
         self._opened = True
-        for port in self.ports:
+        for port in self.all_ports:
             try:
                 port.open()
             except OSError as exc:
-                raise OSError(f"vehicle {port.index} (sysid {port.sysid}): cannot bind its onboard port "
-                              f"{port.endpoint}: {exc.strerror or exc}") from None
+                raise OSError(f"vehicle {port.index} (sysid {port.sysid}): cannot bind its {port.role} port "
+                              f"for {port.endpoint}: {exc.strerror or exc}") from None
         for arm in self.arms.values():
             arm.open()
         for dev in self._devices():
@@ -354,7 +370,7 @@ class FreeRun:
 
     def close(self) -> None:
         self._fixed_fds = None
-        for port in self.ports:
+        for port in self.all_ports:
             port.close()
         for arm in self.arms.values():
             arm.close()
@@ -411,7 +427,7 @@ class FreeRun:
         """The descriptors of the ports, arms and devices that select() finds readable within
         timeout_s [s] (0: a look, no wait)."""
         if self._fixed_fds is None:  # the ports' and devices' sockets: fixed once open
-            self._fixed_fds = [p.fileno() for p in self.ports]
+            self._fixed_fds = [p.fileno() for p in self.all_ports]
             for dev in self._devices():
                 self._fixed_fds.extend(getattr(dev, "fds", lambda: [])())
             self._arm_fds = [arm.fds for arm in self.arms.values() if hasattr(arm, "fds")]
@@ -435,7 +451,7 @@ class FreeRun:
         ready = self._readable(timeout_s)
         if ready:
             now = self.boot_s()
-            for port in self.ports:
+            for port in self.all_ports:
                 if port.fileno() in ready:
                     port.poll(now)
             self._poll_arms(now, ready)
@@ -449,7 +465,11 @@ class FreeRun:
         now = w.time_s  # the autopilots' time: this physics step's start
         for port in self.ports:
             port.poll(now)
-        self._poll_arms(now, self._readable(0.0))
+        ready = self._readable(0.0)
+        for port in self.gcs_ports:  # (a GCS is seldom heard: read when select says so)
+            if port.fileno() in ready:
+                port.poll(now)
+        self._poll_arms(now, ready)
         for dev in self._devices():
             dev.poll(now)  # (they stream: polled every step)
         reports = {s: self._vehicle(s, now) for s in self.sysids}
@@ -474,6 +494,8 @@ class FreeRun:
             if w.step_index % self._truth_every == 0:
                 self._truth(t_next - self.mission_t0_s)
         for i, port in enumerate(self.ports):
+            port.publish(now, reports[self.sysids[i]])
+        for i, port in enumerate(self.gcs_ports):
             port.publish(now, reports[self.sysids[i]])
 
     def _vehicle(self, s: int, t: float) -> VehicleReport:
@@ -642,11 +664,17 @@ class FreeRun:
                 "mode_at_end": cm.nav_name(c.nav_state), "landed_at_end": c.landed, "failsafe_at_end": c.failsafe,
                 "events": c.events, "link": dataclasses.asdict(port.stats),
                 "start_p_WB_m": self.starts[port.sysid].p_WB.tolist()}
+        for g in self.gcs_ports:
+            vehicles[str(g.sysid)]["gcs"] = {
+                "port": g.describe() if g.sock is not None else str(g.endpoint), "signing": g.signing,
+                "link": dataclasses.asdict(g.stats)}
         return {"mode": "free-running", "speed": self.speed, "rate_hz": spec.rate_hz, "status": self.status,
                 "mission_t0_s": t0, "mission_t0_given": self._t0_given, "takeoff_s": TAKEOFF_S,
                 "sim_time_s": sim_s, "wall_s": wall_s, "timing": timing, "takeoff_track": self.takeoff_track,
                 "real_time_factor": sim_s / wall_s if wall_s else None,
-                "ports": [vehicles[str(s)]["port"] for s in self.sysids], "vehicles": vehicles,
+                "ports": [vehicles[str(s)]["port"] for s in self.sysids],
+                "gcs_ports": [vehicles[str(s)]["gcs"]["port"] for s in self.sysids] if self.gcs_ports else [],
+                "vehicles": vehicles,
                 "verdict": verdict.to_dict() if complete else {
                     "status": "incomplete", "success": False, "failure_class": None, "failures": [],
                     "incomplete": "the mission clock never started (no OFFBOARD engage)",

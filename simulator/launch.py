@@ -141,8 +141,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-progress", action="store_true", help="no progress display (there is one on a terminal only)")
     ap.add_argument("--no-telemetry", action="store_true", help="no Zenoh telemetry, no MCAP log, no review")
     ap.add_argument("--startup-timeout", type=cliargs.seconds, default=120.0, help="seconds for all processes to connect")
-    ap.add_argument("--gcs", default=DEFAULT_GCS, metavar="ENDPOINT",
-                    help=f"the simulator's GCS link (default {DEFAULT_GCS}; mavutil's forms; 'none' for none)")
+    ap.add_argument("--gcs", default=None, metavar="ENDPOINT",
+                    help=f"the simulator's GCS link (default {DEFAULT_GCS}; mavutil's forms; 'none' for none); "
+                         f"free-running: PX4 SITL's GCS instances (from 18570+i to 127.0.0.1:14550), or "
+                         f"udpout:HOST:PORT, or none")
+    ap.add_argument("--gcs-unsigned", action="store_true",
+                    help="free-running: the GCS instances' signing off, for tools without MAVLink signing (MAVSDK)")
     ap.add_argument("--gcs-key-file", type=Path, default=None, metavar="FILE",
                     help="the GCS signing passphrase (one line; keep it mode 0600), the same for every run, so a "
                          "GCS set up once keeps working; default: a new random one per run, gcs.key in the run folder")
@@ -166,6 +170,11 @@ def main(argv: list[str] | None = None) -> int:
         a.realtime = True
     if a.realtime:
         a.no_telemetry = True  # the free-running simulator publishes no telemetry yet
+    elif a.gcs_unsigned:
+        return cliargs.fail("am-run", "--gcs-unsigned is for --realtime (the lockstep's GCS link follows the "
+                                      "scenario's [link] signing)")
+    gcs_given = a.gcs is not None
+    a.gcs = a.gcs if gcs_given else DEFAULT_GCS
     try:
         if a.gcs.strip().lower() != "none":
             parse_endpoint(a.gcs)
@@ -203,10 +212,12 @@ def main(argv: list[str] | None = None) -> int:
     key_args = _fresh_key(spec, run_dir)
     speed = a.speed or REALTIME_SPEED
     start = MISSION_START_S if a.mission_start is None else a.mission_start
-    if a.realtime:  # PX4 SITL's onboard ports are unsigned, as PX4's; no lockstep link, no GCS link yet
+    if a.realtime:  # PX4 SITL's onboard ports are unsigned, as PX4's; its GCS instances signed unless told
         sim_cmd = _command("simulator") + ["--config", cfg, "--realtime", "--speed", str(speed), "--mission-start",
                                            str(start), "--run-dir", str(run_dir), "--progress", "jsonl",
                                            "--instance", str(a.instance)]
+        sim_cmd += (["--gcs", a.gcs] if gcs_given else []) + (
+            ["--gcs-unsigned"] if a.gcs_unsigned else _gcs_key(spec, run_dir, a.gcs_key_file))
     else:
         sim_cmd = _command("simulator") + key_args + _gcs_key(spec, run_dir, a.gcs_key_file) + [
             "--config", cfg, "--bind", "udpin:127.0.0.1:0", "--gcs", a.gcs, "--run-dir", str(run_dir),
@@ -254,6 +265,9 @@ def main(argv: list[str] | None = None) -> int:
             ev = json.loads(line)
             if ev.get("event") == "ready" and a.realtime:
                 bind = ev
+                if ev.get("gcs"):
+                    print(f"am-run: GCS ports ({'unsigned' if a.gcs_unsigned else 'signed'}): {'; '.join(ev['gcs'])}",
+                          file=sys.stderr)
             elif ev.get("event") == "ready":
                 bind = ev["connect"]
                 if ev.get("gcs") and parse_endpoint(a.gcs).port == 0:  # the port a GCS connects to

@@ -63,8 +63,9 @@ from .verdict import MISSION_FAILED
 
 
 
-class _Stop(Exception):
-    pass
+class _Stop(BaseException):
+    """SIGINT or SIGTERM: a BaseException, as KeyboardInterrupt, so that no `except Exception` of a
+    handler that keeps the run alive (a port's, for a message that trips a bug) swallows it."""
 
 
 class _BindError(Exception):
@@ -115,9 +116,14 @@ def main(argv: list[str] | None = None) -> int:
                     help=f"where the companions reach their flight controllers, repeatable (default "
                          f"{SIM_BIND}; HOST 0.0.0.0 serves other hosts, port 0 = any free port); "
                          "mavutil's forms: udpin:/udp:, udpout:, tcpin:, tcp:HOST:PORT, serial DEVICE[:BAUD]")
-    ap.add_argument("--gcs", default=DEFAULT_GCS, metavar="ENDPOINT",
+    ap.add_argument("--gcs", default=None, metavar="ENDPOINT",
                     help=f"the flight controllers' GCS link (default {DEFAULT_GCS}; mavutil's forms; 'none': "
-                         f"no GCS endpoint, gcs.tlog is written all the same)")
+                         f"no GCS endpoint, gcs.tlog is written all the same); free-running: each vehicle's GCS "
+                         f"instance, PX4 SITL's by default (bind 127.0.0.1:18570+i, send to 127.0.0.1:14550), "
+                         f"udpout:HOST:PORT or none")
+    ap.add_argument("--gcs-unsigned", action="store_true",
+                    help="free-running: the GCS instances' signing off, for tools without MAVLink signing "
+                         "(MAVSDK): any program that reaches the port can command the vehicles")
     ap.add_argument("--gcs-key-file", type=Path, default=None,
                     help="GCS signing passphrase file (key = SHA-256 of the passphrase, as MAVProxy's 'signing "
                          "key'); with signing on, GCS commands are executed only if signed with it")
@@ -161,7 +167,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"simulator: error: --bind: {exc}", file=sys.stderr)
         return 2
     try:
-        gcs_endpoint = None if a.gcs.strip().lower() == "none" else parse_endpoint(a.gcs)
+        if a.gcs is None and not a.realtime:
+            a.gcs = DEFAULT_GCS
+        gcs_endpoint = None if a.gcs is None or a.gcs.strip().lower() == "none" else parse_endpoint(a.gcs)
     except EndpointError as exc:
         print(f"simulator: error: --gcs: {exc} (or none)", file=sys.stderr)
         return 2
@@ -173,13 +181,16 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, signing.SigningKeyError) as exc:
         print(f"simulator: error: {exc}", file=sys.stderr)
         return 2
-    if a.realtime:  # the PX4 ports are unsigned (as PX4 SITL's); the lockstep's link and GCS are not used
+    if a.gcs_unsigned and not a.realtime:
+        return cliargs.fail("simulator", "--gcs-unsigned is for --realtime (the lockstep's GCS link is unsigned "
+                                         "when the scenario's [link] signing is off)")
+    if a.realtime:  # the onboard ports are unsigned (as PX4 SITL's); the GCS instances as --gcs-key-file says
         if a.duration is not None:
             try:
                 check_duration(spec, a.duration, "--duration")
             except ConfigError as exc:
                 return cliargs.fail("simulator", str(exc))
-        return _main_freerun(a, spec)
+        return _main_freerun(a, spec, gcs_key)
     if warning:
         print(f"simulator: warning: {warning}", file=sys.stderr)
     if keys is not None and gcs_key is None and gcs_endpoint is not None:
@@ -360,16 +371,18 @@ def main(argv: list[str] | None = None) -> int:
     return code
 
 
-def _main_freerun(a, spec) -> int:
+def _main_freerun(a, spec, gcs_key: bytes | None) -> int:
     """--realtime: the free-running simulator (simulator.freerun), wired: its ports, the run,
     outcome.json. Exit codes as the lockstep's; 1 also when no vehicle engaged OFFBOARD."""
     try:
         onboard = a.onboard or ([f"udpout:127.0.0.1:{14540 + a.instance + i}" for i in range(len(spec.ams))]
                                 if a.instance else None)
         endpoints = endpoints_for(spec, onboard)
+        gcs = _freerun_gcs(a, spec, gcs_key)
         arms, wrists, mocap = freerun_devices(spec, a.instance)
         run = FreeRun(spec, endpoints, speed=a.speed or 1.0, arms=arms, wrist_sensors=wrists, mocap=mocap,
-                      mission_t0_s=a.mission_start,
+                      mission_t0_s=a.mission_start, gcs=gcs, gcs_key=gcs_key, gcs_signed=not a.gcs_unsigned,
+                      instance=a.instance,
                       log=lambda msg: print(f"simulator: {msg}", file=sys.stderr, flush=True))
     except (PortError, ValueError) as exc:
         return cliargs.fail("simulator", str(exc))
@@ -389,6 +402,11 @@ def _main_freerun(a, spec) -> int:
         ports = "; ".join(f"sysid {p.sysid}: {p.describe()}" for p in run.ports)
         print(f"simulator: '{spec.name}' free-running at {run.speed:g}x real time; PX4 onboard ports: {ports}",
               file=sys.stderr, flush=True)
+        if run.gcs_ports:
+            signed = ("signed" if gcs_key is not None else "signing on, no --gcs-key-file: telemetry only") \
+                if not a.gcs_unsigned else "UNSIGNED"
+            ports = "; ".join(f"sysid {p.sysid}: {p.describe()}" for p in run.gcs_ports)
+            print(f"simulator: GCS ports ({signed}): {ports}", file=sys.stderr, flush=True)
         buses = "; ".join(f"sysid {s}: servo bus tcp:{arm.address[0]}:{arm.address[1]}, F/T udp:{ft.address[0]}:"
                           f"{ft.address[1]}" for s, arm, ft in zip(run.sysids, arms, wrists))
         print(f"simulator: devices: {buses}" + (f"; motion capture udp:{mocap.address[0]}:{mocap.address[1]}"
@@ -426,6 +444,22 @@ def _main_freerun(a, spec) -> int:
     return code
 
 
+def _freerun_gcs(a, spec, gcs_key: bytes | None):
+    """Each vehicle's GCS endpoint from --gcs (None: no GCS instances); PortError if unusable.
+    Warns of an unsigned GCS link, as the lockstep warns of a keyless one."""
+    from .px4.port import gcs_endpoint
+    if a.gcs is not None and a.gcs.strip().lower() == "none":
+        return None
+    eps = [gcs_endpoint(i, a.gcs) for i in range(len(spec.ams))]
+    if a.gcs_unsigned:
+        print("simulator: warning: --gcs-unsigned: the GCS ports take unsigned commands; any program that reaches "
+              "them can arm, switch modes and land the vehicles", file=sys.stderr)
+    elif gcs_key is None:
+        print("simulator: warning: no --gcs-key-file: the GCS ports send telemetry but read nothing (signing on); "
+              "give --gcs-key-file, or --gcs-unsigned for tools without signing", file=sys.stderr)
+    return eps
+
+
 def freerun_devices(spec, instance: int = 0):
     """Each vehicle's arm as a Dynamixel bus (simulator.servo_bus, TCP 7200+i) and wrist sensor
     as a Net F/T (simulator.netft, UDP 49152+i), and the object's motion-capture stream
@@ -454,6 +488,7 @@ def progress_ready(a, spec, run, arms, wrists, mocap) -> None:
         return
     print(json.dumps({"event": "ready", "realtime": True, "speed": run.speed, "scenario": spec.name,
                       "sysids": run.sysids, "onboard": [p.describe() for p in run.ports],
+                      "gcs": [p.describe() for p in run.gcs_ports],
                       "arms": [f"tcp:{x.address[0]}:{x.address[1]}" for x in arms],
                       "ft": [f"udp:{x.address[0]}:{x.address[1]}" for x in wrists],
                       "mocap": None if mocap is None else f"udp:{mocap.address[0]}:{mocap.address[1]}"}), flush=True)

@@ -14,6 +14,27 @@ clients on one port the first one wins; a client must send from the port it list
 does). This port does the same. (With a remote that is not localhost PX4 latches only after 3 s;
 so does this.)
 
+Roles. ``role="onboard"``: the instance above. ``role="gcs"``: PX4 SITL's GCS instance,
+``mavlink start -x -u 18570+i -r 4000000 -f`` (px4-rc.mavlink:14), MAVLINK_MODE_NORMAL: bound to
+18570+i, sending to 127.0.0.1:14550 (mavlink_main.cpp:1002-1007), with that mode's streams and
+px4-rc.mavlink's 50 Hz ones (`GCS_RATES_HZ`). Both take the same commands and setpoints for the
+same commander: a GCS arms, switches modes and lands on either.
+
+Signing. PX4 v1.14.3's MAVLink has no signing; later PX4 (MAV_SIGN_CFG) and this stack set it
+per link. `require_signed` with `signing_key` (32 bytes, MAVProxy's SHA-256 of a passphrase):
+every frame sent is signed with it and only frames signed with it are read; unsigned, wrongly
+signed and replayed ones are dropped and counted (`PortStats.unsigned`, `bad_signature`,
+`replayed`, `unknown_sysid`; MAVLink 1 is junk here). `require_signed` without a key: the port
+sends its streams (unsigned) and reads nothing, a telemetry-only link. Not `require_signed`:
+signing off, as PX4's ports by default (frames read signed or not, signatures unchecked,
+nothing signed on the way out).
+
+Forwarding. Both of PX4 SITL's instances run with -f: a message one receives that is not for
+the autopilot alone goes to the other instances (Mavlink::forward_message, mavlink_main.cpp:448-487;
+HEARTBEATs too, MAV_HB_FORW_EN = 1, mavlink_params.c:143), which is how a GCS sees the onboard
+computer. Of that, this port forwards HEARTBEATs (`forward`, set by the owner, to another port's
+`forwarded`): the companion's reaches the GCS, re-framed as from its source.
+
 Input. Datagrams are read up to 8000 bytes (PX4's POSIX buffer, mavlink_receiver.cpp:3077; a
 longer one is cut there, counted as oversized) and parsed as a byte stream, as
 mavlink_parse_char does (`amlink.wire.StreamFramer`: junk skipped and counted, a frame may
@@ -93,7 +114,22 @@ ONBOARD_RATES_HZ = {
     "SYS_STATUS": 5.0,  # :1491
     "SYSTEM_TIME": 1.0,  # :1492
 }
-_IDS = {name: getattr(mav, f"MAVLINK_MSG_ID_{name}") for name in ONBOARD_RATES_HZ}
+# PX4 SITL's GCS instance, ``mavlink start -x -u 18570+i -r 4000000 -f`` (px4-rc.mavlink:14, MAVLINK_MODE_NORMAL),
+# with the streams px4-rc.mavlink:15-20 raises to 50 Hz; the rest mavlink_main.cpp:1390-1444 and :2143-2147 [Hz]
+GCS_RATES_HZ = {
+    "HEARTBEAT": 1.0,  # :2144
+    "STATUSTEXT": 20.0,  # :2147
+    "ATTITUDE": 50.0,  # px4-rc.mavlink:18 (mavlink_main.cpp:1393: 15)
+    "ATTITUDE_QUATERNION": 50.0,  # px4-rc.mavlink:19 (:1394: 10)
+    "ATTITUDE_TARGET": 50.0,  # px4-rc.mavlink:20 (:1395: 2)
+    "EXTENDED_SYS_STATE": 1.0,  # :1404
+    "GLOBAL_POSITION_INT": 50.0,  # px4-rc.mavlink:17 (:1408: 5)
+    "HOME_POSITION": 0.5,  # :1413
+    "LOCAL_POSITION_NED": 50.0,  # px4-rc.mavlink:16 (:1415: 1)
+    "SYS_STATUS": 1.0,  # :1428
+}
+ROLE_RATES_HZ = {"onboard": ONBOARD_RATES_HZ, "gcs": GCS_RATES_HZ}
+_IDS = {name: getattr(mav, f"MAVLINK_MSG_ID_{name}") for name in {**ONBOARD_RATES_HZ, **GCS_RATES_HZ}}
 _NAMES = {i: n for n, i in _IDS.items()}
 _REQUESTABLE = {**_IDS, "AUTOPILOT_VERSION": mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION}
 MAX_DATAGRAM = 1600 * 5  # PX4's POSIX receive buffer (mavlink_receiver.cpp:3077)
@@ -139,6 +175,22 @@ def onboard_endpoint(index: int, text: str | None = None) -> Endpoint:
     return ep
 
 
+def gcs_endpoint(index: int, text: str | None = None) -> Endpoint:
+    """The GCS endpoint of vehicle `index`: PX4 SITL's (send to 127.0.0.1:14550 from 18570+i)
+    unless `text` names another ``udpout:HOST:PORT`` (every vehicle sends there, each from its
+    own 18570+i, as PX4 SITL instances do). PortError if unusable."""
+    if text is None:
+        return Endpoint(UDP_OUT, "127.0.0.1", px4.GCS_PORT)
+    try:
+        ep = parse_endpoint(text)
+    except EndpointError as exc:
+        raise PortError(f"--gcs {text!r}: {exc}") from None
+    if ep.kind != UDP_OUT:
+        raise PortError(f"--gcs {text!r}: free-running, each vehicle's GCS instance sends from its own port "
+                        f"18570+i to one GCS (PX4 SITL's -u 18570+i): give udpout:HOST:PORT, or none")
+    return ep
+
+
 @dataclass
 class PortStats:
     """Counters of one port. The first six are `amlink.wire.Decoder`'s."""
@@ -173,10 +225,18 @@ class Px4Port:
     (boot time) [s]; `unix_time_us`: the wall clock for SYSTEM_TIME."""
 
     def __init__(self, index: int, sysid: int, commander: cm.Commander, endpoint: Endpoint | None = None, *,
+                 role: str = "onboard", signing_key: bytes | None = None, require_signed: bool = False,
+                 local_port: int | None = None,
                  rotor_count: int = 4, max_datagrams: int = 64,
                  unix_time_us: Callable[[], int] | None = None, log: Callable[[str], None] = lambda _m: None) -> None:
-        self.index, self.sysid, self.commander = index, sysid, commander
-        self.endpoint = endpoint or onboard_endpoint(index)
+        if role not in ROLE_RATES_HZ:
+            raise ValueError(f"role {role!r}: one of {', '.join(ROLE_RATES_HZ)}")
+        self.index, self.sysid, self.commander, self.role = index, sysid, commander, role
+        self.endpoint = endpoint or (onboard_endpoint(index) if role == "onboard" else gcs_endpoint(index))
+        self._rates = ROLE_RATES_HZ[role]
+        self._local_port = local_port  # a udpout endpoint's own port (None: open's rule)
+        self.signing = bool(require_signed)  # (module doc, Signing)
+        self.forward: Callable[[int, int, object], None] | None = None  # another port's `forwarded` (Forwarding)
         self.stats = PortStats()
         self.max_datagrams = max_datagrams
         self.log = log
@@ -187,10 +247,13 @@ class Px4Port:
         self._remote: tuple | None = None  # the preset remote (-o), until then
         self._opened_s: float | None = None
         self._framer = StreamFramer()
-        self._decoder = Decoder(None, accept=_ACCEPT, counters=self.stats,
+        keys = ({s: signing_key for s in range(256)} if signing_key is not None else {}) if self.signing else None
+        self._decoder = Decoder(keys, accept=_ACCEPT, counters=self.stats,
                                 readers={mav.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET: _read_set_attitude_target})
-        self._encoder = Encoder(sysid, px4.PX4_COMPID)
-        self._interval_s = {n: 1.0 / r for n, r in ONBOARD_RATES_HZ.items()}
+        self._signing_key = signing_key if self.signing else None
+        self._encoder = Encoder(sysid, px4.PX4_COMPID, signing_key=self._signing_key)
+        self._forward_encoders: dict[tuple[int, int], Encoder] = {}
+        self._interval_s = {n: 1.0 / r for n, r in self._rates.items()}
         self._last_sent: dict[str, float] = {}
         self._texts: deque[tuple[int, str]] = deque(maxlen=256)
         self._text_id = 0
@@ -213,8 +276,14 @@ class Px4Port:
                 local = "127.0.0.1" if family == socket.AF_INET else "::1"
                 if not _is_loopback(self._remote[0]):
                     local = "0.0.0.0" if family == socket.AF_INET else "::"
-                # PX4's -u port when the remote is PX4's -o port for this instance, else any free port
-                port = px4.px4_local_port(self.index) if ep.port == px4.onboard_port(self.index) else 0
+                # PX4's -u port when the remote is PX4's -o port for this instance (the GCS instance's:
+                # 18570+i whatever the remote), else any free port
+                if self._local_port is not None:
+                    port = self._local_port
+                elif self.role == "gcs":
+                    port = px4.gcs_local_port(self.index)
+                else:
+                    port = px4.px4_local_port(self.index) if ep.port == px4.onboard_port(self.index) else 0
                 sock.bind((local, port))
             else:
                 sock.bind((ep.host, ep.port))
@@ -290,7 +359,10 @@ class Px4Port:
             return
         name = body.get_type()
         rx[name] = rx.get(name, 0) + 1
-        if msgid in (mav.MAVLINK_MSG_ID_COMMAND_LONG, mav.MAVLINK_MSG_ID_COMMAND_INT):
+        if msgid == mav.MAVLINK_MSG_ID_HEARTBEAT:
+            if self.forward is not None and (sysid, compid) != (self.sysid, px4.PX4_COMPID):
+                self.forward(sysid, compid, body)
+        elif msgid in (mav.MAVLINK_MSG_ID_COMMAND_LONG, mav.MAVLINK_MSG_ID_COMMAND_INT):
             self._command(now, sysid, compid, body)
         elif msgid == mav.MAVLINK_MSG_ID_TIMESYNC and body.tc1 == 0:
             self._send(mav.MAVLink_timesync_message(tc1=_ns(now), ts1=body.ts1), "TIMESYNC")
@@ -365,8 +437,18 @@ class Px4Port:
         elif interval_us > 1e-5:
             self._interval_s[name] = interval_us * 1e-6
         else:
-            self._interval_s[name] = 1.0 / ONBOARD_RATES_HZ[name]
+            default = self._rates.get(name)
+            self._interval_s[name] = 1.0 / default if default else -1.0
         return cm.ACCEPTED
+
+    def forwarded(self, sysid: int, compid: int, msg) -> None:
+        """Send a HEARTBEAT another port of this autopilot received from (sysid, compid) (its
+        companion's, a GCS's), as PX4's forwarding does (module doc, Forwarding): re-framed as
+        from its source, and signed when this link signs."""
+        enc = self._forward_encoders.get((sysid, compid))
+        if enc is None:
+            enc = self._forward_encoders[(sysid, compid)] = Encoder(sysid, compid, signing_key=self._signing_key)
+        self._send(msg, "HEARTBEAT (forwarded)", enc)
 
     def _ack(self, command: int, result: int, sysid: int, compid: int) -> None:
         key = f"{command}:{cm.RESULT_NAMES.get(result, result)}"
@@ -461,11 +543,10 @@ class Px4Port:
                 return None
             p, yaw = self._home
             x, y, z = px4.enu_to_ned(p)
-            lat = HOME_LAT_DEG + math.degrees(x / _EARTH_R_M)
-            lon = HOME_LON_DEG + math.degrees(y / (_EARTH_R_M * math.cos(math.radians(HOME_LAT_DEG))))
+            lat, lon = _lat_lon(x, y)
             psi = math.pi / 2.0 - yaw  # heading about NED down from the yaw about ENU up
             q = [math.cos(psi / 2.0), 0.0, 0.0, math.sin(psi / 2.0)]
-            return mav.MAVLink_home_position_message(round(lat * 1e7), round(lon * 1e7), round((HOME_ALT_M - z) * 1e3),
+            return mav.MAVLink_home_position_message(lat, lon, round((HOME_ALT_M - z) * 1e3),
                                                      x, y, z, q, 0.0, 0.0, 0.0, _us(r.time_s))
         q = px4.q_enu_flu_to_ned_frd(r.quat_WB)
         w = px4.flu_to_frd(r.w_B)
@@ -473,6 +554,14 @@ class Px4Port:
             return mav.MAVLink_attitude_quaternion_message(_ms(r.time_s), *q, *w, [0.0, 0.0, 0.0, 0.0])
         if name == "ATTITUDE":
             return mav.MAVLink_attitude_message(_ms(r.time_s), *_euler(q), *w)
+        if name == "GLOBAL_POSITION_INT":
+            x, y, z = px4.enu_to_ned(r.p_W)
+            vx, vy, vz = px4.enu_to_ned(r.v_W)
+            lat, lon = _lat_lon(x, y)
+            hdg = round(math.degrees(math.pi / 2.0 - _yaw(r.quat_WB)) * 100.0) % 36000
+            rel = -z - (0.0 if self._home is None else -px4.enu_to_ned(self._home[0])[2])
+            return mav.MAVLink_global_position_int_message(_ms(r.time_s), lat, lon, round((HOME_ALT_M - z) * 1e3),
+                                                           round(rel * 1e3), _cm_s(vx), _cm_s(vy), _cm_s(vz), hdg)
         if name == "LOCAL_POSITION_NED":
             return mav.MAVLink_local_position_ned_message(_ms(r.time_s), *px4.enu_to_ned(r.p_W), *px4.enu_to_ned(r.v_W))
         if name == "ODOMETRY":
@@ -491,12 +580,12 @@ class Px4Port:
                                                        min(max(r.target.thrust_normalized, 0.0), 1.0))
         return None
 
-    def _send(self, msg, name: str) -> None:
+    def _send(self, msg, name: str, encoder: Encoder | None = None) -> None:
         dest = self.partner or self._remote
         if dest is None or self.sock is None:
             return
         try:
-            data = self._encoder.pack([msg])
+            data = (encoder or self._encoder).pack([msg])
         except Exception as exc:  # a value out of range for its field: a bug to hear about, never a crash
             self._warn_once(f"pack {name}", f"cannot pack {name}: {exc}")
             return
@@ -519,6 +608,17 @@ def _is_loopback(host: str) -> bool:
         return ipaddress.ip_address(host).is_loopback
     except ValueError:
         return host == "localhost"
+
+
+def _lat_lon(x_n: float, y_e: float) -> tuple[int, int]:
+    """Latitude and longitude [1e-7 deg] of the point x_n north, y_e east [m] of PX4 SITL's home."""
+    lat = HOME_LAT_DEG + math.degrees(x_n / _EARTH_R_M)
+    lon = HOME_LON_DEG + math.degrees(y_e / (_EARTH_R_M * math.cos(math.radians(HOME_LAT_DEG))))
+    return round(lat * 1e7), round(lon * 1e7)
+
+
+def _cm_s(v: float) -> int:
+    return max(-32768, min(32767, round(v * 100.0)))
 
 
 def _ms(t: float) -> int:

@@ -61,11 +61,11 @@ class FreeSim:
     """`simulator --realtime` sending vehicle i's PX4 port to ports[i]; returns once it says its
     ports are open (its kernels may compile first, once per machine)."""
 
-    def __init__(self, tmp_path: Path, ports: list[int], duration_s: float = 60.0) -> None:
+    def __init__(self, tmp_path: Path, ports: list[int], duration_s: float = 60.0, gcs: tuple = ("--gcs", "none")) -> None:
         self.run_dir = tmp_path / "run"
         onboard = [a for p in ports for a in ("--onboard", f"udpout:127.0.0.1:{p}")]
         self.proc = subprocess.Popen([script("simulator"), "--config", str(scenario_copy(tmp_path)), "--realtime",
-                                      "--duration", str(duration_s), "--run-dir", str(self.run_dir), *onboard],
+                                      "--duration", str(duration_s), "--run-dir", str(self.run_dir), *onboard, *gcs],
                                      stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         self.lines: list[str] = []
         ready = threading.Event()
@@ -230,3 +230,105 @@ def test_raw_mavlink_acks_and_bad_input(tmp_path):
     assert events.count("armed") == 1 and "arming denied" in events
     assert outcome["vehicles"]["4"]["offboard_engaged_s"] is None
     assert code == 130
+
+
+async def gcs_view(port: int) -> dict:
+    """MAVSDK as a ground station on the GCS port: both vehicles, vehicle 4's health, arm and disarm."""
+    from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
+    from mavsdk.asyncio.plugins.action import ActionAsync
+    from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+
+    seen: dict = {}
+    async with Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION)) as sdk:
+        await sdk.add_any_connection(f"udpin://127.0.0.1:{port}")
+        t_end = time.monotonic() + 25.0
+        drones = {}
+        while len(drones) < 2 and time.monotonic() < t_end:
+            for d in await sdk.get_systems():
+                drones[await d.get_system_id()] = d
+            await asyncio.sleep(0.2)
+        seen["sysids"] = sorted(drones)
+        drone = drones[4]
+        telemetry, action = TelemetryAsync(drone), ActionAsync(drone)
+        await asyncio.sleep(2.5)  # HOME_POSITION comes at 0.5 Hz
+        seen["health"] = await telemetry.health()
+        seen["position"] = await telemetry.position()
+        await action.arm()  # raises unless ACCEPTED
+        t_end = time.monotonic() + 2.5  # the armed flag comes with the next HEARTBEAT (1 Hz)
+        while not (armed := await telemetry.armed()) and time.monotonic() < t_end:
+            await asyncio.sleep(0.1)
+        seen["armed"] = armed
+        await action.disarm()
+    return seen
+
+
+def test_the_gcs_port_is_px4_sitls_and_signing_is_per_link(tmp_path):
+    """Each vehicle's GCS instance (simulator.px4.port, role gcs): with --gcs-unsigned, MAVSDK as a
+    ground station sees both vehicles, their health as a PX4's indoors, and arms and disarms;
+    a companion's HEARTBEAT on the onboard port reaches the GCS (PX4's forwarding). With a
+    --gcs-key-file the same port executes only commands signed with it."""
+    from pymavlink import mavutil
+    p0, p1, pg = free_udp_ports(3)
+    sim = FreeSim(tmp_path, [p0, p1], gcs=("--gcs", f"udpout:127.0.0.1:{pg}", "--gcs-unsigned", "--instance", "50"))
+    companion = mavutil.mavlink_connection(f"udpin:127.0.0.1:{p1}", source_system=5,
+                                           source_component=px4.ONBOARD_COMPID)
+    try:
+        assert companion.recv_match(type="HEARTBEAT", blocking=True, timeout=25) is not None
+        companion.write(Encoder(5, px4.ONBOARD_COMPID).pack([mav.MAVLink_heartbeat_message(
+            mav.MAV_TYPE_ONBOARD_CONTROLLER, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3)]))
+        try:
+            seen = asyncio.run(asyncio.wait_for(gcs_view(pg), timeout=40.0))
+        except asyncio.TimeoutError:
+            raise AssertionError("MAVSDK did not finish within 40 s; simulator:\n" + "".join(sim.lines)) from None
+    finally:
+        companion.close()
+        code, err, outcome = sim.stop()
+    assert "--gcs-unsigned" in err and "UNSIGNED" in err
+    assert seen["sysids"] == [4, 5]
+    h = seen["health"]
+    assert h.is_gyrometer_calibration_ok and h.is_accelerometer_calibration_ok and h.is_armable, h
+    assert h.is_home_position_ok and h.is_local_position_ok, h
+    assert seen["position"].latitude_deg == pytest.approx(47.397742, abs=1e-3)
+    assert seen["armed"]
+    v4 = outcome["vehicles"]["4"]
+    assert [e["event"] for e in v4["events"]].count("armed") == 1 and "disarmed" in [e["event"] for e in v4["events"]]
+    g5 = outcome["vehicles"]["5"]["gcs"]
+    assert g5["port"].startswith("udp 127.0.0.1:18621") and g5["signing"] is False
+    assert g5["link"]["tx"].get("HEARTBEAT (forwarded)", 0) >= 1  # the companion's, to the GCS
+    assert outcome["gcs_ports"] and code == 130
+
+
+def test_a_signed_gcs_port_takes_only_signed_commands(tmp_path):
+    from amlink.signing import gcs_key_from_passphrase
+    from pymavlink import mavutil
+    p0, p1, pg = free_udp_ports(3)
+    key_file = tmp_path / "gcs.key"
+    key_file.write_text("a passphrase for MAVProxy\n")
+    key_file.chmod(0o600)
+    sim = FreeSim(tmp_path, [p0, p1], gcs=("--gcs", f"udpout:127.0.0.1:{pg}", "--gcs-key-file", str(key_file),
+                                           "--instance", "50"))
+    m = mavutil.mavlink_connection(f"udpin:127.0.0.1:{pg}", source_system=255, source_component=190)
+    key = gcs_key_from_passphrase("a passphrase for MAVProxy")
+
+    def arm(enc: Encoder, sysid: int) -> int | None:
+        m.write(enc.pack([mav.MAVLink_command_long_message(sysid, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0,
+                                                           1, 0, 0, 0, 0, 0, 0)]))
+        t_end = time.monotonic() + 2.0
+        while time.monotonic() < t_end:
+            ack = m.recv_match(type="COMMAND_ACK", blocking=True, timeout=0.5)
+            if ack is not None and ack.get_srcSystem() == sysid:
+                return ack.result
+        return None
+
+    try:
+        hb = m.recv_match(type="HEARTBEAT", blocking=True, timeout=25)
+        assert hb is not None
+        assert arm(Encoder(255, 190), 4) is None  # unsigned: dropped, no answer
+        assert arm(Encoder(255, 190, signing_key=key), 5) == mav.MAV_RESULT_ACCEPTED
+    finally:
+        m.close()
+        code, err, outcome = sim.stop()
+    assert outcome, f"no outcome.json; simulator stderr:\n{err}"
+    assert outcome["vehicles"]["4"]["gcs"]["link"]["unsigned"] >= 1
+    assert outcome["vehicles"]["4"]["armed_at_end"] is False and outcome["vehicles"]["5"]["armed_at_end"] is True
+    assert outcome["vehicles"]["5"]["gcs"]["signing"] is True
