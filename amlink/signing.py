@@ -76,13 +76,14 @@ def gcs_key_from_passphrase(passphrase: str) -> bytes:
     return hashlib.sha256(passphrase.encode("ascii")).digest()
 
 
-def read_gcs_key_file(path: str | Path) -> bytes:
-    """The GCS key of a file holding its passphrase (one line; keep it mode 0600)."""
+def read_gcs_key_file(path: str | Path, what: str = "GCS key file") -> bytes:
+    """The key of a file holding its passphrase (one line; keep it mode 0600), as MAVProxy's
+    'signing key' derives it; `what` names the file in errors."""
     p = Path(path)
     try:
         text = p.read_text(encoding="ascii").strip()
     except (OSError, UnicodeDecodeError) as exc:
-        raise SigningKeyError(f"{p}: cannot read GCS key file: {exc}") from None
+        raise SigningKeyError(f"{p}: cannot read {what}: {exc}") from None
     try:
         return gcs_key_from_passphrase(text)
     except SigningKeyError as exc:

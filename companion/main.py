@@ -86,6 +86,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fc", default=None, metavar="ENDPOINT",
                     help="--clock wall: the autopilot (default udpin:0.0.0.0:14540+i, PX4 SITL's onboard port of this "
                          "AM's place i in [[am]]); mavutil's forms, e.g. /dev/ttyACM0:921600")
+    ap.add_argument("--fc-key-file", type=Path, default=None, metavar="FILE",
+                    help="--clock wall: the autopilot link's signing passphrase (SHA-256 of it, as MAVProxy's and "
+                         "simulator --onboard-key-file); default unsigned, as PX4's ports")
     ap.add_argument("--arm", default=None, metavar="ENDPOINT",
                     help="--clock wall: the servo bus, a serial DEVICE[:BAUD] (/dev/ttyUSB0:4000000) or tcp:HOST:PORT "
                          "(default tcp:127.0.0.1:7200+i, the simulator's)")
@@ -127,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, signing.SigningKeyError) as exc:
         print(f"{tag}: error: {exc}", file=sys.stderr)
         return 2
-    if warning:
+    if warning and a.clock == "lockstep":  # ([link]'s keys are the lockstep's protocol's)
         print(f"{tag}: warning: {warning}", file=sys.stderr)
     pilot = Pilot(spec, a.sysid)
     try:

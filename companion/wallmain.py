@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from amcore.config import ConfigError
+from amlink import signing
 from amlink.endpoint import EndpointError, parse_endpoint
 from amlink.px4link import LinkOpenError
 
@@ -51,6 +52,11 @@ def run_wall(a, spec, pilot: Pilot, tele, am_tele, keys, tlog, tag: str, _stop_e
     except (ValueError, ConfigError) as exc:
         say(f"error: {exc}")
         return 2
+    try:  # the autopilot link's own signing (PX4's ports are unsigned unless set up)
+        fc_key = signing.read_gcs_key_file(a.fc_key_file, "--fc-key-file") if getattr(a, "fc_key_file", None) is not None else None
+    except signing.SigningKeyError as exc:
+        say(f"error: {exc}")
+        return 2
     stopping: list[str] = []
 
     def on_signal(signum, _frame):
@@ -63,9 +69,9 @@ def run_wall(a, spec, pilot: Pilot, tele, am_tele, keys, tlog, tag: str, _stop_e
 
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
-    # PX4's onboard port is unsigned by default (MAVLink signing is set per link, MAV_x_... ); the
-    # lockstep's [link] keys are for the simulator's own protocol
-    run = WallRun(spec, a.sysid, eps, signing_key=None, tlog=tlog, type_mask=a.type_mask, log=say)
+    # PX4's onboard port is unsigned by default (MAVLink signing is set per link); the lockstep's
+    # [link] keys are for the simulator's own protocol
+    run = WallRun(spec, a.sysid, eps, signing_key=fc_key, tlog=tlog, type_mask=a.type_mask, log=say)
     say(f"wall clock: autopilot {eps['fc']}, servo bus {eps['arm']}, F/T {eps['ft']}"
         + (f", motion capture {eps['mocap']}" if run.mocap is not None else ""))
     cpu = procstats.CpuMeter()

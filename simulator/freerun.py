@@ -264,14 +264,15 @@ class FreeRun:
     this vehicle's COM_OF_LOSS_T and hover thrust). gcs: one GCS endpoint per vehicle (None: no
     GCS instances; an entry None: PX4 SITL's, 18570+i -> 127.0.0.1:14550); gcs_key and
     gcs_signed: their signing (`simulator.px4.port`, Signing). instance: vehicle i is PX4 SITL
-    instance `instance` + i (its GCS instance binds 18570 + instance + i)."""
+    instance `instance` + i (its GCS instance binds 18570 + instance + i). onboard_key: the onboard
+    ports sign and read only signed frames (None: unsigned, as PX4's)."""
 
     def __init__(self, spec: ScenarioSpec, endpoints: Sequence[Endpoint | None] | None = None, *,
                  arms: Sequence | None = None, speed: float = 1.0, clock: Callable[[], int] = time.monotonic_ns,
                  mission_t0_s: float | None = None, params: cm.CommanderParams | None = None,
                  wrist_sensors: Sequence | None = None, mocap=None,
                  gcs: Sequence[Endpoint | None] | None = None, gcs_key: bytes | None = None,
-                 gcs_signed: bool = True, instance: int = 0,
+                 gcs_signed: bool = True, instance: int = 0, onboard_key: bytes | None = None,
                  log: Callable[[str], None] = lambda _m: None) -> None:
         v = spec.vehicle
         if v.flight_controller.mode != "attitude":
@@ -293,7 +294,8 @@ class FreeRun:
         hover = self.model.mass_kg * v.gravity_mps2 / self.thrust_scale_n
         p = params or cm.CommanderParams(COM_OF_LOSS_T=v.flight_controller.COM_OF_LOSS_T, MPC_THR_HOVER=hover)
         self.commanders = {s: cm.Commander(p) for s in self.sysids}
-        self.ports = [Px4Port(i, s, self.commanders[s], endpoints[i], rotor_count=v.rotors.count, log=log)
+        self.ports = [Px4Port(i, s, self.commanders[s], endpoints[i], signing_key=onboard_key,
+                              require_signed=onboard_key is not None, rotor_count=v.rotors.count, log=log)
                       for i, s in enumerate(self.sysids)]
         if gcs is not None and len(gcs) != n:
             raise ValueError(f"{len(gcs)} GCS endpoints for {n} vehicles (one per [[am]], in order)")

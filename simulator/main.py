@@ -121,6 +121,10 @@ def main(argv: list[str] | None = None) -> int:
                          f"no GCS endpoint, gcs.tlog is written all the same); free-running: each vehicle's GCS "
                          f"instance, PX4 SITL's by default (bind 127.0.0.1:18570+i, send to 127.0.0.1:14550), "
                          f"udpout:HOST:PORT or none")
+    ap.add_argument("--onboard-key-file", type=Path, default=None, metavar="FILE",
+                    help="free-running: the onboard ports' signing passphrase (SHA-256 of it, as MAVProxy's 'signing "
+                         "key'): only frames signed with it are read (companion --fc-key-file); default unsigned, as "
+                         "PX4's")
     ap.add_argument("--gcs-unsigned", action="store_true",
                     help="free-running: the GCS instances' signing off, for tools without MAVLink signing "
                          "(MAVSDK): any program that reaches the port can command the vehicles")
@@ -178,9 +182,13 @@ def main(argv: list[str] | None = None) -> int:
         preflight.check(spec)  # [mission].envelope_check: nothing flies outside the team's envelope
         keys, warning = signing.keys_for_run(spec, a.key_file)
         gcs_key = signing.read_gcs_key_file(a.gcs_key_file) if a.gcs_key_file is not None else None
+        onboard_key = signing.read_gcs_key_file(a.onboard_key_file, "--onboard-key-file") if a.onboard_key_file is not None else None
     except (ConfigError, signing.SigningKeyError) as exc:
         print(f"simulator: error: {exc}", file=sys.stderr)
         return 2
+    if a.onboard_key_file is not None and not a.realtime:
+        return cliargs.fail("simulator", "--onboard-key-file is for --realtime (the lockstep's link is keyed by "
+                                         "--key-file)")
     if a.gcs_unsigned and not a.realtime:
         return cliargs.fail("simulator", "--gcs-unsigned is for --realtime (the lockstep's GCS link is unsigned "
                                          "when the scenario's [link] signing is off)")
@@ -190,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
                 check_duration(spec, a.duration, "--duration")
             except ConfigError as exc:
                 return cliargs.fail("simulator", str(exc))
-        return _main_freerun(a, spec, gcs_key)
+        return _main_freerun(a, spec, gcs_key, onboard_key)
     if warning:
         print(f"simulator: warning: {warning}", file=sys.stderr)
     if keys is not None and gcs_key is None and gcs_endpoint is not None:
@@ -371,7 +379,7 @@ def main(argv: list[str] | None = None) -> int:
     return code
 
 
-def _main_freerun(a, spec, gcs_key: bytes | None) -> int:
+def _main_freerun(a, spec, gcs_key: bytes | None, onboard_key: bytes | None = None) -> int:
     """--realtime: the free-running simulator (simulator.freerun), wired: its ports, the run,
     outcome.json. Exit codes as the lockstep's; 1 also when no vehicle engaged OFFBOARD."""
     try:
@@ -382,7 +390,7 @@ def _main_freerun(a, spec, gcs_key: bytes | None) -> int:
         arms, wrists, mocap = freerun_devices(spec, a.instance)
         run = FreeRun(spec, endpoints, speed=a.speed or 1.0, arms=arms, wrist_sensors=wrists, mocap=mocap,
                       mission_t0_s=a.mission_start, gcs=gcs, gcs_key=gcs_key, gcs_signed=not a.gcs_unsigned,
-                      instance=a.instance,
+                      instance=a.instance, onboard_key=onboard_key,
                       log=lambda msg: print(f"simulator: {msg}", file=sys.stderr, flush=True))
     except (PortError, ValueError) as exc:
         return cliargs.fail("simulator", str(exc))

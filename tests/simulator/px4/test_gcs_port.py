@@ -168,3 +168,29 @@ def test_the_companions_heartbeat_reaches_the_gcs_as_px4_forwards_it():
         g.close()
         companion.close()
         gcs.close()
+
+
+def test_a_keyed_onboard_port_and_the_companions_link_sign_each_other():
+    """simulator --onboard-key-file and companion --fc-key-file: the companion's Px4Link, signing
+    with the port's key, is heard (its setpoint reaches the commander) and hears the autopilot;
+    an unsigned link's setpoint is dropped and counted, and it hears nothing it can read."""
+    from amlink.px4link import Px4Link
+    c = cm.Commander()
+    port = Px4Port(0, SYSID, c, parse_endpoint("udpin:127.0.0.1:0"), signing_key=KEY, require_signed=True)
+    port.open()
+    target = f"udpout:127.0.0.1:{port.local_address[1]}"
+    try:
+        with Px4Link(SYSID, target, signing_key=KEY, timesync_rate_hz=0) as link:
+            link.send_heartbeat()
+            link.send_attitude_target((1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0)
+            port.poll(0.0)
+            assert port.stats.setpoints == 1 and port.stats.rx["HEARTBEAT"] == 1
+            port.publish(0.0, REPORT)
+            link.poll(0.2)
+            assert link.autopilot_heard
+        with Px4Link(SYSID, target, timesync_rate_hz=0) as plain:
+            plain.send_attitude_target((1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0)
+            port.poll(0.0)
+            assert port.stats.setpoints == 1 and port.stats.unsigned >= 1
+    finally:
+        port.close()
