@@ -43,6 +43,9 @@ from .looptimer import DeadlineTimer, LoopStats
 from .sampling import BaseEstimate, StalenessLimits, frame_values, predict_base
 
 
+STATS_EVERY_S = 2.0  # the loop's measurements to telemetry this often (`WallClockLoop`'s on_stats)
+
+
 @dataclass
 class WallClockResult:
     why: str  # why the loop ended
@@ -57,11 +60,14 @@ class WallClockLoop:
     def __init__(self, pilot, autopilot, arm, wrench, *, clock: Callable[[], int] = time.monotonic_ns,
                  limits: StalenessLimits = StalenessLimits(), predict: bool = True,
                  on_step: Callable | None = None, log: Callable[[str], None] = lambda _m: None,
-                 link_timeout_s: float = 5.0, mission_start_s: float | None = None) -> None:
+                 link_timeout_s: float = 5.0, mission_start_s: float | None = None,
+                 on_stats: Callable[[float, dict], None] | None = None, stats_every_s: float = STATS_EVERY_S) -> None:
         """pilot: companion.pilot.Pilot. autopilot: companion.autopilot.Autopilot (the PX4 link
         and its handshake). arm: the servo bus client (companion.devices.arm). wrench: the F/T
         client (companion.devices.netft), or None (no wrist sensor: a zero wrench).
         on_step(t, phase, result): telemetry. predict: carry the estimate over its age.
+        on_stats(t, stats): the loop's measurements so far (LoopStats.to_dict) every stats_every_s
+        of the loop's clock and at its end, t the mission time (telemetry: the MCAP records them).
         mission_start_s: the autopilot's boot time [s] at which the mission's t = 0 comes, shared
         by a team whose autopilots share a clock (one simulator; or synchronized clocks); the
         later of it and the engage + TAKEOFF_S counts. None: the engage + TAKEOFF_S."""
@@ -82,6 +88,9 @@ class WallClockLoop:
         self._takeoff_started = False
         self._psi = pilot.mission.psi
         self.arm_errors = 0
+        self.on_stats, self._stats_every_ns = on_stats, round(stats_every_s * 1e9)
+        self._next_stats_ns: int | None = None
+        self._t = 0.0  # the last step's mission time [s]
 
     # -- the step's inputs -------------------------------------------------------
     def _age_s(self, fc_now_us: float, sample_fc_us: float) -> float:
@@ -211,6 +220,13 @@ class WallClockLoop:
                 self.pilot.record(t, res)
             if self.on_step is not None:
                 self.on_step(t, self.pilot.mission.phase(max(t, 0.0)), res)
+            self._t = t
+            if self.on_stats is not None:
+                if self._next_stats_ns is None:
+                    self._next_stats_ns = start + self._stats_every_ns
+                elif start >= self._next_stats_ns:
+                    self._next_stats_ns += self._stats_every_ns
+                    self.on_stats(t, self.stats.to_dict(self.timer))
         return self._end("stopped", 0)
 
     def _request_joints(self) -> None:
@@ -243,6 +259,8 @@ class WallClockLoop:
         self._drop_joints()
         stats = self.stats.to_dict(self.timer)
         stats["mission_t0_fc_s"] = None if self.t0_fc_us is None else self.t0_fc_us * 1e-6
+        if self.on_stats is not None and self.steps:
+            self.on_stats(self._t, stats)
         return WallClockResult(why=why, code=code, engaged_fc_us=self.ap.engaged_fc_us, steps=self.steps,
                                held_steps=self.held, stats=stats)
 

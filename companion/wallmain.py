@@ -82,8 +82,13 @@ def run_wall(a, spec, pilot: Pilot, tele, am_tele, keys, tlog, tag: str, _stop_e
         if pose is not None:  # plan the approach from the measured object
             pilot = Pilot(spec, a.sysid, model=pilot.model, object_pose=pose)
         cpu.start()
-        result = fly(run, pilot, on_step=am_tele.step, stop=lambda: bool(stopping), predict=not a.no_predict,
-                     mission_start_s=a.mission_start, link_timeout_s=a.frame_timeout, log=say)
+        def publish(t, phase, res):  # the log is the mission's, from its t = 0 (the take-off is in outcome.json)
+            if t >= 0.0:
+                am_tele.step(t, phase, res)
+
+        result = fly(run, pilot, on_step=publish, stop=lambda: bool(stopping), predict=not a.no_predict,
+                     mission_start_s=a.mission_start, link_timeout_s=a.frame_timeout, log=say,
+                     on_stats=lambda t, stats: am_tele.loop_stats(max(t, 0.0), stats))
     except (DeviceError, LinkOpenError, OSError) as exc:
         say(f"error: {exc}")
         _save(say, a.outcome, pilot.summary(error=str(exc)))

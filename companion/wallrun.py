@@ -85,7 +85,7 @@ class WallRun:
 
 
 def fly(run: WallRun, pilot: Pilot, *, on_step=None, stop=lambda: False, predict: bool = True,
-        mission_start_s: float | None = None, link_timeout_s: float = 5.0, log=print):
+        mission_start_s: float | None = None, link_timeout_s: float = 5.0, log=print, on_stats=None):
     """The loop of `companion.wallclock` over an opened `WallRun`; returns its WallClockResult.
     The F/T sensor is biased (ATI's bias command) at [devices.ft].tare_at_s of mission time,
     as the lockstep's device model tares it."""
@@ -100,7 +100,8 @@ def fly(run: WallRun, pilot: Pilot, *, on_step=None, stop=lambda: False, predict
             on_step(t, phase, res)
 
     loop = WallClockLoop(pilot, run.autopilot, run.arm, run.ft, limits=StalenessLimits(), predict=predict,
-                         on_step=step, log=log, link_timeout_s=link_timeout_s, mission_start_s=mission_start_s)
+                         on_step=step, log=log, link_timeout_s=link_timeout_s, mission_start_s=mission_start_s,
+                         on_stats=on_stats)
     t0 = time.perf_counter()
     result = loop.run(stop)
     result.stats["wall_s"] = round(time.perf_counter() - t0, 3)

@@ -91,6 +91,7 @@ START_TIMEOUT_S = 120.0  # no OFFBOARD engage this long after the start (autopil
 HOLD_JOINTS_K_NM_PER_RAD = 20.0  # HoldJoints' stiffness (see there)
 TAKEOFF_TRACK_EVERY = 100  # steps between the take-off track's samples (`_track_takeoff`)
 MAX_BEHIND_PERIODS = 10  # the most physics periods the loop catches up back to back (module doc)
+TIMING_EVERY_S = 2.0  # the loop's measurements to `on_timing` this often [s of simulated time]
 
 
 class HoldJoints:
@@ -218,7 +219,8 @@ class Pacer:
 
     def to_dict(self) -> dict:
         n = max(self.steps, 1)
-        return {"steps": self.steps, "deadline_misses": self.misses, "worst_lateness_s": self.worst_ns * 1e-9,
+        elapsed = (self.clock() - self.t0_ns) * 1e-9 if self.t0_ns is not None else 0.0
+        return {"steps": self.steps, "elapsed_s": elapsed, "deadline_misses": self.misses, "worst_lateness_s": self.worst_ns * 1e-9,
                 "worst_step": self.worst_step, "mean_lateness_s": self.sum_ns * 1e-9 / n,
                 "mean_step_compute_s": self.busy_sum_ns * 1e-9 / n, "max_step_compute_s": self.busy_max_ns * 1e-9,
                 "period_s": self.period_ns * 1e-9,
@@ -265,7 +267,10 @@ class FreeRun:
     GCS instances; an entry None: PX4 SITL's, 18570+i -> 127.0.0.1:14550); gcs_key and
     gcs_signed: their signing (`simulator.px4.port`, Signing). instance: vehicle i is PX4 SITL
     instance `instance` + i (its GCS instance binds 18570 + instance + i). onboard_key: the onboard
-    ports sign and read only signed frames (None: unsigned, as PX4's)."""
+    ports sign and read only signed frames (None: unsigned, as PX4's). on_truth(gt): each ground-truth
+    sample of the mission (its time the mission's; telemetry). on_timing(t, timing): the physics
+    loop's measurements so far (`Pacer.to_dict`) every TIMING_EVERY_S of simulated time, t the
+    mission time (negative before its start)."""
 
     def __init__(self, spec: ScenarioSpec, endpoints: Sequence[Endpoint | None] | None = None, *,
                  arms: Sequence | None = None, speed: float = 1.0, clock: Callable[[], int] = time.monotonic_ns,
@@ -273,6 +278,7 @@ class FreeRun:
                  wrist_sensors: Sequence | None = None, mocap=None,
                  gcs: Sequence[Endpoint | None] | None = None, gcs_key: bytes | None = None,
                  gcs_signed: bool = True, instance: int = 0, onboard_key: bytes | None = None,
+                 on_truth: Callable | None = None, on_timing: Callable[[float, dict], None] | None = None,
                  log: Callable[[str], None] = lambda _m: None) -> None:
         v = spec.vehicle
         if v.flight_controller.mode != "attitude":
@@ -340,6 +346,8 @@ class FreeRun:
         self._arm_fds: list = []
         self._truth_every = truth_every(spec.rate_hz)
         self.mission_steps = 0
+        self.on_truth, self.on_timing = on_truth, on_timing
+        self._timing_every = max(1, round(TIMING_EVERY_S * spec.rate_hz))
         self.status = ""
         self._opened = False
 
@@ -387,6 +395,10 @@ class FreeRun:
         """The autopilots' time [s]: the simulated time since the start (PX4 SITL's hrt is the
         simulator's clock), so it lags with the physics when the loop falls behind."""
         return self.core.world.time_s if self._opened else 0.0
+
+    def mission_time_s(self) -> float:
+        """The mission's clock [s]: the autopilots' time less mission_t0_s (0 before it is known)."""
+        return self.boot_s() - self.mission_t0_s if self.mission_t0_s is not None else 0.0
 
     # -- the loop -------------------------------------------------------------------------
     def run(self, duration_s: float | None = None, should_stop: Callable[[], bool] = lambda: False) -> dict:
@@ -489,6 +501,9 @@ class FreeRun:
                 self.mission_t0_s = min(engaged) + TAKEOFF_S
                 self.log(f"t = {min(engaged):.3f} s: OFFBOARD engaged; mission clock starts at "
                          f"t = {self.mission_t0_s:.3f} s (take-off {TAKEOFF_S:g} s)")
+        if self.on_timing is not None and w.step_index % self._timing_every == 0:
+            self.on_timing(t_next - (self.mission_t0_s if self.mission_t0_s is not None else t_next),
+                           self.pacer.to_dict() if self.pacer is not None else {})
         if w.step_index % TAKEOFF_TRACK_EVERY == 0 and (self.mission_t0_s is None or t_next < self.mission_t0_s):
             self._track_takeoff(t_next, reports)
         if self.mission_t0_s is not None and t_next - self.mission_t0_s >= -1e-9:
@@ -617,6 +632,8 @@ class FreeRun:
         w = self.core.world
         gt = dataclasses.replace(w.ground_truth(), time_s=mission_t)
         self.core.outcome.add(gt, {s: w.wrench_ee(s) for s in self.sysids})
+        if self.on_truth is not None:
+            self.on_truth(gt)
 
     # -- the result -----------------------------------------------------------------------
     def _commanded(self) -> list[tuple[float, int, str]]:

@@ -41,6 +41,7 @@ from .progress import SimBar
 from .verdict import MISSION_FAILED
 
 INTERRUPTED = 130  # exit code, as every process of the stack exits when interrupted
+REALTIME_TELEMETRY_HZ = 50.0  # --realtime: each companion publishes its controller's state at this rate
 # --realtime: the real-time factor two AMs hold on this project's two-core machines (docs/freerun.md),
 # and the autopilots' boot time of the mission's start: the companions' start-up (~2-4 s), the offboard
 # handshake (>= 1 s of setpoints, TIMESYNC, the engage's HEARTBEAT) and TAKEOFF_S come before it
@@ -153,7 +154,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--realtime", action="store_true",
                     help="free-running: the simulator paced to the wall clock, each vehicle a PX4 SITL on its onboard "
                          "port, each companion on its own clock (--clock wall) over standard MAVLink, Dynamixel "
-                         "and Net F/T (docs/freerun.md); no telemetry log yet")
+                         "and Net F/T (docs/freerun.md)")
     ap.add_argument("--speed", type=cliargs.number(0.0, lo_open=True), default=None, metavar="F",
                     help=f"free-running real-time factor (implies --realtime; default {REALTIME_SPEED:g}: what two "
                          f"AMs hold on two cores, docs/freerun.md)")
@@ -168,9 +169,7 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     if a.speed is not None or a.mission_start is not None:
         a.realtime = True
-    if a.realtime:
-        a.no_telemetry = True  # the free-running simulator publishes no telemetry yet
-    elif a.gcs_unsigned:
+    if a.gcs_unsigned and not a.realtime:
         return cliargs.fail("am-run", "--gcs-unsigned is for --realtime (the lockstep's GCS link follows the "
                                       "scenario's [link] signing)")
     gcs_given = a.gcs is not None
@@ -280,6 +279,8 @@ def main(argv: list[str] | None = None) -> int:
                 link = ["--clock", "wall", "--arm", bind["arms"][i], "--ft", bind["ft"][i], "--mission-start",
                         str(start), "--frame-timeout", "3", "--instance", str(a.instance)] + (
                     ["--mocap", bind["mocap"]] if bind.get("mocap") else [])
+                if not a.no_telemetry:  # the controller's state at REALTIME_TELEMETRY_HZ: CPU the loop needs
+                    link += ["--telemetry-every", str(max(1, round(1.0 / (spec.control_dt_s * REALTIME_TELEMETRY_HZ))))]
             else:
                 link = key_args + ["--sim", bind]
             procs[f"companion {am.sysid}"] = subprocess.Popen(

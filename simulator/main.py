@@ -49,6 +49,7 @@ from amlink.types import ScenarioInfo
 from amlink.udp import STATUSTEXT_MAX
 from companion import jitcache, procstats
 
+from telemetry import schema
 from telemetry.publisher import TelemetryPublisher
 from telemetry.session import TelemetryConfigError, add_zenoh_arguments, options_from_args
 from telemetry.wiring import SimulatorTelemetry
@@ -382,6 +383,22 @@ def main(argv: list[str] | None = None) -> int:
 def _main_freerun(a, spec, gcs_key: bytes | None, onboard_key: bytes | None = None) -> int:
     """--realtime: the free-running simulator (simulator.freerun), wired: its ports, the run,
     outcome.json. Exit codes as the lockstep's; 1 also when no vehicle engaged OFFBOARD."""
+    try:  # a missing telemetry key, like a bad configuration, stops it before anything is written
+        tele = TelemetryPublisher(options_from_args(a), name="simulator")
+    except (TelemetryConfigError, ValueError) as exc:
+        return cliargs.fail("simulator", f"telemetry: {exc}")
+    sim_tele = SimulatorTelemetry(tele, spec)
+
+    def log(msg: str) -> None:
+        print(f"simulator: {msg}", file=sys.stderr, flush=True)
+        # (the log's clock is the mission's, from 0: what comes before it is stamped 0)
+        sim_tele.fault(max(run.mission_time_s(), 0.0) if run is not None else 0.0, msg, level="warning")
+
+    def timing(t: float, stats: dict) -> None:  # the physics loop's measurements, into the log
+        if tele.enabled:
+            tele.publish(tele.keys.sim_event, schema.loop_timing_event(max(t, 0.0), stats, "simulator"))
+
+    run = None
     try:
         onboard = a.onboard or ([f"udpout:127.0.0.1:{14540 + a.instance + i}" for i in range(len(spec.ams))]
                                 if a.instance else None)
@@ -390,8 +407,8 @@ def _main_freerun(a, spec, gcs_key: bytes | None, onboard_key: bytes | None = No
         arms, wrists, mocap = freerun_devices(spec, a.instance)
         run = FreeRun(spec, endpoints, speed=a.speed or 1.0, arms=arms, wrist_sensors=wrists, mocap=mocap,
                       mission_t0_s=a.mission_start, gcs=gcs, gcs_key=gcs_key, gcs_signed=not a.gcs_unsigned,
-                      instance=a.instance, onboard_key=onboard_key,
-                      log=lambda msg: print(f"simulator: {msg}", file=sys.stderr, flush=True))
+                      instance=a.instance, onboard_key=onboard_key, on_truth=sim_tele.truth, on_timing=timing,
+                      log=log)
     except (PortError, ValueError) as exc:
         return cliargs.fail("simulator", str(exc))
     run_dir = a.run_dir or Path("runs") / f"{spec.name}-{time.strftime('%Y%m%d-%H%M%S')}"
@@ -419,7 +436,12 @@ def _main_freerun(a, spec, gcs_key: bytes | None, onboard_key: bytes | None = No
                           f"{ft.address[1]}" for s, arm, ft in zip(run.sysids, arms, wrists))
         print(f"simulator: devices: {buses}" + (f"; motion capture udp:{mocap.address[0]}:{mocap.address[1]}"
                                                  if mocap is not None else ""), file=sys.stderr, flush=True)
+        tele.open()
         progress_ready(a, spec, run, arms, wrists, mocap)
+        if not tele.await_recorder(tele.keys.sim_event, a.telemetry_wait):
+            print(f"simulator: warning: telemetry: no subscriber (recorder) after {a.telemetry_wait:g} s; "
+                  f"publishing anyway", file=sys.stderr, flush=True)
+        sim_tele.start(0.0)
         result = run.run(a.duration)
         if a.progress == "jsonl":  # before the ports close: am-run ends the companions as the run ends
             print(json.dumps({"event": "end", "status": result["status"]}), flush=True)
@@ -440,7 +462,10 @@ def _main_freerun(a, spec, gcs_key: bytes | None, onboard_key: bytes | None = No
     finally:
         if not result and run.core is not None:
             result = run.result()
+        t_end = run.mission_time_s()
         run.close()
+        sim_tele.end(max(t_end, 0.0), status, level="info" if code == 0 else "error")
+        tele.close()
     result = {"scenario": spec.name, "scenario_id": scenario_id(spec), **result, "status": status, "exit_code": code}
     (run_dir / "outcome.json").write_text(json.dumps(result, indent=1))
     timing = result.get("timing", {})

@@ -390,6 +390,12 @@ def phase_event(t_s: float, phase: str, source: str) -> dict:
     return event(t_s, "phase", f"phase {phase}", source, data={"phase": phase})
 
 
+def loop_timing_event(t_s: float, stats: Mapping, source: str) -> dict:
+    """A real-time loop's measurements so far (a companion's on the wall clock, the free-running
+    simulator's physics loop): an info event, text "loop timing", its figures in data."""
+    return event(t_s, "info", "loop timing", source, data=json.loads(json.dumps(stats, default=float)))
+
+
 def fault_event(t_s: float, text: str, source: str, level: str = "error") -> dict:
     return event(t_s, "fault", text, source, level=level)
 

@@ -114,3 +114,9 @@ class CompanionTelemetry:
 
     def fault(self, t_s: float, text: str, level: str = "error") -> None:
         self.pub.publish(self.keys.am_event(self.sysid), schema.fault_event(t_s, text, f"am{self.sysid}", level))
+
+    def loop_stats(self, t_s: float, stats: dict) -> None:
+        """The wall-clock loop's measurements so far (period, lateness, deadline misses, sample ages,
+        sample-to-setpoint latency; companion.looptimer.LoopStats), an info event "loop timing"."""
+        if self._on:
+            self.pub.publish(self.keys.am_event(self.sysid), schema.loop_timing_event(t_s, stats, f"am{self.sysid}"))
