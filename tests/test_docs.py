@@ -28,6 +28,9 @@ DOCS = ROOT / "docs"
 ARCHIVE = DOCS / "archive"
 README_MAX_BYTES = 8 * 1024
 PAGE_MAX_BYTES = 25 * 1024
+# pages another line of work writes (the vehicle TOML reference and the own-vehicle walk-through):
+# links to them are checked once they exist, and until then only that they are these
+PENDING = {DOCS / "vehicle_toml.md", DOCS / "own_vehicle.md"}
 COMMANDS = ("am-run", "am-trials", "am-vehicle", "am-demo", "simulator", "companion", "ground-station")
 
 
@@ -98,9 +101,9 @@ def test_every_link_resolves(page):
             continue
         path, _, anchor = target.partition("#")
         dest = (page.parent / path).resolve() if path else page
-        if not dest.exists():
+        if not dest.exists() and dest not in PENDING:
             broken.append(f"{target}: no such file")
-        elif anchor and dest.suffix == ".md" and anchor not in _anchors(dest):
+        elif anchor and dest.suffix == ".md" and dest.exists() and anchor not in _anchors(dest):
             broken.append(f"{target}: no heading #{anchor}")
     assert not broken, f"{page.relative_to(ROOT)}: " + "; ".join(broken)
 
@@ -177,3 +180,36 @@ def test_every_help_says_its_exit_codes_and_the_reference_lists_every_option(arg
     options = set(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", text)) - {"--help"}
     missing = sorted(o for o in options if o not in body)
     assert not missing, f"docs/reference/commands.md, {' '.join(argv)}: options not described: {missing}"
+
+
+def test_the_foxglove_layout_names_topics_and_fields_the_log_has():
+    """Every message path of docs/foxglove/amstack_layout.json is a topic of the recorder's
+    contract for the default scenario's AMs, and its field is a field of that topic's message."""
+    import json
+
+    from amcore.config import DEFAULT_SCENARIO, load_scenario
+    from ground_station import contract
+    from telemetry import binary
+
+    layout = json.loads((DOCS / "foxglove" / "amstack_layout.json").read_text())
+    sysids = [am.sysid for am in load_scenario(DEFAULT_SCENARIO).ams]
+    fields = {contract.OBJECT_STATE_TOPIC: binary.OBJECT}
+    for s in sysids:
+        fields[contract.controller_topic(s)] = binary.CONTROLLER
+        fields[contract.contact_topic(s)] = binary.CONTACT
+        fields[contract.truth_topic(s)] = binary.AM_TRUTH
+    whole = {contract.SCENE_TOPIC, contract.TF_TOPIC, contract.OBJECT_POSE_TOPIC, contract.EVENTS_TOPIC}
+    paths = []
+    for cfg in layout["configById"].values():
+        paths += [p["value"] for p in cfg.get("paths", [])]
+        paths += [cfg[k] for k in ("topicPath", "topicToRender") if k in cfg]
+        paths += list(cfg.get("topics", {}))
+    assert paths
+    for path in paths:
+        topic, _, field = path.partition(".")
+        if not field:
+            assert topic in whole or topic in fields, path
+            continue
+        assert topic in fields, f"{path}: no such topic in the log"
+        name = re.sub(r"\[\d+\]$", "", field)
+        assert name in {f.name for f in fields[topic].fields}, f"{path}: {fields[topic].name} has no field {name}"
