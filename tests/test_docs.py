@@ -7,8 +7,8 @@ A command block is marked runnable by an HTML comment on the line before its fen
     <!-- runnable -->            every line of the next ```bash block exits 0
     <!-- runnable exit=2 -->     ... exits 2
 
-Each line runs in a scratch folder that holds a link to configs/, so relative paths read as
-in a clone and nothing is written into it; a leading `.venv/bin/` and a console script's name
+Each line runs in a scratch folder that holds links to configs/ and docs/, so relative paths
+read as in a clone and nothing is written into the clone; a leading `.venv/bin/` and a console script's name
 are taken from this interpreter's environment.
 """
 from __future__ import annotations
@@ -145,7 +145,8 @@ def _resolve(cmd: str) -> list[str]:
 
 @pytest.mark.parametrize("page,line,cmd,code", runnable_blocks(), ids=lambda x: x if isinstance(x, str) else None)
 def test_a_runnable_command_runs_as_the_docs_show(page, line, cmd, code, tmp_path):
-    (tmp_path / "configs").symlink_to(ROOT / "configs")
+    for name in ("configs", "docs"):
+        (tmp_path / name).symlink_to(ROOT / name)
     r = subprocess.run(_resolve(cmd), cwd=tmp_path, capture_output=True, text=True, timeout=300,
                        env={**os.environ, "PYTHONPATH": str(ROOT), "COLUMNS": "100"})
     assert r.returncode == code, f"{page}:{line}: {cmd}: exit {r.returncode}, expected {code}\n{r.stderr[-2000:]}"
