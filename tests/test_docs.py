@@ -214,3 +214,23 @@ def test_the_foxglove_layout_names_topics_and_fields_the_log_has():
         assert topic in fields, f"{path}: no such topic in the log"
         name = re.sub(r"\[\d+\]$", "", field)
         assert name in {f.name for f in fields[topic].fields}, f"{path}: {fields[topic].name} has no field {name}"
+
+
+def test_the_files_users_expect_are_there_and_agree():
+    """LICENSE is the BSD 3-Clause text pyproject.toml declares; CITATION.cff is valid YAML that
+    cites the paper with its DOI and this software with its version; CHANGELOG.md exists."""
+    import tomllib
+
+    yaml = pytest.importorskip("yaml")
+
+    meta = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert meta["license"]["text"] == "BSD-3-Clause"
+    text = (ROOT / "LICENSE").read_text()
+    assert text.startswith("BSD 3-Clause License") and "Neither the name of the copyright holder" in text
+    cff = yaml.safe_load((ROOT / "CITATION.cff").read_text())
+    assert cff["cff-version"] == "1.2.0" and cff["license"] == "BSD-3-Clause" and cff["version"] == meta["version"]
+    paper = cff["preferred-citation"]
+    assert "Collaborative Grasping" in paper["title"] and paper["year"] == 2023
+    assert re.fullmatch(r"10\.\d{4,9}/\S+", paper["doi"]), paper["doi"]
+    assert {a["family-names"] for a in paper["authors"]} == {"Jeong", "Kim"}
+    assert "## [Unreleased]" in (ROOT / "CHANGELOG.md").read_text()

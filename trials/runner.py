@@ -1,8 +1,11 @@
 """Runs a campaign's trials: each in-process (`simulator.inprocess`, bit-identical to the
 multi-process SITL), on any `concurrent.futures.Executor`: a local process pool by default,
 or a Dask distributed cluster's executor (`dask.distributed.Client(address).get_executor()`),
-whose workers need this project installed. Results do not depend on the executor: a trial
-is a pure function of its scenario data.
+whose workers need this project installed and nothing else: each trial carries its scenario
+data and the vehicle files it names (`TrialTask.files`), so no filesystem is shared. A link
+key file (`[link] key_file`) is a secret and does not travel: a scenario that names one is
+read where it is. Results do not depend on the executor: a trial is a pure function of its
+scenario data.
 
 A scheduler's address is checked before anything connects (`parse_scheduler_address`), and one
 that does not answer within SCHEDULER_CONNECT_TIMEOUT_S raises `SchedulerUnreachable` naming it.
