@@ -186,7 +186,7 @@ def test_no_gcs_a_reading_gcs_and_one_that_never_reads_leave_the_run_bit_identic
 
 
 def test_nav_land_from_the_gcs_lands_that_vehicle(tmp_path):
-    gcs = Gcs(tmp_path / "gcs.key", commands=[(5, mav.MAV_CMD_NAV_LAND, _p())])
+    gcs = Gcs(tmp_path / "keys" / "gcs.key", commands=[(5, mav.MAV_CMD_NAV_LAND, _p())])
     gcs.start()
     try:
         r = am_run("two_am_comp.toml", tmp_path, "--duration", "0.6", "--no-telemetry", "--gcs",
