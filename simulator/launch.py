@@ -216,7 +216,11 @@ def main(argv: list[str] | None = None) -> int:
     run_dir = (a.run_dir or Path("runs") / f"{spec.name}-{time.strftime('%Y%m%d-%H%M%S')}").resolve()
     try:
         run_dir.mkdir(parents=True, exist_ok=True)
-        runfolder.write_scenario_as_flown(run_dir, a.scenario, a.duration)
+        try:
+            runfolder.write_scenario_as_flown(run_dir, a.scenario, a.duration)
+        except ConfigError as exc:  # the run itself is sound (its scenario loaded): say so and fly it
+            print(f"am-run: warning: the scenario as flown could not be copied into the run folder: {exc}",
+                  file=sys.stderr)
         runfolder.write_manifest(run_dir, a.scenario, spec.name, sys.argv if argv is None else argv, started,
                                  {"duration_s": spec.duration_s if a.duration is None else a.duration,
                                   "realtime": a.realtime, "gcs": a.gcs})
