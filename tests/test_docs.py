@@ -234,3 +234,17 @@ def test_the_files_users_expect_are_there_and_agree():
     assert re.fullmatch(r"10\.\d{4,9}/\S+", paper["doi"]), paper["doi"]
     assert {a["family-names"] for a in paper["authors"]} == {"Jeong", "Kim"}
     assert "## [Unreleased]" in (ROOT / "CHANGELOG.md").read_text()
+
+
+def test_the_guides_example_scenarios_load():
+    """Each scenario a guide ships (docs/guides/*.toml) loads from any folder (its vehicle path is
+    relative to it), and a team's object share is what its comment says (flying one whole is a
+    run of minutes: the guide gives the command and the verdict it measured)."""
+    from amcore.config import load_scenario
+
+    examples = sorted((DOCS / "guides").glob("*.toml"))
+    assert examples
+    for path in examples:
+        spec = load_scenario(path)
+        share = spec.object.mass_kg * spec.vehicle.gravity_mps2 / len(spec.ams)
+        assert f"{share:.1f} N" in path.read_text(), f"{path.name}: each AM carries {share:.2f} N"
