@@ -20,6 +20,25 @@ from pathlib import Path
 BAD_ARGUMENTS = 2  # exit code of every main for a bad configuration or argument
 
 
+# what every process main's exit code means (README, docs/reference/commands.md); each main's
+# --help lists the ones it can return with `exit_codes`
+EXIT_CODE_MEANINGS = {
+    0: "success",
+    1: "a link or process failure",
+    2: "bad configuration or arguments (the message names the file, key or flag)",
+    3: "scenario mismatch between a companion and the simulator",
+    4: "the mission failed (the verdict says why)",
+    130: "interrupted (SIGINT or SIGTERM)",
+}
+
+
+def exit_codes(*codes: int, **meanings: str) -> str:
+    """An --help epilog listing `codes` with their meanings (EXIT_CODE_MEANINGS, or the
+    command's own words given as c<code>="...")."""
+    parts = [f"{c} {meanings.get(f'c{c}', EXIT_CODE_MEANINGS[c])}" for c in codes]
+    return "Exit codes: " + "; ".join(parts) + "."
+
+
 class DefaultsHelpFormatter(argparse.HelpFormatter):
     """--help gives every option's default: "(default: ...)" is added to each help text that
     does not already say its default, for every option and optional positional with a value

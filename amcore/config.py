@@ -23,7 +23,17 @@ class ConfigError(ValueError):
 # the scenario every process main runs when none is given: the paper's two-AM grasp through the
 # design card's interface (attitude-thrust setpoints at 250 Hz to an emulated PX4); the paper's
 # idealized torque interface is configs/scenarios/two_am_comp.toml
-DEFAULT_SCENARIO = Path(__file__).resolve().parents[1] / "configs" / "scenarios" / "two_am_comp_attitude.toml"
+def _configs_dir() -> Path:
+    """The shipped configs/: a source tree's own (a clone, an editable install), else the copy a
+    wheel carries inside amcore (`pip install .`; build_backend/amstack_build.py puts it there)."""
+    here = Path(__file__).resolve().parent
+    tree = here.parent / "configs"
+    return tree if (here.parent / "pyproject.toml").is_file() and tree.is_dir() else here / "configs"
+
+
+CONFIGS_DIR = _configs_dir()
+SCENARIOS_DIR = CONFIGS_DIR / "scenarios"
+DEFAULT_SCENARIO = SCENARIOS_DIR / "two_am_comp_attitude.toml"
 
 
 # ----------------------------------------------------------------------------- vehicle

@@ -22,9 +22,13 @@ HOOK_SOURCE = Path(__file__).resolve().parents[1] / "amlink" / "pymavlink_dialec
 HOOK_MODULE = "_amstack_pymavlink"
 
 
+CONFIGS = Path(__file__).resolve().parents[1] / "configs"
+CONFIGS_IN_WHEEL = "amcore/configs"  # where amcore.config.CONFIGS_DIR looks outside a source tree
+
+
 def build_wheel(wheel_directory, config_settings=None, metadata_directory=None):
     name = _setuptools.build_wheel(wheel_directory, config_settings, metadata_directory)
-    add_dialect_hook(Path(wheel_directory) / name)
+    add_dialect_hook(Path(wheel_directory) / name, shipped_configs())
     return name
 
 
@@ -39,9 +43,19 @@ def _record_line(path: str, data: bytes) -> str:
     return f"{path},sha256={digest},{len(data)}"
 
 
-def add_dialect_hook(wheel: Path) -> None:
-    """Rewrite ``wheel`` with the hook module and its .pth at the root, listed in RECORD."""
-    added = {f"{HOOK_MODULE}.py": HOOK_SOURCE.read_bytes(), f"{HOOK_MODULE}.pth": f"import {HOOK_MODULE}\n".encode()}
+def shipped_configs() -> dict[str, bytes]:
+    """configs/ (the scenarios, vehicles, randomizations and Zenoh settings) as wheel entries
+    under amcore/configs/: a regular install's `am-run` then finds its default scenario.
+    An editable install reads the source tree's configs/ instead."""
+    return {f"{CONFIGS_IN_WHEEL}/{p.relative_to(CONFIGS).as_posix()}": p.read_bytes()
+            for p in sorted(CONFIGS.rglob("*")) if p.is_file() and "__pycache__" not in p.parts}
+
+
+def add_dialect_hook(wheel: Path, extra: dict[str, bytes] | None = None) -> None:
+    """Rewrite ``wheel`` with the hook module and its .pth at the root (and the `extra` entries),
+    listed in RECORD."""
+    added = {f"{HOOK_MODULE}.py": HOOK_SOURCE.read_bytes(), f"{HOOK_MODULE}.pth": f"import {HOOK_MODULE}\n".encode(),
+             **(extra or {})}
     tmp = wheel.with_suffix(".tmp")
     with zipfile.ZipFile(wheel) as src, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as dst:
         record = next(n for n in src.namelist() if n.endswith(".dist-info/RECORD"))

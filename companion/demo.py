@@ -25,7 +25,8 @@ from amcore.so3 import exp_so3
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = cliargs.ArgumentParser(prog="am-demo", description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = cliargs.ArgumentParser(prog="am-demo", description=" ".join(__doc__.split("\n\n")[0].split()),
+                                epilog=cliargs.exit_codes(0, 2, c0="the demo ran"))
     ap.add_argument("--config", type=Path, default=DEFAULT_SCENARIO)
     ap.add_argument("--sysid", type=cliargs.number(2, 255, integer=True), default=None)
     ap.add_argument("--duration", type=cliargs.number(0.0, 3600.0, lo_open=True, unit=" s"), default=5.0)

@@ -63,7 +63,9 @@ def _on_signal(signum, _frame):
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = cliargs.ArgumentParser(prog="companion", description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = cliargs.ArgumentParser(prog="companion", description=" ".join(__doc__.split("\n\n")[0].split()),
+                                epilog=cliargs.exit_codes(0, 1, 2, 3, c0="the run ended (the simulator ended it, or "
+                                                          "SIGINT or SIGTERM stopped the companion)"))
     ap.add_argument("--sysid", type=cliargs.number(2, 255, integer=True), required=True, help="this AM's MAVLink system id (its [[am]] entry)")
     ap.add_argument("--sim", default=COMPANION_SIM, metavar="ENDPOINT",
                     help=f"the flight controller (simulator) endpoint (default {COMPANION_SIM}); mavutil's forms: "

@@ -33,7 +33,9 @@ def _nonneg(text: str) -> float:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="am-vehicle", description="Thrust margin and torque authority of a vehicle "
                                  "file: at hover, and in a loaded hover squeezing a vertical face.",
-                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+                                 epilog="Exit codes: 0 printed; 2 bad arguments or a bad vehicle file (named in the "
+                                        "message).")
     ap.add_argument("vehicle", type=Path, help="a vehicle TOML (configs/vehicles/*.toml)")
     ap.add_argument("--squeeze", type=_nonneg, default=0.0, metavar="N",
                     help="normal force the pad pushes the object's face with [N]")

@@ -139,10 +139,15 @@ def _review(a: argparse.Namespace) -> int:
     return 0
 
 
+EXIT_CODES = cliargs.exit_codes(0, 1, 2, c1="a runtime failure", c2="bad input (a missing file, not an MCAP, an "
+                                "empty log, bad options, an output folder that cannot be written)")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = cliargs.ArgumentParser(prog="ground-station", description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = cliargs.ArgumentParser(prog="ground-station", description=" ".join(__doc__.split("\n\n")[0].split()),
+                                epilog=EXIT_CODES)
     sub = ap.add_subparsers(dest="command", required=True)
-    r = sub.add_parser("record", help="subscribe to the telemetry and write an MCAP log")
+    r = sub.add_parser("record", help="subscribe to the telemetry and write an MCAP log", epilog=EXIT_CODES)
     r.add_argument("--out", type=cliargs.output_file, required=True, help="MCAP file to write")
     r.add_argument("--duration", type=cliargs.seconds, default=None, help="stop after S seconds of wall time")
     r.add_argument("--linger", type=cliargs.seconds_or_zero, default=0.5, help="keep recording S seconds after run_end (default 0.5)")
@@ -151,10 +156,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--compression", choices=("zstd", "lz4", "none"), default="zstd")
     r.add_argument("--summary-json", action="store_true", help="print the final summary as JSON on stdout")
     add_zenoh_arguments(r, role="recorder")
-    k = sub.add_parser("keys", help="write a run's telemetry keys (recorder, simulator, each companion) into a folder")
+    k = sub.add_parser("keys", help="write a run's telemetry keys (recorder, simulator, each companion) into a folder",
+                       epilog=EXIT_CODES)
     k.add_argument("folder", type=cliargs.output_dir, help="folder for the key files (created; mode 0600 files)")
     k.add_argument("--config", type=Path, default=DEFAULT_SCENARIO, help="scenario TOML: whose keys (its sysids)")
-    v = sub.add_parser("review", help="summarize a recorded run per phase, optionally plot it")
+    v = sub.add_parser("review", help="summarize a recorded run per phase, optionally plot it", epilog=EXIT_CODES)
     v.add_argument("log", type=Path, help="MCAP file (a truncated one is salvaged)")
     v.add_argument("--json", action="store_true", help="print the summary as JSON")
     v.add_argument("--plots", type=cliargs.output_dir, default=None, metavar="DIR", help="write PNG plots into DIR")

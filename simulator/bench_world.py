@@ -28,13 +28,13 @@ import hashlib
 import time
 import timeit
 from itertools import cycle
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
+
 from simulator.bullet import pb
 
-from amcore.config import AmSpec, ObjectSpec, ScenarioSpec, load_scenario
+from amcore.config import SCENARIOS_DIR, AmSpec, ObjectSpec, ScenarioSpec, load_scenario
 from amcore.model import AmState, build_model
 from amcore.so3 import Rz
 from amlink import fastcodec, wire
@@ -43,7 +43,7 @@ from amlink.udp import SIM_COMPID, SIM_SYSID
 
 from simulator.world import World
 
-SCENARIO = Path(__file__).resolve().parents[1] / "configs" / "scenarios" / "two_am_comp.toml"
+SCENARIO = SCENARIOS_DIR / "two_am_comp.toml"
 Q_BENCH = np.array([1.0472, -1.0472, 0.0])
 GAP_M = 0.02
 KEY = bytes(range(32))  # a signing key for the per-AM figures

@@ -2,14 +2,16 @@
 MAVLink/UDP on loopback, with a progress bar and a run folder holding the outcome.
 
     am-run [configs/scenarios/two_am_comp_attitude.toml] [--run-dir runs/NAME] [--duration S]
-           [--gcs udpout:127.0.0.1:14551] [--gcs-key-file FILE] [--tlog-companions]
+           [--gcs udpout:127.0.0.1:14551] [--gcs-key-file FILE] [--tlog-companions] [--list]
 
-The run folder gets outcome.json (simulator ground truth), am<sysid>.json (each
-companion's controller errors per phase), gcs.tlog (the flight controllers' GCS link, for
-stock MAVLink tools), gcs.key (its signing passphrase, new every run unless --gcs-key-file
-gives one to keep), telemetry*.key (the run's telemetry
-keys: the recorder keeps only what the run's simulator and companions sealed, telemetry.auth)
-and every process's log. Exit code:
+The run folder gets manifest.json (the scenario, the command line, the version and commit,
+the host and the start time), scenario.toml with vehicle/ (the scenario as flown: `am-run
+RUN/scenario.toml` flies it again), outcome.json (simulator ground truth), am<sysid>.json (each
+companion's controller errors per phase), run.mcap (the telemetry log) and plots/ (its review),
+gcs.tlog (the flight controllers' GCS link, for stock MAVLink tools), every process's log, and
+keys/ (mode 0700): link.key, gcs.key (the GCS signing passphrase, new every run unless
+--gcs-key-file gives one to keep) and telemetry*.key (the recorder keeps only what the run's
+simulator and companions sealed, telemetry.auth). Exit code:
 0 when every process ended cleanly and the mission succeeded (simulator.verdict), 4 when
 the mission failed, 2 bad configuration, 1 when a process failed, 130 when am-run was
 interrupted (SIGINT, as Ctrl-C sends it, or SIGTERM). An interrupt reaches the simulator
@@ -19,6 +21,7 @@ told and the recorder finishes the log), and am-run waits for every process to e
 """
 from __future__ import annotations
 
+import datetime
 import json
 import multiprocessing
 import os
@@ -37,8 +40,9 @@ from amlink.endpoint import DEFAULT_GCS, EndpointError, parse_endpoint
 from amlink.signing import SigningKeyError, read_gcs_key_file
 from telemetry.keyfiles import write_run_keys, write_secret
 
+from . import runfolder
 from .progress import SimBar
-from .verdict import MISSION_FAILED
+from .verdict import MISSION_FAILED, criteria_rows, format_criteria
 
 INTERRUPTED = 130  # exit code, as every process of the stack exits when interrupted
 REALTIME_TELEMETRY_HZ = 50.0  # --realtime: each companion publishes its controller's state at this rate
@@ -90,6 +94,15 @@ def _pass_on(procs: dict[str, subprocess.Popen], name: str) -> None:
             p.send_signal(signum)
 
 
+def _shipped(scenario: Path) -> Path:
+    """A scenario named without a path (`am-run two_am_short`) is the shipped one of that name
+    when no such file is here; any other path is taken as it is."""
+    named = runfolder.SCENARIOS_DIR / f"{scenario.name}.toml"
+    if not scenario.exists() and scenario.parent == Path(".") and scenario.suffix == "" and named.is_file():
+        return named
+    return scenario
+
+
 def _command(name: str) -> list[str]:
     """The console script next to this interpreter, else `python -m <package>`."""
     exe = shutil.which(name, path=str(Path(sys.executable).parent))
@@ -135,8 +148,11 @@ def _warm_simulator_kernels(scenario: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = cliargs.ArgumentParser(prog="am-run", description=" ".join(__doc__.split("\n\n")[0].split()))
-    ap.add_argument("scenario", nargs="?", type=Path, default=DEFAULT_SCENARIO, help="scenario TOML")
+    ap = cliargs.ArgumentParser(prog="am-run", description=" ".join(__doc__.split("\n\n")[0].split()),
+                                epilog=cliargs.exit_codes(0, 1, 2, 4, 130, c1="a process failed or did not start"))
+    ap.add_argument("--list", action="store_true", help="list the shipped scenarios and exit")
+    ap.add_argument("scenario", nargs="?", type=Path, default=DEFAULT_SCENARIO,
+                    help="scenario TOML, or the name of a shipped one (am-run --list)")
     ap.add_argument("--run-dir", type=cliargs.output_dir, default=None, help="run folder (default runs/<name>-<time>)")
     ap.add_argument("--duration", type=cliargs.seconds, default=None, help="override the scenario's duration [s]")
     ap.add_argument("--no-progress", action="store_true", help="no progress display (there is one on a terminal only)")
@@ -150,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="free-running: the GCS instances' signing off, for tools without MAVLink signing (MAVSDK)")
     ap.add_argument("--gcs-key-file", type=Path, default=None, metavar="FILE",
                     help="the GCS signing passphrase (one line; keep it mode 0600), the same for every run, so a "
-                         "GCS set up once keeps working; default: a new random one per run, gcs.key in the run folder")
+                         "GCS set up once keeps working; default: a new random one per run, keys/gcs.key in the run folder")
     ap.add_argument("--realtime", action="store_true",
                     help="free-running: the simulator paced to the wall clock, each vehicle a PX4 SITL on its onboard "
                          "port, each companion on its own clock (--clock wall) over standard MAVLink, Dynamixel "
@@ -167,6 +183,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tlog-companions", action="store_true",
                     help="each companion also writes its link to companion-<sysid>.tlog (1 kHz: large)")
     a = ap.parse_args(argv)
+    if a.list:
+        try:
+            print(runfolder.format_scenarios(runfolder.list_scenarios()))
+        except ConfigError as exc:
+            return cliargs.fail("am-run", str(exc))
+        print(f"(the default: {DEFAULT_SCENARIO.stem}; run one with: am-run NAME, its file is {DEFAULT_SCENARIO.parent}/NAME.toml)")
+        return 0
+    a.scenario = _shipped(a.scenario)
     if a.speed is not None or a.mission_start is not None:
         a.realtime = True
     if a.gcs_unsigned and not a.realtime:
@@ -196,9 +220,18 @@ def main(argv: list[str] | None = None) -> int:
                       file=sys.stderr)
     except (ConfigError, SigningKeyError) as exc:
         return cliargs.fail("am-run", str(exc))
+    started = datetime.datetime.now(datetime.timezone.utc)
     run_dir = (a.run_dir or Path("runs") / f"{spec.name}-{time.strftime('%Y%m%d-%H%M%S')}").resolve()
     try:
         run_dir.mkdir(parents=True, exist_ok=True)
+        try:
+            runfolder.write_scenario_as_flown(run_dir, a.scenario, a.duration)
+        except ConfigError as exc:  # the run itself is sound (its scenario loaded): say so and fly it
+            print(f"am-run: warning: the scenario as flown could not be copied into the run folder: {exc}",
+                  file=sys.stderr)
+        runfolder.write_manifest(run_dir, a.scenario, spec.name, sys.argv if argv is None else argv, started,
+                                 {"duration_s": spec.duration_s if a.duration is None else a.duration,
+                                  "realtime": a.realtime, "gcs": a.gcs})
     except OSError as exc:
         return cliargs.fail("am-run", f"--run-dir {run_dir}: {exc.strerror or exc}")
     try:
@@ -378,14 +411,14 @@ def _fresh_key(spec, run_dir: Path) -> list[str]:
     scenario names its own keys or turns signing off."""
     if not spec.link.signing or spec.link.key_file or any(am.signing_key_hex for am in spec.ams):
         return []
-    return ["--key-file", str(_secret_file(run_dir / "link.key", os.urandom(32).hex()))]
+    return ["--key-file", str(_secret_file(runfolder.keys_dir(run_dir) / "link.key", os.urandom(32).hex()))]
 
 
 def _telemetry_keys(spec, run_dir: Path) -> dict[str, str]:
     """A random telemetry master key for this run for the recorder, and each publisher's own
     key derived from it (telemetry.auth), each in a 0600 file of the run folder: the recorder
     keeps only what the run's simulator and companions sealed."""
-    return {name: str(path) for name, path in write_run_keys(run_dir, [am.sysid for am in spec.ams]).items()}
+    return {name: str(path) for name, path in write_run_keys(runfolder.keys_dir(run_dir), [am.sysid for am in spec.ams]).items()}
 
 
 def _gcs_key(spec, run_dir: Path, given: Path | None = None) -> list[str]:
@@ -396,7 +429,7 @@ def _gcs_key(spec, run_dir: Path, given: Path | None = None) -> list[str]:
         return []
     if given is not None:
         return ["--gcs-key-file", str(Path(given).resolve())]
-    return ["--gcs-key-file", str(_secret_file(run_dir / "gcs.key", os.urandom(16).hex()))]
+    return ["--gcs-key-file", str(_secret_file(runfolder.keys_dir(run_dir) / "gcs.key", os.urandom(16).hex()))]
 
 
 _secret_file = write_secret
@@ -500,6 +533,8 @@ def _print_summary(run_dir: Path, spec, procs) -> None:
               f"compute per step of {1e3 * timing['period_s']:.2f} ms", file=sys.stderr)
     if "verdict" in o:
         print(f"verdict: {o['verdict']['text']}", file=sys.stderr)
+    print("success criteria ([success] of the scenario):\n"
+          + format_criteria(criteria_rows(o, spec.success)), file=sys.stderr)
     hl = obj.get("hover_min_lift_m")
     print(f"object: final lift {obj['final_lift_m'] * 100:.1f} cm"
           + (f", hover-window min {hl * 100:.1f} cm" if hl is not None else "")

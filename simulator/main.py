@@ -111,7 +111,9 @@ class Progress:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = cliargs.ArgumentParser(prog="simulator", description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = cliargs.ArgumentParser(prog="simulator", description=" ".join(__doc__.split("\n\n")[0].split()),
+                                epilog=cliargs.exit_codes(0, 1, 2, 4, 130, c1="a link failure (a missing or silent "
+                                                          "companion, named; free-running: no vehicle engaged OFFBOARD)"))
     ap.add_argument("--config", type=Path, default=DEFAULT_SCENARIO, help="scenario TOML")
     ap.add_argument("--bind", action="append", metavar="ENDPOINT",
                     help=f"where the companions reach their flight controllers, repeatable (default "

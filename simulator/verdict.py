@@ -236,3 +236,60 @@ def summary_figures(result: Mapping, share_n: float) -> dict:
         "joint_saturated_steps": sum(a.get("joint_saturated_steps", 0) for a in ams.values()),
         "force_share_error": max(abs(u - share_n) / share_n for u in up) if share_n > 0 else None,
     }
+
+
+@dataclass(frozen=True)
+class CriterionRow:
+    """One [success] criterion beside the run's figure, for the end-of-run summary: what is
+    measured, the limit and the figure as text with their units, and whether it was met (None
+    when the outcome holds no figure for it)."""
+
+    what: str
+    limit: str
+    figure: str
+    met: bool | None
+
+
+def criteria_rows(result: Mapping, criteria: SuccessCriteria) -> list[CriterionRow]:
+    """Each success criterion of `criteria` beside its figure in a finished run's outcome dict
+    (outcome.json: `SitlCore.finish` with the simulator's "steps"), judged here from the figure
+    itself. A base leaving the arena has no figure in the outcome dict; its row is judged from the
+    verdict's failure classes."""
+    obj, ams = result.get("object", {}), result.get("ams", {})
+    rows = []
+    hl = obj.get("hover_min_lift_m")
+    touching = obj.get("touching_in_hover") or []
+    lift_fig = "-" if hl is None else f"{hl * 100:.1f} cm" + (f", touching {', '.join(touching)}" if touching else "")
+    rows.append(CriterionRow("object lift, lowest in the hover window", f">= {criteria.min_lift_m * 100:g} cm, "
+                             "off the table", lift_fig, None if hl is None else hl >= criteria.min_lift_m and not touching))
+    slip = max((a["slip_max_m"] for a in ams.values()), default=None)
+    rows.append(CriterionRow("pad slip, worst pad", f"<= {criteria.max_slip_m * 1e3:g} mm",
+                             "-" if slip is None else f"{slip * 1e3:.2f} mm",
+                             None if slip is None else slip <= criteria.max_slip_m))
+    steps = result.get("steps") or 0
+    if steps and ams:
+        frac = max(a["saturated_steps"] for a in ams.values()) / steps
+        rows.append(CriterionRow("actuator saturation, worst AM", f"<= {criteria.max_saturated_fraction * 100:g} % "
+                                 "of steps", f"{frac * 100:.2f} %", frac <= criteria.max_saturated_fraction))
+    hits = sorted(f"am{s}" for s, a in ams.items() if a.get("base_contacts"))
+    rows.append(CriterionRow("base contact", "none", ", ".join(hits) or "none", None if not ams else not hits))
+    classes = {f["class"] for f in result.get("verdict", {}).get("failures", [])}
+    rows.append(CriterionRow("bases near the object, states finite", f"<= {criteria.max_distance_m:g} m away",
+                             "diverged" if "diverged" in classes else "yes",
+                             None if "verdict" not in result else "diverged" not in classes))
+    fs = result.get("failsafe_at_end")
+    rows.append(CriterionRow("vehicles in failsafe at the end", "none",
+                             "-" if fs is None else (", ".join(f"sysid {s}" for s in fs) or "none"),
+                             None if fs is None else not fs))
+    rej = result.get("rejected_setpoints")
+    rows.append(CriterionRow("setpoints rejected as implausible", "0", "-" if rej is None else str(rej),
+                             None if rej is None else rej == 0))
+    return rows
+
+
+def format_criteria(rows: list[CriterionRow]) -> str:
+    """`criteria_rows` as aligned text lines: criterion, limit, figure, ok / MISSED."""
+    mark = {True: "ok", False: "MISSED", None: "-"}
+    table = [("criterion", "limit", "this run", ""), *((r.what, r.limit, r.figure, mark[r.met]) for r in rows)]
+    w = [max(len(t[i]) for t in table) for i in range(3)]
+    return "\n".join(f"  {a:<{w[0]}}  {b:<{w[1]}}  {c:<{w[2]}}  {d}".rstrip() for a, b, c, d in table)

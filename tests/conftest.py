@@ -20,3 +20,14 @@ def spec():
 @pytest.fixture(scope="session")
 def model(spec):
     return build_model(spec.vehicle)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Tests marked `slow` (a fresh install into a new environment: minutes) run only when the
+    marker expression asks for them (`pytest -m slow`); the default run skips them, saying how."""
+    if "slow" in (config.getoption("-m") or ""):
+        return
+    skip = pytest.mark.skip(reason="slow (minutes); run with: pytest -m slow")
+    for item in items:
+        if "slow" in item.keywords:
+            item.add_marker(skip)

@@ -24,7 +24,7 @@ connected to, before anything is drawn or written to DIR.
 Exit codes: 0 the campaign ran (whatever its success rate), 2 bad arguments or
 configuration (a malformed --scheduler address, a --controller the scenario cannot fly), 1 a
 trial raised (a bug: failed missions are verdicts, not errors) or the --scheduler did not
-answer (a missing peer; nothing is written then).
+answer (a missing peer; nothing is written then), 130 interrupted (SIGINT or SIGTERM).
 """
 from __future__ import annotations
 
@@ -41,15 +41,15 @@ import time
 from pathlib import Path
 
 from amcore import cliargs
-from amcore.config import CONTROLLERS, ConfigError, _read_toml, load_scenario, scenario_from_dict
+from amcore.config import CONFIGS_DIR, CONTROLLERS, ConfigError, _read_toml, load_scenario, scenario_from_dict
 
 from . import report
 from .randomize import RandomizeSpec, draw_trial, load_randomize, randomize_from_table, relocate
-from .runner import (SCHEDULER_ADDRESS_FORM, SchedulerUnreachable, TrialTask, executor, parse_scheduler_address,
-                     run_all)
+from .runner import (SCHEDULER_ADDRESS_FORM, SchedulerUnreachable, TrialTask, bundle_files, executor,
+                     parse_scheduler_address, run_all)
 from .toml_write import dumps
 
-DEFAULT_RANDOMIZE = Path(__file__).resolve().parents[1] / "configs" / "randomize" / "default.toml"
+DEFAULT_RANDOMIZE = CONFIGS_DIR / "randomize" / "default.toml"
 # --screening's PyBullet solver sweeps a step ([scenario].solver_iterations; the default is 50)
 SCREENING_SWEEPS = 25
 
@@ -111,8 +111,9 @@ def _scheduler(text: str) -> str:
 
 def parse_args(argv):
     ap = cliargs.ArgumentParser(prog="am-trials", description=" ".join(__doc__.split("\n\n")[0].split()),
-                                 epilog="Exit codes: 0 the campaign ran, 2 bad arguments or configuration, "
-                                        "1 a trial raised or the --scheduler did not answer.")
+                                 epilog="Exit codes: 0 the campaign ran (whatever its success rate); 1 a trial "
+                                        "raised or the --scheduler did not answer; 2 bad arguments or configuration; "
+                                        "130 interrupted (SIGINT or SIGTERM).")
     ap.add_argument("scenario", type=Path, help="base scenario TOML")
     ap.add_argument("--trials", type=_positive_int, required=True, help="number of trials")
     ap.add_argument("--seed", type=_seed, required=True, help="campaign seed (0..2**32-1)")
@@ -234,7 +235,7 @@ def build_tasks(base: dict, scenario: Path, rand: RandomizeSpec, seed: int, n: i
         data = relocate(data, scenario, folder)
         path.write_text(f"# trial {i} of am-trials {scenario.name} --seed {seed}\n" + dumps(data))
         scenario_from_dict(data, path)  # a draw that makes an invalid scenario stops here, named
-        tasks.append(TrialTask(i, data, str(path), params))
+        tasks.append(TrialTask(i, data, str(path), params, bundle_files(data, path)))
     return tasks
 
 

@@ -1,8 +1,11 @@
 """Runs a campaign's trials: each in-process (`simulator.inprocess`, bit-identical to the
 multi-process SITL), on any `concurrent.futures.Executor`: a local process pool by default,
 or a Dask distributed cluster's executor (`dask.distributed.Client(address).get_executor()`),
-whose workers need this project installed. Results do not depend on the executor: a trial
-is a pure function of its scenario data.
+whose workers need this project installed and nothing else: each trial carries its scenario
+data and the vehicle files it names (`TrialTask.files`), so no filesystem is shared. A link
+key file (`[link] key_file`) is a secret and does not travel: a scenario that names one is
+read where it is. Results do not depend on the executor: a trial is a pure function of its
+scenario data.
 
 A scheduler's address is checked before anything connects (`parse_scheduler_address`), and one
 that does not answer within SCHEDULER_CONNECT_TIMEOUT_S raises `SchedulerUnreachable` naming it.
@@ -84,12 +87,54 @@ def _os_reason(exc: BaseException) -> str | None:
 @dataclass(frozen=True)
 class TrialTask:
     """One trial: its index, its scenario data (TOML tables) and the file it was written to
-    (relative paths in the data are taken from that file's folder), and the drawn values."""
+    (relative paths in the data are taken from that file's folder), the drawn values, and the
+    files the data names ({path relative to the trial's folder: contents}: the vehicle TOML and
+    its URDF, `bundle_files`). A worker that cannot read `path`'s folder (a Dask worker on
+    another machine) flies the trial from a temporary folder holding `files`."""
 
     index: int
     data: dict
     path: str
     params: dict
+    files: tuple[tuple[str, bytes], ...] = ()
+
+
+def bundle_files(data: dict, path: Path) -> tuple[tuple[str, bytes], ...]:
+    """The files scenario `data` (written at `path`) needs to load: its vehicle TOML and the URDF
+    that one names, each keyed by its path relative to `path`'s folder. A vehicle outside that
+    folder (a path with ..) is not bundled: the worker reads it where it is."""
+    import tomllib
+
+    folder = Path(path).resolve().parent
+    rel = data.get("scenario", {}).get("vehicle")
+    if not rel or Path(rel).is_absolute() or ".." in Path(rel).parts:
+        return ()
+    vpath = folder / rel
+    out = [(Path(rel).as_posix(), vpath.read_bytes())]
+    urdf = tomllib.loads(out[0][1].decode()).get("vehicle", {}).get("urdf")
+    if urdf and not Path(urdf).is_absolute():
+        upath = (vpath.parent / urdf).resolve()
+        if upath.is_file() and upath.is_relative_to(folder):
+            out.append((upath.relative_to(folder).as_posix(), upath.read_bytes()))
+    return tuple(out)
+
+
+@contextlib.contextmanager
+def trial_folder(task: TrialTask) -> Iterator[Path]:
+    """The path to load `task` from: its own file when every file it bundles is there, else the
+    same name in a temporary folder that holds the bundled files (removed afterwards)."""
+    import tempfile
+
+    own = Path(task.path)
+    if not task.files or all((own.parent / rel).is_file() for rel, _ in task.files):
+        yield own
+        return
+    with tempfile.TemporaryDirectory(prefix="amtrial-") as tmp:
+        for rel, blob in task.files:
+            dst = Path(tmp) / rel
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            dst.write_bytes(blob)
+        yield Path(tmp) / own.name
 
 
 def run_trial(task: TrialTask) -> dict:
@@ -103,7 +148,11 @@ def run_trial(task: TrialTask) -> dict:
     from simulator.inprocess import run
     from simulator.verdict import summary_figures
 
-    spec = scenario_from_dict(task.data, Path(task.path))
+    with trial_folder(task) as where:
+        return _run_trial(task, scenario_from_dict(task.data, where), refusal, run, summary_figures)
+
+
+def _run_trial(task: TrialTask, spec, refusal, run, summary_figures) -> dict:
     t0 = time.perf_counter()
     why = refusal(spec)
     if why is not None:

@@ -50,7 +50,7 @@ def test_the_simulator_gets_the_kept_gcs_key_or_a_new_one_per_run(tmp_path):
     for run in ("run2", "run3"):
         (tmp_path / run).mkdir()
         flag, path = _gcs_key(spec, tmp_path / run)
-        assert flag == "--gcs-key-file" and Path(path) == tmp_path / run / "gcs.key"
+        assert flag == "--gcs-key-file" and Path(path) == tmp_path / run / "keys" / "gcs.key"
         assert Path(path).stat().st_mode & 0o777 == 0o600
         drawn.append(Path(path).read_text())
     assert drawn[0] != drawn[1]

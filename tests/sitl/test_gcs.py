@@ -88,7 +88,7 @@ def watched(tmp_path_factory):
     """am-run of two_am_comp (0.4 s) watched by a GCS that sends commands that change nothing
     (a disarm in the air, which is denied; an unsupported one; unsigned ones, dropped)."""
     run_dir = tmp_path_factory.mktemp("watched")
-    gcs = Gcs(run_dir / "gcs.key",
+    gcs = Gcs(run_dir / "keys" / "gcs.key",
               commands=[(4, mav.MAV_CMD_COMPONENT_ARM_DISARM, _p(0.0)), (5, mav.MAV_CMD_DO_SET_MODE, _p(1.0))],
               intruder=[(4, mav.MAV_CMD_COMPONENT_ARM_DISARM, _p(0.0, 21196.0)), (5, mav.MAV_CMD_NAV_LAND, _p())])
     gcs.start()
@@ -186,7 +186,7 @@ def test_no_gcs_a_reading_gcs_and_one_that_never_reads_leave_the_run_bit_identic
 
 
 def test_nav_land_from_the_gcs_lands_that_vehicle(tmp_path):
-    gcs = Gcs(tmp_path / "gcs.key", commands=[(5, mav.MAV_CMD_NAV_LAND, _p())])
+    gcs = Gcs(tmp_path / "keys" / "gcs.key", commands=[(5, mav.MAV_CMD_NAV_LAND, _p())])
     gcs.start()
     try:
         r = am_run("two_am_comp.toml", tmp_path, "--duration", "0.6", "--no-telemetry", "--gcs",

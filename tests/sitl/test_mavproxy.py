@@ -131,4 +131,4 @@ def test_mavproxy_sees_both_vehicles_arms_signed_survives_unsigned_frames_and_ab
     assert o["verdict"]["failure_class"] == "commanded"
     assert o["verdict"]["failures"][0]["reason"].startswith("aborted by the GCS at t = ")
     assert o["gcs"]["commands"] > 0 and o["gcs"]["link"]["unsigned"] == 0  # every command it sent was signed
-    assert not (run_dir / "gcs.key").exists()  # the kept key, not a new one
+    assert not (run_dir / "keys" / "gcs.key").exists()  # the kept key, not a new one
