@@ -69,7 +69,7 @@ def test_am_run_realtime_takes_off_and_flies_the_approach(tmp_path):
     ams = o["ams"]
     assert all(not a["base_contacts"] for a in ams.values()), ams
     # PX4 SITL's GCS instances, signed with the run's gcs.key
-    assert "GCS ports (signed)" in r.stderr and (run / "gcs.key").is_file()
+    assert "GCS ports (signed)" in r.stderr and (run / "keys" / "gcs.key").is_file()
     assert [g.split(" -> ")[0] for g in o["gcs_ports"]] == ["udp 127.0.0.1:18590", "udp 127.0.0.1:18591"]
     # the log: the mission's ground truth, each controller's state, and the loops' timing (the
     # companions' period, misses and sample ages; the physics loop's deadline misses)
