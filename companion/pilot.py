@@ -110,23 +110,24 @@ class Pilot:
         take = Pilot(self.spec, self.am.sysid, model=self.model, object_pose=self.object_pose)
         x_low = [*values]
         x_low[2] -= 0.5
-        take.start_takeoff(x_low, -3.0, 3.0)
+        take.start_takeoff(x_low, -3.0)
         for k in range(2):
             take.command(sensor_frame_from_wire(k, -3.0 + k * self.spec.control_dt_s, x_low, self.model.n, 0))
         if twin._adapts:  # the options' compiled shaping acts from the first contact on (amcore.adapt.adapted)
             m = twin.mission
             adapted(m.reference(0.0), m.frame, twin.trim_dr, HeadingState(1e-3), m.contact_point_W, LateralState(1e-3))
 
-    def start_takeoff(self, values, t: float, takeoff_s: float) -> None:
-        """Free-running flight: the first step comes at mission time t = -(take-off time left),
-        with the vehicle standing where it landed. Its references blend from there into the
-        mission's start (t = 0) along the restart's blend (amcore.mission.JoinBlend), so that the
-        first command holds the vehicle where it stands. `values`: the first frame's values."""
+    def start_takeoff(self, values, t: float) -> None:
+        """Free-running flight: the first step comes at mission time t < 0, with the vehicle
+        standing where it landed. Its references blend from there into the mission along the
+        restart's blend (amcore.mission.JoinBlend), so that the first command holds the vehicle
+        where it stands: until t = 0, or over [mission].join_blend_s when less take-off time is
+        left (a companion that engaged late). `values`: the first frame's values."""
         if self._started:
             raise RuntimeError("start_takeoff must come before the pilot's first step")
         self._started = True
         state = state_from_frame(sensor_frame_from_wire(0, t, values, self.model.n, 0))
-        duration = max(-t, 1e-3 * takeoff_s)
+        duration = max(-t, self.spec.mission.join_blend_s)
         self._blend = join_blend(self.model, self.mission, self.params.components, state, t, duration)
 
     def command(self, frame: SensorFrame) -> tuple[TorqueSetpoint | AttitudeSetpoint, AttitudeTarget | None, StepResult]:

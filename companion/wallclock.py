@@ -70,7 +70,10 @@ class WallClockLoop:
         of the loop's clock and at its end, t the mission time (telemetry: the MCAP records them).
         mission_start_s: the autopilot's boot time [s] at which the mission's t = 0 comes, shared
         by a team whose autopilots share a clock (one simulator; or synchronized clocks); the
-        later of it and the engage + TAKEOFF_S counts. None: the engage + TAKEOFF_S."""
+        team's clock counts whenever this companion engages: engaged before it, the take-off blends
+        into it; engaged after it (a companion restarted, or started late), the companion joins
+        the mission in progress with the restart's blend (companion.pilot). None: the engage +
+        TAKEOFF_S."""
         self.pilot, self.ap, self.arm, self.wrench = pilot, autopilot, arm, wrench
         self.clock, self.limits, self.predict, self.on_step, self.log = clock, limits, predict, on_step, log
         self.link_timeout_s = link_timeout_s
@@ -185,9 +188,8 @@ class WallClockLoop:
                 ap.stream_idle(self._idle_target())  # PX4 accepts OFFBOARD only on a live stream
                 continue
             if self.t0_fc_us is None:
-                self.t0_fc_us = ap.engaged_fc_us + TAKEOFF_S * 1e6
-                if self.mission_start_us is not None and self.mission_start_us > self.t0_fc_us:
-                    self.t0_fc_us = self.mission_start_us
+                self.t0_fc_us = (ap.engaged_fc_us + TAKEOFF_S * 1e6 if self.mission_start_us is None
+                                 else self.mission_start_us)
                 self.log(f"OFFBOARD engaged at autopilot time {ap.engaged_fc_us * 1e-6:.3f} s; the mission "
                          f"starts at {self.t0_fc_us * 1e-6:.3f} s")
             t = (fc_now - self.t0_fc_us) * 1e-6
@@ -207,7 +209,10 @@ class WallClockLoop:
             if not self._takeoff_started:
                 self._takeoff_started = True
                 self.arm.start_current_control()  # the servos held their pose until now
-                self.pilot.start_takeoff(values, t, TAKEOFF_S)  # the blend lasts until t = 0
+                if t < 0.0:  # before the mission's start: the take-off's blend into it
+                    self.pilot.start_takeoff(values, t)
+                else:  # the mission is under way (a restart): the pilot joins it where the vehicle is
+                    self.log(f"joining the mission at t = {t:.2f} s (the restart's blend)")
             frame = sensor_frame_from_wire(self.steps, t, values, self.n, 0)
             frame = with_autopilot_reports(frame, effort, att_report)
             sp, _, res = self.pilot.command(frame)

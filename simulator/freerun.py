@@ -654,6 +654,39 @@ class FreeRun:
                     out.append((tm, s, "disarm"))
         return out
 
+    def _failovers(self) -> list[tuple[float, int, str, float | None]]:
+        """Each vehicle taken out of OFFBOARD while armed (in flight or about to fly), before the mission's
+        end, at mission time t (negative in the take-off): (t, sysid, why, t of its next OFFBOARD
+        engage or None). A LAND asked for is `_commanded`'s."""
+        out = []
+        t0 = self.mission_t0_s
+        if t0 is None:
+            return out
+        for s, c in self.commanders.items():
+            engaged, pending, why = False, None, None
+            for e in c.events:
+                tm = e["t_s"] - t0
+                if tm >= self.spec.duration_s:
+                    break
+                kind = e["event"]
+                if kind == "failsafe":
+                    why = f"failsafe: {e.get('cause', '?')}"
+                elif kind == "mode request":
+                    why = f"{e.get('mode')} asked for"
+                elif kind == "mode":
+                    if e.get("to") == "OFFBOARD":
+                        if pending is not None:
+                            out.append((*pending, tm))
+                            pending = None
+                        engaged, why = True, None
+                    elif e.get("from") == "OFFBOARD" and engaged and e.get("armed"):
+                        engaged = False
+                        if not (e.get("to") == "LAND" and why == "LAND asked for"):
+                            pending = (tm, s, why or f"to {e.get('to')}")
+            if pending is not None:
+                out.append((*pending, None))
+        return out
+
     def result(self, wall_s: float | None = None) -> dict:
         """The run's outcome (outcome.json's free-running part)."""
         core, spec = self.core, self.spec
@@ -664,7 +697,8 @@ class FreeRun:
         if complete and self._opened and core.world.time_s - t0 >= 0.0:
             self._truth(core.world.time_s - t0)
         failsafe_at_end = [s for s, c in self.commanders.items() if c.failsafe]
-        verdict = judge(core.outcome, spec.success, self.mission_steps, failsafe_at_end, (), (), self._commanded())
+        verdict = judge(core.outcome, spec.success, self.mission_steps, failsafe_at_end, (), (), self._commanded(),
+                        self._failovers())
         timing = self.pacer.to_dict() if self.pacer is not None else {}
         if self._gc is not None:
             timing["gc"] = self._gc

@@ -24,7 +24,7 @@ MISSION_FAILED = 4  # exit code of every runner (simulator, am-run, in-process) 
 # decided the run's end, and what followed (the object dropped, a base on the ground) follows
 # from it. "rejected setpoints" before "failsafe": K refused setpoints in a row send a vehicle
 # to its failsafe (amcore.config.FlightControllerParams), and the refusals are then the cause
-FAILURE_CLASSES = ("commanded", "diverged", "base contact", "never lifted", "dropped", "slipped", "rejected setpoints",
+FAILURE_CLASSES = ("commanded", "failover", "diverged", "base contact", "never lifted", "dropped", "slipped", "rejected setpoints",
                    "failsafe", "saturated")
 
 
@@ -75,7 +75,8 @@ class Verdict:
 def judge(outcome: RunOutcome, criteria: SuccessCriteria, n_steps: int, failsafe_at_end: Iterable[int] = (),
           rejected: Iterable[tuple[float, int, str]] = (),
           controller_errors: Iterable[tuple[float, int, str]] = (),
-          commanded: Iterable[tuple[float, int, str]] = ()) -> Verdict:
+          commanded: Iterable[tuple[float, int, str]] = (),
+          failovers: Iterable[tuple[float, int, str, float | None]] = ()) -> Verdict:
     """The verdict of a finished run.
 
     n_steps: physics steps run (the saturation fraction's denominator); failsafe_at_end: sysids
@@ -84,7 +85,10 @@ def judge(outcome: RunOutcome, criteria: SuccessCriteria, n_steps: int, failsafe
     controllers that raised instead of answering (in-process runs); commanded: (t, sysid, what)
     of GCS commands that took a vehicle from its companion, what = "abort" (the mission abort,
     one entry per vehicle), "land" (NAV_LAND) or "disarm" (forced, in flight). A base that
-    touches something after its own vehicle was commanded down is that landing, not a crash."""
+    touches something after its own vehicle was commanded down is that landing, not a crash.
+    failovers: (t, sysid, why, back_t) of a vehicle taken out of OFFBOARD in flight (free-running:
+    a PX4 failsafe, or a mode another client asked for), back_t when a companion engaged it again
+    (or None): the mission was not flown by its companions throughout."""
     commanded = sorted(commanded)
     down_at: dict[int, float] = {}
     for t, s, _ in commanded:
@@ -92,7 +96,7 @@ def judge(outcome: RunOutcome, criteria: SuccessCriteria, n_steps: int, failsafe
     found: dict[str, Failure] = {}
     w0, w1 = outcome.hover_window
     complete = bool(outcome.t_series) and outcome.t_series[-1] >= w1 - 1e-9
-    for f in (*_commanded(commanded), *_diverged(outcome, criteria, controller_errors), *_base_contact(outcome, down_at),
+    for f in (*_commanded(commanded), *_failover(failovers), *_diverged(outcome, criteria, controller_errors), *_base_contact(outcome, down_at),
               *_lift(outcome, criteria, complete), *_slip(outcome, criteria), *_failsafe(failsafe_at_end),
               *_rejected(rejected), *_saturation(outcome, criteria, n_steps)):
         found.setdefault(f.kind, f)
@@ -124,6 +128,16 @@ def _commanded(commanded: list[tuple[float, int, str]]) -> list[Failure]:
     more = f" (then am{', am'.join(map(str, sorted(others)))})" if others else ""
     done = "landed by the GCS" if what == "land" else "disarmed in flight by the GCS"
     return [Failure("commanded", t, f"am{s} {done} at t = {t:.2f} s{more}")]
+
+
+def _failover(failovers: Iterable[tuple[float, int, str, float | None]]) -> list[Failure]:
+    f = sorted(failovers, key=lambda x: x[0])
+    if not f:
+        return []
+    t, s, why, back = f[0]
+    again = f"; engaged again at t = {back:.2f} s" if back is not None else ""
+    more = f" ({len(f)} in all)" if len(f) > 1 else ""
+    return [Failure("failover", t, f"am{s} left OFFBOARD at t = {t:.2f} s ({why}){again}{more}")]
 
 
 def _base_contact(o: RunOutcome, down_at: Mapping[int, float]) -> list[Failure]:

@@ -284,3 +284,22 @@ def test_the_autopilot_time_is_anchored_on_the_newest_sample_not_on_the_fitted_l
     # a silent autopilot (nothing for longer than ANCHOR_MAX_NS): the line, so ages keep growing
     late = now + ANCHOR_MAX_NS + 1
     assert ap.fc_time_us(late) == pytest.approx(late * 1e-3 * 0.51)
+
+
+@pytest.mark.parametrize("mission_start_s, first_t, blend_s", [
+    (9.0, -3.0, 3.0),  # engaged 3 s before the team's start: the take-off blends into it
+    (6.5, -0.5, 3.0),  # engaged late, 0.5 s before it: the blend lasts [mission].join_blend_s
+    (5.5, 0.5, 3.0),  # engaged after it (a restart): the mission joined in progress, the restart's blend
+])
+def test_a_shared_mission_start_counts_whenever_the_companion_engages(spec, mission_start_s, first_t, blend_s):
+    """--mission-start is the team's clock: the companion engaged at autopilot time 6.0 s keeps
+    it, and its references blend from where the vehicle is at its first step."""
+    logs = []
+    loop, ap, arm, clock, pilot = _loop(spec, engage_s=1.0, mission_start_s=mission_start_s, log=logs.append)
+    stop_at = clock.t + round(2.5 * 1e9)
+    res = loop.run(stop=lambda: clock.t >= stop_at)
+    assert res.code == 0
+    assert loop.t0_fc_us == pytest.approx(mission_start_s * 1e6)
+    blend = pilot._blend
+    assert blend is not None and blend.t0 == pytest.approx(first_t, abs=0.01) and blend.duration_s == blend_s
+    assert any("joining the mission" in m for m in logs) == (first_t > 0)

@@ -120,7 +120,7 @@ def test_a_run_cut_short_is_incomplete_unless_something_already_failed():
 
 
 def test_failure_classes_come_in_the_documented_order():
-    assert FAILURE_CLASSES == ("commanded", "diverged", "base contact", "never lifted", "dropped", "slipped",
+    assert FAILURE_CLASSES == ("commanded", "failover", "diverged", "base contact", "never lifted", "dropped", "slipped",
                                "rejected setpoints", "failsafe", "saturated")
 
 
@@ -132,3 +132,18 @@ def test_failure_classes_come_in_the_documented_order():
 def test_criteria_come_from_the_scenario(criteria, expect):
     v = judge(_outcome(_lift_profile, touching=_touch_until_lifted), criteria, n_steps=20000)
     assert v.failure_class == expect
+
+
+def test_a_failover_is_named_first_after_a_command_with_its_return():
+    """Free-running: a vehicle taken out of OFFBOARD (a PX4 failsafe, a mode another client asked
+    for) fails a mission that otherwise met every criterion; the first one is named, with the
+    time a companion engaged it again, and how many there were."""
+    ok = judge(_outcome(_lift_profile, touching=_touch_until_lifted), C, n_steps=20000)
+    assert ok.success
+    v = judge(_outcome(_lift_profile, touching=_touch_until_lifted), C, n_steps=20000,
+              failovers=[(3.5, 5, "failsafe: offboard signal lost", 6.25), (-1.0, 4, "HOLD asked for", None)])
+    assert v.status == "failed" and v.failure_class == "failover"
+    assert v.failures[0].t_s == -1.0 and "am4 left OFFBOARD at t = -1.00 s (HOLD asked for) (2 in all)" in v.text
+    back = judge(_outcome(_lift_profile, touching=_touch_until_lifted), C, n_steps=20000,
+                 failovers=[(3.5, 5, "failsafe: offboard signal lost", 6.25)])
+    assert "engaged again at t = 6.25 s" in back.text

@@ -101,32 +101,43 @@ def _loop_timing_events(path: Path) -> dict[str, list[dict]]:
 def _start_sim(run: Path, duration: float, mission_start: float):
     return subprocess.Popen([str(BIN / "simulator"), "--realtime", "--speed", "0.5", "--config", str(SCENARIO),
                              "--run-dir", str(run), "--duration", str(duration), "--mission-start", str(mission_start),
-                             "--instance", str(INSTANCE)],
+                             "--instance", str(INSTANCE), "--no-telemetry"],
                             stdout=subprocess.DEVNULL, stderr=open(run / "simulator.log", "w"), env=_env(), cwd=ROOT)
 
 
-def _start_companion(run: Path, sysid: int, mission_start: float):
+def _start_companion(run: Path, sysid: int, mission_start: float, name: str | None = None):
+    name = name or str(sysid)
     return subprocess.Popen([str(BIN / "companion"), "--sysid", str(sysid), "--clock", "wall", "--config",
                              str(SCENARIO), "--no-telemetry", "--mission-start", str(mission_start), "--outcome",
-                             str(run / f"am{sysid}.json"), "--frame-timeout", "3", "--instance", str(INSTANCE)],
-                            stdout=subprocess.DEVNULL, stderr=open(run / f"companion-{sysid}.log", "w"), env=_env(),
+                             str(run / f"am{name}.json"), "--frame-timeout", "3", "--instance", str(INSTANCE)],
+                            stdout=subprocess.DEVNULL, stderr=open(run / f"companion-{name}.log", "w"), env=_env(),
                             cwd=ROOT)
 
 
-def test_a_mode_switched_away_is_yielded_to_and_a_killed_companion_fails_over(tmp_path):
+def test_a_mode_switched_away_is_yielded_to_a_stalled_companion_fails_over_and_a_restarted_one_rejoins(tmp_path):
+    """Vehicle 0: another client switches it to HOLD; its companion yields and never asks for
+    OFFBOARD again. Vehicle 1: its companion stalls (SIGSTOP) for 2 s of the autopilot's clock;
+    PX4's COM_OF_LOSS_T failover takes the vehicle to HOLD, and the companion, resumed, finds it
+    out of OFFBOARD and yields too. A new companion started for vehicle 1 engages OFFBOARD again
+    and joins the mission in progress (the team's --mission-start), flying it to the run's end.
+    (A killed companion is a stall that never resumes: the same failover.)"""
     run = tmp_path / "run"
     run.mkdir()
-    start = 8.0
-    sim = _start_sim(run, duration=start + 4.0, mission_start=start)
-    time.sleep(2.0)
+    start, speed = 8.0, 0.5
+    sim = _start_sim(run, duration=start + 8.0, mission_start=start)
+    deadline = time.monotonic() + 120.0  # its ports and devices open (its kernels may compile first)
+    while "devices:" not in (run / "simulator.log").read_text():
+        assert sim.poll() is None and time.monotonic() < deadline, (run / "simulator.log").read_text()
+        time.sleep(0.2)
     c4, c5 = _start_companion(run, 4, start), _start_companion(run, 5, start)
+    c5b = None
     gcs = None
     try:
         # another client on vehicle 0's onboard port: PX4 executes its commands (its answers go to the
         # first partner, the companion); once both fly, it switches vehicle 0 to HOLD
         deadline = time.monotonic() + 90.0
         seen = ""
-        while time.monotonic() < deadline and "starts at" not in seen:
+        while time.monotonic() < deadline and seen.count("starts at") < 2:
             time.sleep(0.5)
             seen = (run / "companion-4.log").read_text() + (run / "companion-5.log").read_text()
             assert c4.poll() is None and c5.poll() is None, seen
@@ -138,12 +149,17 @@ def test_a_mode_switched_away_is_yielded_to_and_a_killed_companion_fails_over(tm
                                                 float(px4.MAIN_AUTO), float(px4.SUB_AUTO_LOITER), 0, 0, 0, 0)
         gcs.sendto(enc.pack([hold]), ("127.0.0.1", int(port)))
         c4.wait(timeout=20)  # the companion sees HOLD in the next HEARTBEATs and yields
-        c5.send_signal(signal.SIGKILL)  # companion 5 dies in flight
-        c5.wait(timeout=10)
-        sim.wait(timeout=120)
+        c5.send_signal(signal.SIGSTOP)  # companion 5 stalls: 2 s of the autopilot's clock
+        time.sleep(2.0 / speed)
+        c5.send_signal(signal.SIGCONT)
+        c5.wait(timeout=20)
+        c5b = _start_companion(run, 5, start, name="5b")  # a new companion for vehicle 1
+        sim.wait(timeout=150)
+        c5b.send_signal(signal.SIGTERM)  # (as am-run ends the companions when the simulator ends)
+        c5b.wait(timeout=20)
     finally:
-        for p in (c4, c5, sim):
-            if p.poll() is None:
+        for p in (c4, c5, c5b, sim):
+            if p is not None and p.poll() is None:
                 p.kill()
                 p.wait()
         if gcs is not None:
@@ -158,5 +174,20 @@ def test_a_mode_switched_away_is_yielded_to_and_a_killed_companion_fails_over(tm
     holds = [i for i, e in enumerate(ev4) if e.get("event") == "mode" and e.get("to") == "HOLD" and e.get("armed")]
     assert holds, ev4
     assert not any(e.get("event") == "mode request" and e.get("mode") == "OFFBOARD" for e in ev4[holds[0]:]), ev4
+    # vehicle 1: the stall's failover, after COM_OF_LOSS_T of the autopilot's clock without a setpoint
     ev5 = o["vehicles"]["5"]["events"]
-    assert any(e.get("event") == "failsafe" and "offboard" in e.get("cause", "") for e in ev5), ev5
+    fs = [e for e in ev5 if e.get("event") == "failsafe" and "offboard" in e.get("cause", "")]
+    assert fs and fs[0]["t_s"] - fs[0]["last_setpoint_s"] == pytest.approx(1.0, abs=0.0011), ev5
+    a5 = json.loads((run / "am5.json").read_text())
+    assert c5.returncode == 0 and a5["ended"].startswith("yielded"), a5["ended"]
+    # the restarted companion engaged again and flew the mission from where it joined, to the end
+    log5b = (run / "companion-5b.log").read_text()
+    a5b = json.loads((run / "am5b.json").read_text())
+    assert c5b.returncode == 0 and a5b["error"] is None, log5b[-2000:]
+    assert "joining the mission" in log5b and a5b["engaged_fc_s"] > fs[0]["t_s"]
+    engages = [e for e in ev5 if e.get("event") == "mode" and e.get("to") == "OFFBOARD" and e.get("armed")]
+    assert len(engages) >= 2 and engages[-1]["t_s"] > fs[0]["t_s"], ev5
+    assert o["vehicles"]["5"]["mode_at_end"] == "OFFBOARD" and o["vehicles"]["5"]["armed_at_end"]
+    # the verdict names the first failover (vehicle 0's HOLD) and counts the others
+    v = o["verdict"]
+    assert v["failure_class"] == "failover" and "am4 left OFFBOARD" in v["text"] and "HOLD asked for" in v["text"], v

@@ -65,7 +65,7 @@ class FreeSim:
         self.run_dir = tmp_path / "run"
         onboard = [a for p in ports for a in ("--onboard", f"udpout:127.0.0.1:{p}")]
         self.proc = subprocess.Popen([script("simulator"), "--config", str(scenario_copy(tmp_path)), "--realtime",
-                                      "--duration", str(duration_s), "--run-dir", str(self.run_dir), *onboard, *gcs],
+                                      "--duration", str(duration_s), "--run-dir", str(self.run_dir), "--no-telemetry", *onboard, *gcs],
                                      stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         self.lines: list[str] = []
         ready = threading.Event()
