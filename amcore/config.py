@@ -11,6 +11,7 @@ import math
 import tomllib
 import types
 import typing
+import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +19,10 @@ from pathlib import Path
 
 class ConfigError(ValueError):
     """A configuration file is malformed; the message names the file and the key."""
+
+
+class ConfigWarning(UserWarning):
+    """A configuration loads but may not do what its author meant; the message names the file and the key."""
 
 
 # the scenario every process main runs when none is given: the paper's two-AM grasp through the
@@ -111,6 +116,11 @@ class TaskSpec:
     """
 
     components: tuple[str, ...]
+
+
+# The grasp mission (amcore.mission.am_mission) approaches and squeezes along the task's x (towards
+# the object) and lifts along its z; every other component holds its nominal value.
+GRASP_COMPONENTS = ("x", "z")
 
 
 @dataclass(frozen=True)
@@ -929,6 +939,13 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     for c in v.task.components:
         if c not in ("x", "y", "z", "roll", "pitch", "yaw"):
             raise ConfigError(f"{where}: [task].components: unknown component '{c}'")
+    if len(set(v.task.components)) != n:
+        raise ConfigError(f"{where}: [task].components: a component is named twice in {list(v.task.components)}")
+    missing = [c for c in GRASP_COMPONENTS if c not in v.task.components]
+    if missing:
+        raise ConfigError(f"{where}: [task].components: the grasp mission needs {' and '.join(map(repr, missing))} "
+                          f"('x' approaches and squeezes towards the object, 'z' lifts it), got "
+                          f"{list(v.task.components)}")
     for key in ("K_y", "D_y"):
         if len(getattr(g, key)) != n:
             raise ConfigError(f"{where}: [gains].{key}: expected {n} entries, got {len(getattr(g, key))}")
@@ -937,6 +954,7 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     if v.safety.y_err_max and len(v.safety.y_err_max) != n:
         raise ConfigError(f"{where}: [safety].y_err_max: expected {n} entries, got {len(v.safety.y_err_max)}")
     _positive(f"{where}: [vehicle].joint_torque_max_nm", v.joint_torque_max_nm)
+    _check_urdf_physics(v, where)
     _positive(f"{where}: [options].force_filter_hz", v.options.force_filter_hz)
     _positive(f"{where}: [options].force_filter_zeta", v.options.force_filter_zeta)
     for key in ("com_err_max_m", "sigma_damping", "damping_max"):
@@ -1103,6 +1121,26 @@ def _check_urdf(v: VehicleParams, where: str) -> None:
         raise ConfigError(f"{where}: [vehicle].arm_joints: {what}; the vehicle file lists {list(v.arm_joints)}")
     if not urdf_mass_kg(v.urdf, where) > 0.0:
         raise ConfigError(f"{where}: [vehicle].urdf: {v.urdf}: the links' <inertial> masses sum to 0")
+
+
+def _check_urdf_physics(v: VehicleParams, where: str) -> None:
+    """amcore.vehicle_checks: inertials, q_nominal_rad in the limits, static torques; warns of task
+    components the arm cannot move."""
+    from . import vehicle_checks as vc
+
+    root = _urdf_tree(v.urdf, where)
+    try:
+        vc.check_inertials(root, v.base_link)
+    except vc.UrdfCheckError as exc:
+        raise ConfigError(f"{where}: [vehicle].urdf: {v.urdf}: {exc}") from None
+    why = vc.check_nominal_in_limits(root, v.arm_joints, v.q_nominal_rad)
+    if why:
+        raise ConfigError(f"{where}: [vehicle].q_nominal_rad: {why}")
+    why = vc.check_static_torques(v.urdf, v.arm_joints, v.q_nominal_rad, v.joint_torque_max_nm, v.gravity_mps2)
+    if why:
+        raise ConfigError(f"{where}: [vehicle].joint_torque_max_nm: {why}")
+    for text in vc.task_warnings(v.urdf, v.ee_frame, v.q_nominal_rad, tuple(v.task.components)):
+        warnings.warn(f"{where}: {text}", ConfigWarning, stacklevel=2)
 
 
 def _chain_joints(link: str, children: dict[str, list]) -> list[str]:
