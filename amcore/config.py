@@ -149,15 +149,20 @@ class Safety:
       becomes the gradient of a convex, Huber-like potential, so passivity is kept).
     - sigma_damping: below this smallest singular value of Jbar_3 the inverse in eq. u3
       becomes a damped least-squares inverse with damping up to damping_max.
+    - failsafe_joint_damping: per arm joint [N m s/rad], the flight controller's failsafe
+      (simulator.failsafe) damps the limp arm with it; empty: derived from the arm
+      (simulator.failsafe.joint_damping).
     """
 
     com_err_max_m: float = 0.5
     y_err_max: tuple[float, ...] = ()
     sigma_damping: float = 0.02
     damping_max: float = 0.05
+    failsafe_joint_damping: tuple[float, ...] = ()
 
 
 CONTROLLERS = ("passivity", "baseline")  # amcore.control (the paper's law), amcore.baseline
+BASELINE_COMPONENTS = ("x", "z", "pitch")  # amcore.baseline's inverse kinematics: the arm's plane in {b}
 BASELINE_ARMS = ("joint", "cartesian")  # [baseline].arm: joint PD on the IK's q_d, or impedance at the pad
 
 
@@ -961,6 +966,11 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
         _positive(f"{where}: [safety].{key}", getattr(v.safety, key))
     if v.safety.y_err_max:
         _positive(f"{where}: [safety].y_err_max", v.safety.y_err_max)
+    if v.safety.failsafe_joint_damping:
+        if len(v.safety.failsafe_joint_damping) != n:
+            raise ConfigError(f"{where}: [safety].failsafe_joint_damping: expected {n} entries (one per arm joint), "
+                              f"got {len(v.safety.failsafe_joint_damping)}")
+        _positive(f"{where}: [safety].failsafe_joint_damping", v.safety.failsafe_joint_damping)
     if v.options.heading_admittance_hz < 0.0 or not v.options.heading_admittance_zeta > 0.0:
         raise ConfigError(f"{where}: [options].heading_admittance_hz must be >= 0 (0: off) and "
                           f"heading_admittance_zeta > 0")
@@ -998,6 +1008,10 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
                           f"only (its attitude loop is its own torque law)")
     if v.options.controller == "baseline" and v.baseline is None:
         raise ConfigError(f"{where}: [options].controller = 'baseline' needs a [baseline] table")
+    if v.options.controller == "baseline" and tuple(v.task.components) != BASELINE_COMPONENTS:
+        raise ConfigError(f"{where}: [options].controller = 'baseline': its inverse kinematics is for the planar "
+                          f"task {list(BASELINE_COMPONENTS)} (joints about the body y axis); [task].components is "
+                          f"{list(v.task.components)}")
     if v.baseline is not None:
         _check_baseline(v.baseline, n, f"{where}: [baseline]")
     _check_flight_controller(v.flight_controller, f"{where}: [flight_controller]")
