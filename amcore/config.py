@@ -1014,8 +1014,32 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
                           f"{list(v.task.components)}")
     if v.baseline is not None:
         _check_baseline(v.baseline, n, f"{where}: [baseline]")
+    v = _derive_px4_gains(v, set(data.get("flight_controller", {})))
     _check_flight_controller(v.flight_controller, f"{where}: [flight_controller]")
     return v
+
+
+def _derive_px4_gains(v: VehicleParams, given: set[str]) -> VehicleParams:
+    """The [flight_controller] gains the file does not give, by amcore.px4_gains' rule."""
+    from . import px4_gains
+
+    missing = [k for k in px4_gains.REFERENCE if k not in given]
+    if not missing:
+        return v
+    derived = px4_gains.derived_gains(*px4_units(v))
+    return dataclasses.replace(v, flight_controller=dataclasses.replace(v.flight_controller,
+                                                                       **{k: derived[k] for k in missing}))
+
+
+def px4_units(v: VehicleParams) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """(J, S): the whole AM's rotational inertia about the base's origin, body axes, arm at
+    q_nominal_rad (roll, pitch, yaw) [kg m^2], and PX4's torque units on those axes [N m per unit
+    of normalized torque] (amcore.px4_gains)."""
+    from .allocation import Allocation
+    from .vehicle_checks import whole_am_inertia
+
+    J = whole_am_inertia(v.urdf, v.q_nominal_rad)
+    return tuple(float(x) for x in J.diagonal()), tuple(Allocation(v.rotors).torque_scale_nm)
 
 
 def _rotors(table, where: str) -> RotorParams:

@@ -131,6 +131,15 @@ def nominal_statics(urdf: Path, q_nominal, gravity_mps2: float):
     return pm, data, q, np.array(g[6:])
 
 
+def whole_am_inertia(urdf: Path, q_nominal) -> np.ndarray:
+    """(3, 3) rotational inertia of the whole AM about the base's origin, body axes, arm locked at
+    q_nominal [kg m^2] (pinocchio's CRBA, M[3:6, 3:6])."""
+    import pinocchio as pin
+
+    pm, data, q, _ = nominal_statics(urdf, q_nominal, 9.81)
+    return np.array(pin.crba(pm, data, q)[3:6, 3:6])
+
+
 def check_static_torques(urdf: Path, joints, q_nominal, torque_max, gravity_mps2: float) -> str | None:
     """None, or the first joint whose static torque at the nominal hover exceeds its limit."""
     *_, tau = nominal_statics(urdf, q_nominal, gravity_mps2)
