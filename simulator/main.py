@@ -32,6 +32,7 @@ ends when the mission clock (first OFFBOARD engage + amcore.mission.TAKEOFF_S) r
 from __future__ import annotations
 
 import json
+import os
 import signal
 import sys
 import time
@@ -80,8 +81,26 @@ def _on_signal(signum, _frame):
     raise _Stop(signal.Signals(signum).name)
 
 
+_EVENTS = {"stream": None}  # where --progress jsonl's events go: --events-fd, else stdout
+
+
+def emit_event(**kw) -> None:
+    """One event, a JSON line, on the events channel (--events-fd N: that descriptor, which am-run
+    reads; nothing a library prints on stdout or stderr reaches it; else stdout)."""
+    stream = _EVENTS["stream"] or sys.stdout
+    stream.write(json.dumps(kw) + "\n")
+    stream.flush()
+
+
+def open_events(fd: int | None) -> None:
+    """Send the events to descriptor `fd` (None: stdout)."""
+    if fd is not None:
+        _EVENTS["stream"] = os.fdopen(fd, "w", buffering=1, closefd=False)
+
+
 class Progress:
-    """Progress to stderr as a bar (`simulator.progress`) or to stdout as JSON lines (for am-run)."""
+    """Progress to stderr as a bar (`simulator.progress`) or as JSON-line events (for am-run,
+    `emit_event`)."""
 
     def __init__(self, mode: str, duration_s: float) -> None:
         self.mode, self.duration = mode, duration_s
@@ -91,7 +110,7 @@ class Progress:
 
     def event(self, **kw) -> None:
         if self.mode == "jsonl":
-            print(json.dumps(kw), flush=True)
+            emit_event(**kw)
 
     def update(self, t: float, force: bool = False) -> None:
         now = time.perf_counter()
@@ -134,6 +153,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="signing master key (64 hex digits); overrides [link].key_file of the scenario")
     ap.add_argument("--progress", choices=("bar", "jsonl", "none"), default=None,
                     help="progress display (default: bar on a terminal, else none)")
+    ap.add_argument("--events-fd", type=cliargs.number(3, 65535, integer=True), default=None, metavar="FD",
+                    help="with --progress jsonl: write the events (ready, progress, done) to this inherited file "
+                         "descriptor instead of stdout, so that nothing else printed can mix with them (am-run)")
     ap.add_argument("--realtime", action="store_true",
                     help="free-running: physics paced to the wall clock, each vehicle played as PX4 SITL on its "
                          "onboard MAVLink port (simulator.freerun); any PX4 offboard program flies it")
@@ -151,6 +173,10 @@ def main(argv: list[str] | None = None) -> int:
                          "udpin:HOST:PORT")
     add_zenoh_arguments(ap, role="publisher")
     a = ap.parse_args(argv)
+    try:
+        open_events(a.events_fd)
+    except OSError as exc:
+        return cliargs.fail("simulator", f"--events-fd {a.events_fd}: {exc.strerror or exc}")
     if a.speed is not None:
         a.realtime = True
     if a.onboard and not a.realtime:
@@ -396,7 +422,7 @@ def _main_freerun(a, spec) -> int:
         progress_ready(a, spec, run, arms, wrists, mocap)
         result = run.run(a.duration)
         if a.progress == "jsonl":  # before the ports close: am-run ends the companions as the run ends
-            print(json.dumps({"event": "end", "status": result["status"]}), flush=True)
+            emit_event(event="end", status=result["status"])
         status = result["status"]
         if status.startswith("no vehicle"):
             code = 1
@@ -452,11 +478,11 @@ def progress_ready(a, spec, run, arms, wrists, mocap) -> None:
     """The ready event (--progress jsonl, for am-run): every endpoint a companion reaches."""
     if a.progress != "jsonl":
         return
-    print(json.dumps({"event": "ready", "realtime": True, "speed": run.speed, "scenario": spec.name,
-                      "sysids": run.sysids, "onboard": [p.describe() for p in run.ports],
-                      "arms": [f"tcp:{x.address[0]}:{x.address[1]}" for x in arms],
-                      "ft": [f"udp:{x.address[0]}:{x.address[1]}" for x in wrists],
-                      "mocap": None if mocap is None else f"udp:{mocap.address[0]}:{mocap.address[1]}"}), flush=True)
+    emit_event(event="ready", realtime=True, speed=run.speed, scenario=spec.name, sysids=run.sysids,
+               onboard=[p.describe() for p in run.ports],
+               arms=[f"tcp:{x.address[0]}:{x.address[1]}" for x in arms],
+               ft=[f"udp:{x.address[0]}:{x.address[1]}" for x in wrists],
+               mocap=None if mocap is None else f"udp:{mocap.address[0]}:{mocap.address[1]}")
 
 
 def _told(first: dict) -> str:
