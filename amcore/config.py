@@ -316,8 +316,9 @@ class FlightControllerParams:
       starts unpowered. Both modes.
 
     The upper-case keys are PX4 parameters under their PX4 names and in PX4's units (rad/s
-    per rad, normalized torque per rad/s, deg/s, Hz); their defaults are PX4's, the vehicle
-    file sets this vehicle's. They act in attitude mode only.
+    per rad, normalized torque per rad/s, deg/s, Hz). They act in attitude mode only. The
+    loader sets each one a vehicle file leaves out by amcore.px4_gains' rule for that vehicle
+    (COM_OF_LOSS_T: PX4's default); the defaults below are PX4's, for this class built directly.
     """
 
     mode: str = "torque"
