@@ -25,6 +25,20 @@ class ConfigWarning(UserWarning):
     """A configuration loads but may not do what its author meant; the message names the file and the key."""
 
 
+_format_warning = warnings.formatwarning
+
+
+def _config_warning_format(message, category, filename, lineno, line=None):
+    """A ConfigWarning reads as one line, `warning: <file>: <key>: <reason>` (not the loader's
+    source line: the user's file is the place to look)."""
+    if isinstance(category, type) and issubclass(category, ConfigWarning):
+        return f"warning: {message}\n"
+    return _format_warning(message, category, filename, lineno, line)
+
+
+warnings.formatwarning = _config_warning_format
+
+
 # the scenario every process main runs when none is given: the paper's two-AM grasp through the
 # design card's interface (attitude-thrust setpoints at 250 Hz to an emulated PX4); the paper's
 # idealized torque interface is configs/scenarios/two_am_comp.toml
