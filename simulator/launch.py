@@ -465,7 +465,8 @@ def _simulator_errors(log_path: Path) -> str:
         lines = log_path.read_text(errors="replace").splitlines()
     except OSError:
         return f"(no log at {log_path})"
-    errors = [ln for ln in lines if ln.startswith("simulator: error")]
+    mark = "simulator: error"  # a library's unterminated output may precede it on its line
+    errors = [ln[ln.index(mark):] for ln in lines if mark in ln]
     return "\n".join(errors or lines[-5:])
 
 
@@ -538,6 +539,8 @@ def _print_summary(run_dir: Path, spec, procs) -> None:
     if not path.is_file():
         return
     o = json.loads(path.read_text())
+    if "object" not in o:  # the world never came up (a refused configuration): nothing flew
+        return
     obj = o["object"]
     rtf = o.get("real_time_factor") or 0.0
     print(f"\n{spec.name}: {o['status']}; {o['sim_time_s']:.2f} s simulated, {rtf:.2f}x real time", file=sys.stderr)

@@ -17,7 +17,10 @@ PX4 SITL does. The run folder gets outcome.json (the physical outcome from groun
 simulator.outcome, and the mission verdict, simulator.verdict) and gcs.tlog. Exit codes: 0
 run complete and its mission a success (or not failed so far, when --duration cut the
 mission short), 4 the mission failed (the verdict names the criterion and when), 2 bad
-configuration, 1 link failure (a missing or silent companion, named), 130 interrupted.
+configuration (the loader's, or a URDF PyBullet cannot load), 1 link failure (a missing or
+silent companion, named), 130 interrupted. With --progress jsonl its events (ready,
+progress, done) are JSON lines on stdout, or on the inherited descriptor --events-fd names
+(am-run's: nothing but the events is written there).
 
     simulator --realtime [--speed F] [--onboard ENDPOINT]... [--duration S]
 
@@ -38,6 +41,7 @@ import sys
 import time
 from pathlib import Path
 
+import pybullet as pb
 
 from amcore import cliargs, preflight
 from amcore.config import DEFAULT_SCENARIO, ConfigError, check_duration, load_scenario, scenario_id
@@ -70,6 +74,11 @@ class _Stop(Exception):
 
 class _BindError(Exception):
     pass
+
+
+class _Refused(Exception):
+    """The physics engine refuses what the loader let through (the vehicle's URDF): a
+    configuration error, exit 2."""
 
 
 def _on_signal(signum, _frame):
@@ -271,7 +280,10 @@ def main(argv: list[str] | None = None) -> int:
         if jit.compiled:
             print(f"simulator: compiled the simulator's kernels in {jit.seconds:.1f} s (once per machine: cached "
                   f"in {jitcache.cache_dir()})", file=sys.stderr, flush=True)
-        core.connect()
+        try:
+            core.connect()
+        except pb.error as exc:  # PyBullet's own refusal of a file: the user's to fix
+            raise _Refused(f"{spec.vehicle.urdf}: PyBullet cannot load the scenario's bodies: {exc}") from None
         try:
             server.open()
         except OSError as exc:
@@ -348,6 +360,9 @@ def main(argv: list[str] | None = None) -> int:
         told = status
     except _BindError as exc:
         status, code, told = str(exc), 1, str(exc)
+        print(f"simulator: error: {exc}", file=sys.stderr)
+    except _Refused as exc:
+        status, code, told = str(exc), 2, str(exc)
         print(f"simulator: error: {exc}", file=sys.stderr)
     except LinkError as exc:
         status, code, told = f"link failure: {exc}", 1, str(exc)

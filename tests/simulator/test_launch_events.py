@@ -61,3 +61,24 @@ def test_a_simulator_that_refuses_its_configuration_makes_am_run_exit_2_with_its
     err = capsys.readouterr().err
     assert code == 2, err
     assert "the simulator's own reason" in err and "Traceback" not in err
+
+
+def test_a_urdf_pybullet_cannot_load_is_a_configuration_error_on_am_runs_terminal(tmp_path, capsys):
+    """A collision mesh that does not exist: pinocchio (no geometry) loads the file, PyBullet does
+    not. The real simulator exits 2 with its message, and am-run exits 2 and prints it."""
+    vehicles = SCENARIOS.parent / "vehicles"
+    urdf = (vehicles / "am3dof.urdf").read_text()
+    box = '<collision>\n      <geometry><box size="0.24 0.24 0.06"/></geometry>'
+    assert urdf.count(box) == 1
+    (tmp_path / "am3dof.urdf").write_text(urdf.replace(box, '<collision>\n      <geometry><mesh filename="missing.stl"/>'
+                                                             '</geometry>'))
+    (tmp_path / "am3dof.toml").write_text((vehicles / "am3dof.toml").read_text())
+    scenario = tmp_path / "s.toml"
+    scenario.write_text((SCENARIOS / "two_am_short.toml").read_text().replace(
+        'vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{tmp_path / "am3dof.toml"}"'))
+    code = launch.main([str(scenario), "--no-telemetry", "--gcs", "none", "--run-dir", str(tmp_path / "run"),
+                        "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert "simulator: error:" in err and "PyBullet cannot load" in err and str(tmp_path / "am3dof.urdf") in err
+    assert "Traceback" not in err
