@@ -41,8 +41,6 @@ import sys
 import time
 from pathlib import Path
 
-import pybullet as pb
-
 from amcore import cliargs, preflight
 from amcore.config import DEFAULT_SCENARIO, ConfigError, check_duration, load_scenario, scenario_id
 from amlink import signing
@@ -63,6 +61,7 @@ from .freerun import FreeRun, endpoints_for
 from .px4.port import PortError
 from .gcs import GcsSession, snapshot_every
 from .gcs_link import GcsLink
+from .bullet import pb
 from .progress import SimBar
 from .verdict import MISSION_FAILED
 
