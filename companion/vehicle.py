@@ -70,7 +70,11 @@ def main(argv: list[str] | None = None) -> int:
     from amcore.model import build_model
     from amcore.tuning import nominal_tuning, tuning_lines
 
-    va = vehicle_authority(vehicle, args.squeeze, args.load)
+    try:
+        va = vehicle_authority(vehicle, args.squeeze, args.load)
+    except ConfigError as exc:  # an arm the loaded hover's model does not fit (amcore.authority)
+        print(f"am-vehicle: {exc}", file=sys.stderr)
+        return 2
     for line in report_lines(va):
         print(line)
     for line in tuning_lines(vehicle, nominal_tuning(vehicle, build_model(vehicle))):
@@ -81,7 +85,11 @@ def main(argv: list[str] | None = None) -> int:
         from amcore.envelope import Envelope, verdict_line
 
         env = Envelope(vehicle)
-        m = env.payload_kg(args.team, args.friction, args.friction_margin)
+        try:
+            m = env.payload_kg(args.team, args.friction, args.friction_margin)
+        except ConfigError as exc:
+            print(f"am-vehicle: {exc}", file=sys.stderr)
+            return 2
         mg = env.margins
         print(f"team of {args.team} at friction {args.friction:g} (margin {args.friction_margin:g}) holds up to "
               f"{m:.2f} kg (rotors within {mg.thrust_fraction_max:.0%}, {mg.yaw_reserve_nm:g} N m of yaw and {mg.pitch_reserve_nm:g} N m of pitch left, "

@@ -50,3 +50,40 @@ def test_exit_4_when_the_vehicle_cannot(capsys):
     assert main([str(VEHICLES / "am3dof.toml"), "--squeeze", "40", "--load", "2"]) == 4
     err = capsys.readouterr().err
     assert "NOT FEASIBLE" in err and "the rotors cannot make it" in err and "torque limit" in err
+
+
+def _two_joint_arm(tmp_path) -> Path:
+    """am3dof with its wrist fixed (the pad facing forward at the nominal pose): task x z."""
+    urdf = (VEHICLES / "am3dof.urdf").read_text()
+    wrist = ('<joint name="joint3" type="revolute">\n    <parent link="link2"/>\n    <child link="link3"/>\n'
+             '    <origin xyz="0.22 0 0" rpy="0 0 0"/>\n    <axis xyz="0 1 0"/>\n'
+             '    <limit lower="-2.0" upper="2.0" effort="2.0" velocity="8.0"/>')
+    assert urdf.count(wrist) == 1
+    (tmp_path / "am2dof.urdf").write_text(urdf.replace(wrist, '<joint name="joint3" type="fixed">\n'
+                                                      '    <parent link="link2"/>\n    <child link="link3"/>\n'
+                                                      '    <origin xyz="0.22 0 0" rpy="0 1.0 0"/>'))
+    toml = (VEHICLES / "am3dof.toml").read_text()
+    for old, new in (('urdf = "am3dof.urdf"', 'urdf = "am2dof.urdf"'),
+                     ('["joint1", "joint2", "joint3"]', '["joint1", "joint2"]'),
+                     ("[1.0, -2.0, 1.0]", "[1.0, -2.0]"), ("[6.0, 4.0, 2.0]", "[6.0, 4.0]"),
+                     ('["x", "z", "pitch"]', '["x", "z"]'), ("[300.0, 300.0, 1.5]", "[300.0, 300.0]"),
+                     ("[14.0, 14.0, 0.03]", "[14.0, 14.0]"), ("[0.15, 0.15, 0.5]", "[0.15, 0.15]"),
+                     ("[1.0, 0.4, 0.1]", "[1.0, 0.4]"), ("[20.0, 5.0, 6.0]", "[20.0, 5.0]"),
+                     ("[0.73, 0.26, 0.066]", "[0.73, 0.26]")):
+        assert toml.count(old) == 1, old
+        toml = toml.replace(old, new)
+    p = tmp_path / "am2dof.toml"
+    p.write_text(toml)
+    return p
+
+
+def test_an_arm_the_loaded_hover_cannot_model_is_refused_not_guessed(tmp_path, capsys):
+    """Two planar joints cannot keep the pad's pose (position and pitch) while the base pitches:
+    the hover is reported, a loaded hover is refused with exit 2 naming the arm."""
+    p = _two_joint_arm(tmp_path)
+    assert main([str(p)]) == 0
+    capsys.readouterr()
+    assert main([str(p), "--squeeze", "9", "--load", "0.5"]) == 2
+    err = capsys.readouterr().err
+    assert str(tmp_path / "am2dof.urdf") in err and "[vehicle].arm_joints" in err and "cannot keep the pad's pose" in err
+    assert "Traceback" not in err
