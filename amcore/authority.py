@@ -28,7 +28,7 @@ import numpy as np
 import pinocchio as pin
 
 from .allocation import AXES, Allocation
-from .config import VehicleParams
+from .config import ConfigError, VehicleParams
 from .model import AmModel, build_model, create_data
 
 
@@ -117,7 +117,20 @@ def _hold_pad(model: AmModel, data, q0: np.ndarray, R_WB: np.ndarray) -> np.ndar
             break
         J = pin.computeFrameJacobian(model.pin_model, data, q_pin, model.ee_frame_id, pin.LOCAL)[:, 6:]
         q = q + np.linalg.solve(J.T @ J + 1e-9 * np.eye(len(q)), J.T @ err)
+    if np.linalg.norm(err) > HOLD_PAD_TOLERANCE:
+        pitch = math.degrees(math.atan2(R_WB[0, 2], R_WB[0, 0]))
+        raise ArmCannotHoldPad(f"{model.vehicle.urdf}: [vehicle].arm_joints {list(model.vehicle.arm_joints)}: the arm "
+                               f"cannot keep the pad's pose with the base pitched {pitch:.1f} deg (pose error "
+                               f"{np.linalg.norm(err):.2g}); the loaded hover (amcore.authority, the envelope) needs "
+                               f"joints that turn the pad about the body y axis")
     return q
+
+
+HOLD_PAD_TOLERANCE = 1e-6  # |log6| of the pad's pose error [m, rad] that counts as held
+
+
+class ArmCannotHoldPad(ConfigError):
+    """The loaded hover's model does not fit this arm: a configuration the envelope refuses."""
 
 
 def vehicle_authority(vehicle: VehicleParams, squeeze_n: float = 0.0, load_kg: float = 0.0,

@@ -87,7 +87,7 @@ import pinocchio as pin
 
 from . import linalg3
 from .attitude import desired_attitude
-from .config import VehicleParams
+from .config import BASELINE_COMPONENTS, VehicleParams
 from .control import Command, Diagnostics, Reference, StepResult
 from .filters import FilterState, LowPass2, lowpass_update_floats
 from .mission import nominal_geometry
@@ -95,7 +95,7 @@ from .model import AmModel, AmState
 from .so3 import cross
 from .task import TaskFrame, angle_of
 
-PLANAR_COMPONENTS = ("x", "z", "pitch")  # the arm's plane in {b}: joints turn about the body y axis
+PLANAR_COMPONENTS = BASELINE_COMPONENTS  # the arm's plane in {b}: joints turn about the body y axis
 
 
 @dataclass(frozen=True)

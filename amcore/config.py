@@ -11,6 +11,7 @@ import math
 import tomllib
 import types
 import typing
+import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +19,24 @@ from pathlib import Path
 
 class ConfigError(ValueError):
     """A configuration file is malformed; the message names the file and the key."""
+
+
+class ConfigWarning(UserWarning):
+    """A configuration loads but may not do what its author meant; the message names the file and the key."""
+
+
+_format_warning = warnings.formatwarning
+
+
+def _config_warning_format(message, category, filename, lineno, line=None):
+    """A ConfigWarning reads as one line, `warning: <file>: <key>: <reason>` (not the loader's
+    source line: the user's file is the place to look)."""
+    if isinstance(category, type) and issubclass(category, ConfigWarning):
+        return f"warning: {message}\n"
+    return _format_warning(message, category, filename, lineno, line)
+
+
+warnings.formatwarning = _config_warning_format
 
 
 # the scenario every process main runs when none is given: the paper's two-AM grasp through the
@@ -123,6 +142,11 @@ class TaskSpec:
     components: tuple[str, ...]
 
 
+# The grasp mission (amcore.mission.am_mission) approaches and squeezes along the task's x (towards
+# the object) and lifts along its z; every other component holds its nominal value.
+GRASP_COMPONENTS = ("x", "z")
+
+
 @dataclass(frozen=True)
 class Gains:
     """Gains of eq. Com_controller, eq. ori_controller and eq. u3 (diagonal entries).
@@ -149,15 +173,20 @@ class Safety:
       becomes the gradient of a convex, Huber-like potential, so passivity is kept).
     - sigma_damping: below this smallest singular value of Jbar_3 the inverse in eq. u3
       becomes a damped least-squares inverse with damping up to damping_max.
+    - failsafe_joint_damping: per arm joint [N m s/rad], the flight controller's failsafe
+      (simulator.failsafe) damps the limp arm with it; empty: derived from the arm
+      (simulator.failsafe.joint_damping).
     """
 
     com_err_max_m: float = 0.5
     y_err_max: tuple[float, ...] = ()
     sigma_damping: float = 0.02
     damping_max: float = 0.05
+    failsafe_joint_damping: tuple[float, ...] = ()
 
 
 CONTROLLERS = ("passivity", "baseline")  # amcore.control (the paper's law), amcore.baseline
+BASELINE_COMPONENTS = ("x", "z", "pitch")  # amcore.baseline's inverse kinematics: the arm's plane in {b}
 BASELINE_ARMS = ("joint", "cartesian")  # [baseline].arm: joint PD on the IK's q_d, or impedance at the pad
 
 
@@ -311,8 +340,9 @@ class FlightControllerParams:
       starts unpowered. Both modes.
 
     The upper-case keys are PX4 parameters under their PX4 names and in PX4's units (rad/s
-    per rad, normalized torque per rad/s, deg/s, Hz); their defaults are PX4's, the vehicle
-    file sets this vehicle's. They act in attitude mode only.
+    per rad, normalized torque per rad/s, deg/s, Hz). They act in attitude mode only. The
+    loader sets each one a vehicle file leaves out by amcore.px4_gains' rule for that vehicle
+    (COM_OF_LOSS_T: PX4's default); the defaults below are PX4's, for this class built directly.
     """
 
     mode: str = "torque"
@@ -939,6 +969,13 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     for c in v.task.components:
         if c not in ("x", "y", "z", "roll", "pitch", "yaw"):
             raise ConfigError(f"{where}: [task].components: unknown component '{c}'")
+    if len(set(v.task.components)) != n:
+        raise ConfigError(f"{where}: [task].components: a component is named twice in {list(v.task.components)}")
+    missing = [c for c in GRASP_COMPONENTS if c not in v.task.components]
+    if missing:
+        raise ConfigError(f"{where}: [task].components: the grasp mission needs {' and '.join(map(repr, missing))} "
+                          f"('x' approaches and squeezes towards the object, 'z' lifts it), got "
+                          f"{list(v.task.components)}")
     for key in ("K_y", "D_y"):
         if len(getattr(g, key)) != n:
             raise ConfigError(f"{where}: [gains].{key}: expected {n} entries, got {len(getattr(g, key))}")
@@ -947,12 +984,18 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     if v.safety.y_err_max and len(v.safety.y_err_max) != n:
         raise ConfigError(f"{where}: [safety].y_err_max: expected {n} entries, got {len(v.safety.y_err_max)}")
     _positive(f"{where}: [vehicle].joint_torque_max_nm", v.joint_torque_max_nm)
+    _check_urdf_physics(v, where)
     _positive(f"{where}: [options].force_filter_hz", v.options.force_filter_hz)
     _positive(f"{where}: [options].force_filter_zeta", v.options.force_filter_zeta)
     for key in ("com_err_max_m", "sigma_damping", "damping_max"):
         _positive(f"{where}: [safety].{key}", getattr(v.safety, key))
     if v.safety.y_err_max:
         _positive(f"{where}: [safety].y_err_max", v.safety.y_err_max)
+    if v.safety.failsafe_joint_damping:
+        if len(v.safety.failsafe_joint_damping) != n:
+            raise ConfigError(f"{where}: [safety].failsafe_joint_damping: expected {n} entries (one per arm joint), "
+                              f"got {len(v.safety.failsafe_joint_damping)}")
+        _positive(f"{where}: [safety].failsafe_joint_damping", v.safety.failsafe_joint_damping)
     if v.options.heading_admittance_hz < 0.0 or not v.options.heading_admittance_zeta > 0.0:
         raise ConfigError(f"{where}: [options].heading_admittance_hz must be >= 0 (0: off) and "
                           f"heading_admittance_zeta > 0")
@@ -990,10 +1033,38 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
                           f"only (its attitude loop is its own torque law)")
     if v.options.controller == "baseline" and v.baseline is None:
         raise ConfigError(f"{where}: [options].controller = 'baseline' needs a [baseline] table")
+    if v.options.controller == "baseline" and tuple(v.task.components) != BASELINE_COMPONENTS:
+        raise ConfigError(f"{where}: [options].controller = 'baseline': its inverse kinematics is for the planar "
+                          f"task {list(BASELINE_COMPONENTS)} (joints about the body y axis); [task].components is "
+                          f"{list(v.task.components)}")
     if v.baseline is not None:
         _check_baseline(v.baseline, n, f"{where}: [baseline]")
+    v = _derive_px4_gains(v, set(data.get("flight_controller", {})))
     _check_flight_controller(v.flight_controller, f"{where}: [flight_controller]")
     return v
+
+
+def _derive_px4_gains(v: VehicleParams, given: set[str]) -> VehicleParams:
+    """The [flight_controller] gains the file does not give, by amcore.px4_gains' rule."""
+    from . import px4_gains
+
+    missing = [k for k in px4_gains.REFERENCE if k not in given]
+    if not missing:
+        return v
+    derived = px4_gains.derived_gains(*px4_units(v))
+    return dataclasses.replace(v, flight_controller=dataclasses.replace(v.flight_controller,
+                                                                       **{k: derived[k] for k in missing}))
+
+
+def px4_units(v: VehicleParams) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """(J, S): the whole AM's rotational inertia about the base's origin, body axes, arm at
+    q_nominal_rad (roll, pitch, yaw) [kg m^2], and PX4's torque units on those axes [N m per unit
+    of normalized torque] (amcore.px4_gains)."""
+    from .allocation import Allocation
+    from .vehicle_checks import whole_am_inertia
+
+    J = whole_am_inertia(v.urdf, v.q_nominal_rad)
+    return tuple(float(x) for x in J.diagonal()), tuple(Allocation(v.rotors).torque_scale_nm)
 
 
 def _rotors(table, where: str) -> RotorParams:
@@ -1113,6 +1184,26 @@ def _check_urdf(v: VehicleParams, where: str) -> None:
         raise ConfigError(f"{where}: [vehicle].arm_joints: {what}; the vehicle file lists {list(v.arm_joints)}")
     if not urdf_mass_kg(v.urdf, where) > 0.0:
         raise ConfigError(f"{where}: [vehicle].urdf: {v.urdf}: the links' <inertial> masses sum to 0")
+
+
+def _check_urdf_physics(v: VehicleParams, where: str) -> None:
+    """amcore.vehicle_checks: inertials, q_nominal_rad in the limits, static torques; warns of task
+    components the arm cannot move."""
+    from . import vehicle_checks as vc
+
+    root = _urdf_tree(v.urdf, where)
+    try:
+        vc.check_inertials(root, v.base_link)
+    except vc.UrdfCheckError as exc:
+        raise ConfigError(f"{where}: [vehicle].urdf: {v.urdf}: {exc}") from None
+    why = vc.check_nominal_in_limits(root, v.arm_joints, v.q_nominal_rad)
+    if why:
+        raise ConfigError(f"{where}: [vehicle].q_nominal_rad: {why}")
+    why = vc.check_static_torques(v.urdf, v.arm_joints, v.q_nominal_rad, v.joint_torque_max_nm, v.gravity_mps2)
+    if why:
+        raise ConfigError(f"{where}: [vehicle].joint_torque_max_nm: {why}")
+    for text in vc.task_warnings(v.urdf, v.ee_frame, v.q_nominal_rad, tuple(v.task.components)):
+        warnings.warn(f"{where}: {text}", ConfigWarning, stacklevel=2)
 
 
 def _chain_joints(link: str, children: dict[str, list]) -> list[str]:

@@ -22,7 +22,7 @@ import numpy as np
 import pinocchio as pin
 
 from . import law
-from .config import (AmSpec, MissionSpec, ScenarioSpec, VehicleParams, design_mass_kg, grasped_face,  # noqa: F401
+from .config import (GRASP_COMPONENTS, AmSpec, MissionSpec, ScenarioSpec, VehicleParams, design_mass_kg, grasped_face,  # noqa: F401
                      surface_distance)  # (surface_distance: re-exported)
 from .control import Reference
 from .model import AmModel, AmState, create_data, decoupled_terms
@@ -39,11 +39,21 @@ TAKEOFF_S = 3.0
 
 @dataclass(frozen=True)
 class NominalGeometry:
-    """At q_nominal with a level base: end-effector and CoM offsets from {b}'s origin [m]."""
+    """At q_nominal with a level base: end-effector and CoM offsets from {b}'s origin [m], and
+    the end-effector's orientation R_BE."""
 
     p_BE: np.ndarray
     r_BC: np.ndarray
     pitch_rad: float
+    R_BE: np.ndarray
+
+    def task_values(self, components: tuple[str, ...], x_t: float, z_t: float) -> np.ndarray:
+        """y for `components` with the pad at x_t, z_t [m] in {t} and everything else as at the
+        nominal pose with the CoM on {t}'s x-z plane: "y" the pad's lateral offset from the CoM,
+        each angle component the nominal pose's angle (amcore.task.angle_of of R_BE)."""
+        lateral = float(self.p_BE[1] - self.r_BC[1])
+        value = {"x": x_t, "y": lateral, "z": z_t}
+        return np.array([value[c] if c in value else angle_of(self.R_BE, c) for c in components])
 
 
 def nominal_geometry(model: AmModel) -> NominalGeometry:
@@ -55,7 +65,8 @@ def nominal_geometry(model: AmModel) -> NominalGeometry:
     com = pin.centerOfMass(pm, data, q)
     R_BE = data.oMf[model.ee_frame_id].rotation
     return NominalGeometry(
-        p_BE=data.oMf[model.ee_frame_id].translation.copy(), r_BC=com.copy(), pitch_rad=angle_of(R_BE, "pitch")
+        p_BE=data.oMf[model.ee_frame_id].translation.copy(), r_BC=com.copy(), pitch_rad=angle_of(R_BE, "pitch"),
+        R_BE=R_BE.copy()
     )
 
 
@@ -105,7 +116,7 @@ class AmMission:
     frame: TaskFrame
     psi: float
     com_path_t: SmoothPath  # CoM in {t}
-    y_path: SmoothPath  # y_d = (x, z, pitch) in {t}
+    y_path: SmoothPath  # y_d, one entry per [task].components, in {t}
     nominal: NominalGeometry
     q_nominal: tuple[float, ...]
     phase_ends_s: tuple[float, float, float]
@@ -154,10 +165,15 @@ def am_mission(spec: ScenarioSpec, am: AmSpec, model: AmModel, object_pose: Obje
     `config_object_pose`; [mission].object_pose = "mocap": the measurement the simulator's
     motion capture shares). Each AM uses only the pose and its own [[am]] entry: with
     `faces_from_pose`, it approaches the box's face whose normal is nearest its azimuth.
-    Needs task components (x, z, pitch)."""
-    if tuple(spec.vehicle.task.components) != ("x", "z", "pitch"):
-        raise ValueError(f"the grasp mission is defined for task components (x, z, pitch), "
-                         f"vehicle has {spec.vehicle.task.components}")
+
+    The task references follow the vehicle's [task].components: "x" approaches and squeezes,
+    "z" carries the start height and the lift, every other component holds its value at the
+    nominal pose (`NominalGeometry.task_values`). The loader refuses a set without "x" and "z"
+    (amcore.config.GRASP_COMPONENTS)."""
+    comps = tuple(spec.vehicle.task.components)
+    missing = [c for c in GRASP_COMPONENTS if c not in comps]
+    if missing:
+        raise ValueError(f"the grasp mission needs task components {GRASP_COMPONENTS}, vehicle has {comps}")
     ms = spec.mission
     pose = object_pose or config_object_pose(spec)
     az, half = grasped_face(spec, am, pose.yaw_rad)
@@ -167,29 +183,34 @@ def am_mission(spec: ScenarioSpec, am: AmSpec, model: AmModel, object_pose: Obje
     frame = TaskFrame(R_WT=Rz(psi), p_WT=np.array(pose.p_W_m, dtype=float))
     geo = nominal_geometry(model)
     d = geo.p_BE - geo.r_BC  # end-effector relative to CoM, level, in {b} = {t} orientation
-    pitch = geo.pitch_rad  # hold the nominal pose's pad orientation
-    y0 = np.array([-(half + ms.standoff_m), ms.start_height_m, pitch])
-    y_app = np.array([-(half + ms.pre_gap_m), 0.0, pitch])
-    y_grasp = np.array([-(half - squeeze_plan(spec, model).depth_m), 0.0, pitch])
-    y_lift = y_grasp + np.array([0.0, ms.lift_m, 0.0])
+
+    def y_at(x_t, z_t):  # the other components hold the nominal pose's values
+        return geo.task_values(comps, x_t, z_t)
+
+    y0 = y_at(-(half + ms.standoff_m), ms.start_height_m)
+    y_app = y_at(-(half + ms.pre_gap_m), 0.0)
+    y_grasp = y_at(-(half - squeeze_plan(spec, model).depth_m), 0.0)
+    y_lift = y_at(-(half - squeeze_plan(spec, model).depth_m), ms.lift_m)
     t_a, t_g = ms.approach_end_s, ms.grasp_end_s
     if ms.approach_move_s > t_a or t_a + ms.grasp_move_s > t_g or t_g + ms.lift_move_s > ms.hover_end_s:
         raise ValueError("mission moves do not fit in their phases")
     grasp_moves = [(t_a, t_a + ms.grasp_move_s, y_grasp)]
     if ms.touch_hold_s > 0.0:  # touch, align, squeeze: the first move presses touch_force_n only
-        k_x = spec.vehicle.gains.K_y[spec.vehicle.task.components.index("x")]
-        y_touch = np.array([-(half - ms.touch_force_n / k_x), 0.0, pitch])
+        k_x = spec.vehicle.gains.K_y[comps.index("x")]
+        y_touch = y_at(-(half - ms.touch_force_n / k_x), 0.0)
         t_s = t_a + ms.grasp_move_s + ms.touch_hold_s
         grasp_moves = [(t_a, t_a + ms.grasp_move_s, y_touch), (t_s, t_s + ms.grasp_move_s, y_grasp)]
     y_path = path_through(y0, [(0.0, ms.approach_move_s, y_app), *grasp_moves,
                                (t_g, t_g + ms.lift_move_s, y_lift)])
 
-    def com_of(y_xz):
-        return np.array([y_xz[0] - d[0], 0.0, y_xz[1] - d[2]])
+    ix, iz = comps.index("x"), comps.index("z")
 
-    c_contact = com_of([-half, 0.0])
-    com_path = path_through(com_of(y0[:2]), [
-        (0.0, ms.approach_move_s, com_of(y_app[:2])),
+    def com_of(y):  # the CoM under the pad's x and z, on {t}'s x-z plane
+        return np.array([y[ix] - d[0], 0.0, y[iz] - d[2]])
+
+    c_contact = com_of(y_at(-half, 0.0))
+    com_path = path_through(com_of(y0), [
+        (0.0, ms.approach_move_s, com_of(y_app)),
         (t_a, t_a + ms.grasp_move_s, c_contact),
         (t_g, t_g + ms.lift_move_s, c_contact + np.array([0.0, 0.0, ms.lift_m])),
     ])

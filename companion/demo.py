@@ -2,8 +2,9 @@
 
     am-demo [--config configs/scenarios/two_am_comp_attitude.toml] [--sysid 4] [--duration 5]
 
-Starts the AM off its reference (5 cm, 0.13 rad, 0.15 rad joint error), flies the approach
-phase against pinocchio's forward dynamics and prints the errors of Theorem 1 over time.
+Starts the AM off its reference (5 cm, 0.13 rad, and every arm joint off by `joint_offsets`),
+flies the approach phase against pinocchio's forward dynamics and prints the errors of
+Theorem 1 over time.
 This is the process-free use of the public API: load, build, step.
 """
 from __future__ import annotations
@@ -23,6 +24,13 @@ from amcore.model import AmState, build_model
 from amcore.so3 import exp_so3
 
 
+def joint_offsets(n: int) -> np.ndarray:
+    """The start's joint error [rad]: 0.1 on each of the n joints with alternating sign, halved on
+    the last (the wrist, whose task inertia is the smallest); 0.1, -0.1, 0.05 for the paper's arm."""
+    d = np.array([0.1 * (-1) ** i for i in range(n)])
+    d[-1] *= 0.5
+    return d
+
 
 def main(argv: list[str] | None = None) -> int:
     ap = cliargs.ArgumentParser(prog="am-demo", description=" ".join(__doc__.split("\n\n")[0].split()),
@@ -41,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     params = ControllerParams.from_vehicle(spec.vehicle, mission.frame)
     x = mission.initial_state()
     x0 = AmState(x.p_WB + np.array([0.05, -0.03, 0.04]), x.R_WB @ exp_so3(np.array([0.05, -0.04, 0.1])),
-                 x.v_B, x.w_B, x.q + np.array([0.1, -0.1, 0.05]), x.qdot)
+                 x.v_B, x.w_B, x.q + joint_offsets(model.n), x.qdot)
     print(f"scenario {spec.name}, AM sysid {am.sysid}: m = {model.mass_kg:.3f} kg, n = {model.n} joints, "
           f"hover thrust {model.mass_kg * model.gravity_mps2:.2f} N")
     print(f"{'t [s]':>6} {'|r~_c| [mm]':>12} {'|e_R| [rad]':>12} {'|y~| max':>10} {'thrust [N]':>11} {'sigma_min':>10}")

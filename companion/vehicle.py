@@ -4,20 +4,29 @@
     am-vehicle configs/vehicles/am3dof.toml --squeeze 9 --load 0.5
     am-vehicle configs/vehicles/hex3dof.toml --team 2 --friction 0.5 --mass 2.5
 
-With --team, it also prints the team's payload (amcore.envelope: the squeeze the object needs
-at that friction against what each AM can push with its margins kept) and, with --mass,
-whether that object is inside the envelope or how many AMs it needs.
+It prints what tuning the vehicle needs (amcore.tuning): the whole AM's mass and inertia,
+PX4's torque units and the attitude-mode gains in effect beside the rule that derives them
+(amcore.px4_gains), sigma_min of Jbar_3 and the task inertia at the nominal pose; the loader's
+warnings (a task component the arm cannot move) on stderr. With --team, it also prints the
+team's payload (amcore.envelope: the squeeze the object needs at that friction against what
+each AM can push with its margins kept) and, with --mass, whether that object is inside the
+envelope or how many AMs it needs.
 
-Exit codes: 0 printed; 2 bad arguments or a bad vehicle file (named in the message).
+Exit codes: 0 the vehicle can do what was asked; 2 bad arguments or a bad vehicle file (named
+in the message); 4 it cannot (a hover the rotors cannot make, an arm joint beyond its torque
+limit, or an object outside the team's envelope), the reason printed.
 """
 from __future__ import annotations
 
 import argparse
 import math
 import sys
+import warnings
 from pathlib import Path
 
-from amcore.config import ConfigError, load_vehicle
+from amcore.config import ConfigError, ConfigWarning, load_vehicle
+
+CANNOT = 4  # the vehicle cannot do what it was asked
 
 
 def _nonneg(text: str) -> float:
@@ -51,26 +60,58 @@ def main(argv: list[str] | None = None) -> int:
     if args.mass is not None and not args.team:
         ap.error("--mass needs --team")
     try:
-        vehicle = load_vehicle(args.vehicle)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", ConfigWarning)
+            vehicle = load_vehicle(args.vehicle)
     except ConfigError as exc:
         print(f"am-vehicle: {exc}", file=sys.stderr)
         return 2
+    for w in caught:
+        print(f"am-vehicle: warning: {w.message}", file=sys.stderr)
     from amcore.authority import report_lines, vehicle_authority  # pinocchio: after the arguments are checked
+    from amcore.model import build_model
+    from amcore.tuning import nominal_tuning, tuning_lines
 
-    for line in report_lines(vehicle_authority(vehicle, args.squeeze, args.load)):
+    try:
+        va = vehicle_authority(vehicle, args.squeeze, args.load)
+    except ConfigError as exc:  # an arm the loaded hover's model does not fit (amcore.authority)
+        print(f"am-vehicle: {exc}", file=sys.stderr)
+        return 2
+    for line in report_lines(va):
         print(line)
+    for line in tuning_lines(vehicle, nominal_tuning(vehicle, build_model(vehicle))):
+        print(line)
+    cannot = [f"the {label}: {why}" for label, op in (("hover", va.hover), ("loaded hover", va.loaded))
+              if op is not None for why in _infeasible(op)]
     if args.team:
         from amcore.envelope import Envelope, verdict_line
 
         env = Envelope(vehicle)
-        m = env.payload_kg(args.team, args.friction, args.friction_margin)
+        try:
+            m = env.payload_kg(args.team, args.friction, args.friction_margin)
+        except ConfigError as exc:
+            print(f"am-vehicle: {exc}", file=sys.stderr)
+            return 2
         mg = env.margins
         print(f"team of {args.team} at friction {args.friction:g} (margin {args.friction_margin:g}) holds up to "
               f"{m:.2f} kg (rotors within {mg.thrust_fraction_max:.0%}, {mg.yaw_reserve_nm:g} N m of yaw and {mg.pitch_reserve_nm:g} N m of pitch left, "
               f"arm joints within {mg.joint_fraction_max:.0%})")
         if args.mass is not None:
             print(verdict_line(env, args.mass, args.team, args.friction, args.friction_margin))
+            if not env.fit(args.mass, args.team, args.friction, args.friction_margin).holds:
+                cannot.append(f"a {args.mass:g} kg object is outside the envelope of a team of {args.team}")
+    if cannot:
+        print(f"am-vehicle: NOT FEASIBLE: {'; '.join(cannot)}", file=sys.stderr)
+        return CANNOT
     return 0
+
+
+def _infeasible(op) -> list[str]:
+    """Why an operating point (amcore.authority) cannot be flown; empty if it can."""
+    out = [] if op.feasible else ["the rotors cannot make it"]
+    if max(op.joint_fractions) > 1.0:
+        out.append(f"an arm joint needs {max(op.joint_fractions):.0%} of its torque limit")
+    return out
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -16,9 +16,11 @@ stable for any vehicle the scenario flies, not fast.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
+import pinocchio as pin
 
 from amcore.model import AmModel, AmState, generalized_gravity
 from amcore.so3 import Rz, vee
@@ -30,11 +32,31 @@ class FailsafeGains:
     k_d: float = 6.4  # velocity damping per kg [N s/m/kg]
     k_R: float = 6.0  # attitude stiffness [N m/rad]
     k_w: float = 0.6  # attitude damping [N m s/rad]
-    d_q: tuple[float, ...] = (1.0, 0.4, 0.1)  # joint damping [N m s/rad]; no stiffness: compliant arm
+    d_q: tuple[float, ...] = ()  # joint damping [N m s/rad]; no stiffness: compliant arm; empty: joint_damping(model)
     hold_s: float = 5.0
     descent_mps: float = 0.3
     touchdown_gap_m: float = 0.15
     touchdown_s: float = 0.5
+
+
+# The derived damping's time constant [s]: each limp joint's speed decays in this time on its own
+# inertia at the nominal pose. 13.5 ms is what the paper arm's shoulder was flown with (1.0 N m s/rad
+# on M_qq,11 = 0.0135 kg m^2; am3dof.toml keeps its tuned values for all three joints).
+JOINT_DAMPING_TAU_S = 0.0135
+
+
+def joint_damping(model: AmModel) -> tuple[float, ...]:
+    """The failsafe's joint damping [N m s/rad]: the vehicle's [safety].failsafe_joint_damping, or
+    d_q,i = M_qq,ii(q_nominal) / JOINT_DAMPING_TAU_S with M_qq the arm's joint-space inertia
+    (pinocchio's CRBA, base level)."""
+    v = model.vehicle
+    if v.safety.failsafe_joint_damping:
+        return tuple(v.safety.failsafe_joint_damping)
+    pm = model.pin_model
+    q = pin.neutral(pm)
+    q[7:] = v.q_nominal_rad
+    M = pin.crba(pm, pm.createData(), q)
+    return tuple(float(M[6 + i, 6 + i]) / JOINT_DAMPING_TAU_S for i in range(model.n))
 
 
 @dataclass(frozen=True)
@@ -50,6 +72,8 @@ class Failsafe:
 
     def __init__(self, model: AmModel, x0: AmState, t0_s: float, gains: FailsafeGains = FailsafeGains()) -> None:
         n = model.n
+        if not gains.d_q:
+            gains = dataclasses.replace(gains, d_q=joint_damping(model))
         if len(gains.d_q) != n:
             raise ValueError(f"failsafe joint gains need {n} entries")
         self.model, self.g = model, gains

@@ -78,7 +78,7 @@ from amlink.endpoint import Endpoint
 from . import scene
 from .bullet import pb
 from .core import LAND_NOW, SitlCore, initial_state, truth_every
-from .failsafe import Failsafe, FailsafeGains
+from .failsafe import Failsafe, FailsafeGains, joint_damping
 from .flight_controller import FlightController
 from .object_mocap import measure_object
 from .px4 import commander as cm
@@ -102,7 +102,7 @@ class HoldJoints:
     torque 4.1 N m: ~19 N m/rad), D = simulator.failsafe's joint damping d_q (N m s/rad).
     The ServoBus interface: open, close, poll, joint_torques_nm, observe."""
 
-    def __init__(self, q0_rad, torque_max_nm, d_q=FailsafeGains().d_q, k_q: float = HOLD_JOINTS_K_NM_PER_RAD) -> None:
+    def __init__(self, q0_rad, torque_max_nm, d_q, k_q: float = HOLD_JOINTS_K_NM_PER_RAD) -> None:
         self.q0 = np.array(q0_rad, dtype=float)
         n = self.q0.shape[0]
         if len(d_q) != n or len(torque_max_nm) != n:
@@ -317,7 +317,7 @@ class FreeRun:
             raise ValueError(f"{len(arms)} arms for {n} vehicles (one per [[am]], in order)")
         q0 = start_joints(spec, self.model)
         self.arms = dict(zip(self.sysids, arms)) if arms is not None else {
-            s: HoldJoints(q0[s], v.joint_torque_max_nm) for s in self.sysids}
+            s: HoldJoints(q0[s], v.joint_torque_max_nm, joint_damping(self.model)) for s in self.sysids}
         if wrist_sensors is not None and len(wrist_sensors) != n:
             raise ValueError(f"{len(wrist_sensors)} wrist sensors for {n} vehicles (one per [[am]], in order)")
         # each vehicle's wrist F/T server (simulator.netft: publish(t, wrench_E), poll(t)), and the

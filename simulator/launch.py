@@ -13,7 +13,8 @@ keys/ (mode 0700): link.key, gcs.key (the GCS signing passphrase, new every run 
 --gcs-key-file gives one to keep) and telemetry*.key (the recorder keeps only what the run's
 simulator and companions sealed, telemetry.auth). Exit code:
 0 when every process ended cleanly and the mission succeeded (simulator.verdict), 4 when
-the mission failed, 2 bad configuration, 1 when a process failed, 130 when am-run was
+the mission failed, 2 bad configuration (found by am-run, or by the simulator: then its own
+message is printed), 1 when a process failed, 130 when am-run was
 interrupted (SIGINT, as Ctrl-C sends it, or SIGTERM). An interrupt reaches the simulator
 whether the terminal sent it to every process or it went to am-run alone: the simulator
 ends the run as it does on its own interrupt (its outcome.json says so, the companions are
@@ -263,6 +264,7 @@ def main(argv: list[str] | None = None) -> int:
     procs: dict[str, subprocess.Popen] = {}
     logs = []
     interrupted = None
+    refused = False
     # a bar on a terminal only, as the simulator's own default: redirected output gets the summary lines
     bar = SimBar(spec.duration_s if a.duration is None else a.duration, disabled=a.no_progress or not sys.stderr.isatty())
     if a.realtime:
@@ -287,14 +289,25 @@ def main(argv: list[str] | None = None) -> int:
         log = open(run_dir / "simulator.log", "w")
         logs.append(log)
         sim_tele = tele_args + (["--telemetry-key-file", tele_keys["simulator"]] if tele_keys else [])
-        sim = procs["simulator"] = subprocess.Popen(sim_cmd + sim_tele, stdout=subprocess.PIPE, stderr=log, env=env, text=True)
+        # its events come on their own pipe: whatever a library prints on stdout or stderr goes to the log
+        ev_read, ev_write = os.pipe()
+        try:
+            sim = procs["simulator"] = subprocess.Popen(sim_cmd + sim_tele + ["--events-fd", str(ev_write)],
+                                                        stdout=log, stderr=subprocess.STDOUT, env=env,
+                                                        pass_fds=(ev_write,))
+        finally:
+            os.close(ev_write)
+        events = os.fdopen(ev_read, "r")
+        logs.append(events)
         bind = None
         deadline = time.monotonic() + a.startup_timeout
         while bind is None:
-            line = sim.stdout.readline() if _readable(sim.stdout, deadline) else ""
-            if not line:
-                raise RuntimeError(f"the simulator did not start (exit {sim.poll()}); see {run_dir / 'simulator.log'}")
-            ev = json.loads(line)
+            ev = _next_event(events, deadline)
+            if ev is None:
+                code = _exit_code(sim, time.monotonic() + 5.0)
+                if code == REFUSED:
+                    raise _Refused(_simulator_errors(run_dir / "simulator.log"))
+                raise RuntimeError(f"the simulator did not start (exit {code}); see {run_dir / 'simulator.log'}")
             if ev.get("event") == "ready" and a.realtime:
                 bind = ev
                 if ev.get("gcs"):
@@ -322,7 +335,7 @@ def main(argv: list[str] | None = None) -> int:
                                          "--connect-timeout", str(a.startup_timeout)] + tlog + tele_args
                 + (["--telemetry-key-file", tele_keys[f"am{am.sysid}"]] if tele_keys else []),
                 stdout=clog, stderr=subprocess.STDOUT, env=env)
-        failed = _follow(sim, procs, bar, started=a.realtime)
+        failed = _follow(sim, events, procs, bar, started=a.realtime)
         if a.realtime:  # the run is over when the simulator ends it: its vehicles are gone, not silent
             for name, p in procs.items():
                 if name.startswith("companion") and p.poll() is None:
@@ -333,6 +346,10 @@ def main(argv: list[str] | None = None) -> int:
         bar.close()
         print(f"am-run: interrupted by {interrupted}; ending the run", file=sys.stderr)
         _pass_on(procs, interrupted)
+    except _Refused as exc:  # its configuration: the simulator's own words, and the config error's exit code
+        print(f"am-run: the simulator refused the scenario:\n{exc}", file=sys.stderr)
+        refused = True
+        failed = ["start-up"]
     except RuntimeError as exc:
         print(f"am-run: error: {exc}", file=sys.stderr)
         failed = ["start-up"]
@@ -361,6 +378,8 @@ def main(argv: list[str] | None = None) -> int:
     if signals.late:  # during the review
         print(f"am-run: interrupted by {signals.late} (logs in {run_dir})", file=sys.stderr)
         return INTERRUPTED
+    if refused:
+        return REFUSED
     if failed:
         print(f"am-run: FAILED: {', '.join(failed)} (logs in {run_dir})", file=sys.stderr)
         return 1
@@ -458,7 +477,49 @@ def _readable(stream, deadline: float) -> bool:
     return bool(select.select([stream], [], [], max(0.0, deadline - time.monotonic()))[0])
 
 
-def _follow(sim: subprocess.Popen, procs: dict[str, subprocess.Popen], bar: SimBar, started: bool = False) -> list[str]:
+REFUSED = 2  # the simulator's exit code for a configuration it refuses, and am-run's then
+
+
+class _Refused(Exception):
+    """The simulator exited REFUSED before it was ready; the message is its error lines."""
+
+
+def _next_event(events, deadline: float) -> dict | None:
+    """The next event line from the simulator's events pipe before `deadline`; None at its end
+    or on time-out. A line that is not a JSON object is skipped (only the simulator writes here)."""
+    while _readable(events, deadline):
+        line = events.readline()
+        if not line:
+            return None
+        try:
+            ev = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        if isinstance(ev, dict):
+            return ev
+    return None
+
+
+def _exit_code(proc: subprocess.Popen, deadline: float) -> int | None:
+    try:
+        return proc.wait(max(0.0, deadline - time.monotonic()))
+    except subprocess.TimeoutExpired:
+        return None
+
+
+def _simulator_errors(log_path: Path) -> str:
+    """The simulator's own error lines in its log (all of its last lines if none is marked)."""
+    try:
+        lines = log_path.read_text(errors="replace").splitlines()
+    except OSError:
+        return f"(no log at {log_path})"
+    mark = "simulator: error"  # a library's unterminated output may precede it on its line
+    errors = [ln[ln.index(mark):] for ln in lines if mark in ln]
+    return "\n".join(errors or lines[-5:])
+
+
+def _follow(sim: subprocess.Popen, events, procs: dict[str, subprocess.Popen], bar: SimBar,
+            started: bool = False) -> list[str]:
     """Show progress until the simulator exits. A process that fails before the run starts
     stops everything (the simulator would only wait for it); once the run is under way, a
     companion that dies is reported and its vehicle flies on under the flight controller's
@@ -466,12 +527,15 @@ def _follow(sim: subprocess.Popen, procs: dict[str, subprocess.Popen], bar: SimB
     stops a run."""
     reported, failed = set(), []  # (free-running: under way from the start; the simulator waits for nobody)
     while True:
-        if _readable(sim.stdout, time.monotonic() + 0.2):
-            line = sim.stdout.readline()
+        if _readable(events, time.monotonic() + 0.2):
+            line = events.readline()
             if not line:
                 sim.wait()
                 return failed
-            ev = json.loads(line)
+            try:
+                ev = json.loads(line)
+            except json.JSONDecodeError:
+                continue
             if ev.get("event") == "progress":
                 started = True
                 bar.show(ev["t"], ev["rtf"])
@@ -523,6 +587,8 @@ def _print_summary(run_dir: Path, spec, procs) -> None:
     if not path.is_file():
         return
     o = json.loads(path.read_text())
+    if "object" not in o:  # the world never came up (a refused configuration): nothing flew
+        return
     obj = o["object"]
     rtf = o.get("real_time_factor") or 0.0
     print(f"\n{spec.name}: {o['status']}; {o['sim_time_s']:.2f} s simulated, {rtf:.2f}x real time", file=sys.stderr)

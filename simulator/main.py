@@ -17,7 +17,10 @@ PX4 SITL does. The run folder gets outcome.json (the physical outcome from groun
 simulator.outcome, and the mission verdict, simulator.verdict) and gcs.tlog. Exit codes: 0
 run complete and its mission a success (or not failed so far, when --duration cut the
 mission short), 4 the mission failed (the verdict names the criterion and when), 2 bad
-configuration, 1 link failure (a missing or silent companion, named), 130 interrupted.
+configuration (the loader's, or a URDF PyBullet cannot load), 1 link failure (a missing or
+silent companion, named), 130 interrupted. With --progress jsonl its events (ready,
+progress, done) are JSON lines on stdout, or on the inherited descriptor --events-fd names
+(am-run's: nothing but the events is written there).
 
     simulator --realtime [--speed F] [--onboard ENDPOINT]... [--duration S]
 
@@ -32,11 +35,11 @@ ends when the mission clock (first OFFBOARD engage + amcore.mission.TAKEOFF_S) r
 from __future__ import annotations
 
 import json
+import os
 import signal
 import sys
 import time
 from pathlib import Path
-
 
 from amcore import cliargs, preflight
 from amcore.config import DEFAULT_SCENARIO, ConfigError, check_duration, load_scenario, scenario_id
@@ -59,6 +62,7 @@ from .freerun import FreeRun, endpoints_for
 from .px4.port import PortError
 from .gcs import GcsSession, snapshot_every
 from .gcs_link import GcsLink
+from .bullet import pb
 from .progress import SimBar
 from .verdict import MISSION_FAILED
 
@@ -73,6 +77,11 @@ class _BindError(Exception):
     pass
 
 
+class _Refused(Exception):
+    """The physics engine refuses what the loader let through (the vehicle's URDF): a
+    configuration error, exit 2."""
+
+
 def _on_signal(signum, _frame):
     """The first SIGINT or SIGTERM ends the run; later ones are ignored, so that the run's end
     (the outcome, the companions told, the log's last samples) is not cut short by a second
@@ -82,8 +91,26 @@ def _on_signal(signum, _frame):
     raise _Stop(signal.Signals(signum).name)
 
 
+_EVENTS = {"stream": None}  # where --progress jsonl's events go: --events-fd, else stdout
+
+
+def emit_event(**kw) -> None:
+    """One event, a JSON line, on the events channel (--events-fd N: that descriptor, which am-run
+    reads; nothing a library prints on stdout or stderr reaches it; else stdout)."""
+    stream = _EVENTS["stream"] or sys.stdout
+    stream.write(json.dumps(kw) + "\n")
+    stream.flush()
+
+
+def open_events(fd: int | None) -> None:
+    """Send the events to descriptor `fd` (None: stdout)."""
+    if fd is not None:
+        _EVENTS["stream"] = os.fdopen(fd, "w", buffering=1, closefd=False)
+
+
 class Progress:
-    """Progress to stderr as a bar (`simulator.progress`) or to stdout as JSON lines (for am-run)."""
+    """Progress to stderr as a bar (`simulator.progress`) or as JSON-line events (for am-run,
+    `emit_event`)."""
 
     def __init__(self, mode: str, duration_s: float) -> None:
         self.mode, self.duration = mode, duration_s
@@ -93,7 +120,7 @@ class Progress:
 
     def event(self, **kw) -> None:
         if self.mode == "jsonl":
-            print(json.dumps(kw), flush=True)
+            emit_event(**kw)
 
     def update(self, t: float, force: bool = False) -> None:
         now = time.perf_counter()
@@ -147,6 +174,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="signing master key (64 hex digits); overrides [link].key_file of the scenario")
     ap.add_argument("--progress", choices=("bar", "jsonl", "none"), default=None,
                     help="progress display (default: bar on a terminal, else none)")
+    ap.add_argument("--events-fd", type=cliargs.number(3, 65535, integer=True), default=None, metavar="FD",
+                    help="with --progress jsonl: write the events (ready, progress, done) to this inherited file "
+                         "descriptor instead of stdout, so that nothing else printed can mix with them (am-run)")
     ap.add_argument("--realtime", action="store_true",
                     help="free-running: physics paced to the wall clock, each vehicle played as PX4 SITL on its "
                          "onboard MAVLink port (simulator.freerun); any PX4 offboard program flies it")
@@ -164,6 +194,10 @@ def main(argv: list[str] | None = None) -> int:
                          "udpin:HOST:PORT")
     add_zenoh_arguments(ap, role="publisher")
     a = ap.parse_args(argv)
+    try:
+        open_events(a.events_fd)
+    except OSError as exc:
+        return cliargs.fail("simulator", f"--events-fd {a.events_fd}: {exc.strerror or exc}")
     if a.speed is not None:
         a.realtime = True
     if a.onboard and not a.realtime:
@@ -267,7 +301,10 @@ def main(argv: list[str] | None = None) -> int:
         if jit.compiled:
             print(f"simulator: compiled the simulator's kernels in {jit.seconds:.1f} s (once per machine: cached "
                   f"in {jitcache.cache_dir()})", file=sys.stderr, flush=True)
-        core.connect()
+        try:
+            core.connect()
+        except pb.error as exc:  # PyBullet's own refusal of a file: the user's to fix
+            raise _Refused(f"{spec.vehicle.urdf}: PyBullet cannot load the scenario's bodies: {exc}") from None
         try:
             server.open()
         except OSError as exc:
@@ -344,6 +381,9 @@ def main(argv: list[str] | None = None) -> int:
         told = status
     except _BindError as exc:
         status, code, told = str(exc), 1, str(exc)
+        print(f"simulator: error: {exc}", file=sys.stderr)
+    except _Refused as exc:
+        status, code, told = str(exc), 2, str(exc)
         print(f"simulator: error: {exc}", file=sys.stderr)
     except LinkError as exc:
         status, code, told = f"link failure: {exc}", 1, str(exc)
@@ -446,7 +486,7 @@ def _main_freerun(a, spec, gcs_key: bytes | None, onboard_key: bytes | None = No
         sim_tele.start(0.0)
         result = run.run(a.duration)
         if a.progress == "jsonl":  # before the ports close: am-run ends the companions as the run ends
-            print(json.dumps({"event": "end", "status": result["status"]}), flush=True)
+            emit_event(event="end", status=result["status"])
         status = result["status"]
         if status.startswith("no vehicle"):
             code = 1
@@ -521,12 +561,11 @@ def progress_ready(a, spec, run, arms, wrists, mocap) -> None:
     """The ready event (--progress jsonl, for am-run): every endpoint a companion reaches."""
     if a.progress != "jsonl":
         return
-    print(json.dumps({"event": "ready", "realtime": True, "speed": run.speed, "scenario": spec.name,
-                      "sysids": run.sysids, "onboard": [p.describe() for p in run.ports],
-                      "gcs": [p.describe() for p in run.gcs_ports],
-                      "arms": [f"tcp:{x.address[0]}:{x.address[1]}" for x in arms],
-                      "ft": [f"udp:{x.address[0]}:{x.address[1]}" for x in wrists],
-                      "mocap": None if mocap is None else f"udp:{mocap.address[0]}:{mocap.address[1]}"}), flush=True)
+    emit_event(event="ready", realtime=True, speed=run.speed, scenario=spec.name, sysids=run.sysids,
+               onboard=[p.describe() for p in run.ports], gcs=[p.describe() for p in run.gcs_ports],
+               arms=[f"tcp:{x.address[0]}:{x.address[1]}" for x in arms],
+               ft=[f"udp:{x.address[0]}:{x.address[1]}" for x in wrists],
+               mocap=None if mocap is None else f"udp:{mocap.address[0]}:{mocap.address[1]}")
 
 
 def _told(first: dict) -> str:

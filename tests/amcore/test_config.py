@@ -279,7 +279,7 @@ def test_am_vehicle_prints_a_teams_payload_and_the_team_an_object_needs(capsys):
     from companion.vehicle import main
 
     hexa = str(ROOT / "configs" / "vehicles" / "hex3dof.toml")
-    assert main([hexa, "--team", "2", "--friction", "0.5", "--mass", "2.5"]) == 0
+    assert main([hexa, "--team", "2", "--friction", "0.5", "--mass", "2.5"]) == 4  # outside the envelope: cannot
     out = capsys.readouterr().out.splitlines()
     assert out[-2].startswith("team of 2 at friction 0.5 (margin 1.2) holds up to ")
     assert out[-1].startswith("2.5 kg at friction 0.5 (margin 1.2) needs 29.4 N per pad from 2 AMs")

@@ -61,3 +61,52 @@ def test_land_descends_and_turns_the_motors_off(spec, model):
         assert am.p_WB[2] < 0.3  # down on the ground, not fallen from height: see the speed check
     zs = np.array([[d[s][0].p_WB[2] for s in d] for _, d in log])
     assert np.all(np.diff(zs, axis=0) > -0.8 * 0.1 * 1.5)  # never faster than 1.5x the commanded descent: no drop
+
+
+def test_the_failsafe_takes_its_joint_damping_from_the_vehicle():
+    """[safety].failsafe_joint_damping when the file gives it (am3dof), else M_qq,ii(q_nominal) /
+    13.5 ms, one per joint (am4dof: the rule gives its shoulder about the 1.0 N m s/rad am3dof
+    was tuned with)."""
+    from pathlib import Path
+
+    import pinocchio as pin
+
+    from amcore.config import load_scenario
+    from amcore.model import build_model
+    from simulator.failsafe import JOINT_DAMPING_TAU_S, joint_damping
+
+    root = Path(__file__).resolve().parents[2] / "configs" / "scenarios"
+    paper = build_model(load_scenario(root / "two_am_comp.toml").vehicle)
+    assert joint_damping(paper) == (1.0, 0.4, 0.1)
+    wrist = build_model(load_scenario(root / "two_am_comp_4dof.toml").vehicle)
+    d = joint_damping(wrist)
+    pm = wrist.pin_model
+    q = pin.neutral(pm)
+    q[7:] = wrist.vehicle.q_nominal_rad
+    M = pin.crba(pm, pm.createData(), q)
+    assert len(d) == 4 and all(x > 0.0 for x in d)
+    np.testing.assert_allclose(d, np.diag(M)[6:] / JOINT_DAMPING_TAU_S, rtol=1e-12)
+    assert abs(d[0] - 1.0) < 0.02
+
+
+def test_hold_then_land_on_the_four_joint_arm():
+    """am4dof (a wrist roll: its damping derived): the failsafe holds a disturbed AM level and
+    lands it, the arm limp and still."""
+    from pathlib import Path
+
+    from amcore.config import load_scenario
+    from amcore.model import build_model
+
+    spec = load_scenario(Path(__file__).resolve().parents[2] / "configs" / "scenarios" / "two_am_comp_4dof.toml")
+    model = build_model(spec.vehicle)
+
+    def disturbed(x):
+        return type(x)(x.p_WB, x.R_WB @ exp_so3(np.array([0.2, -0.1, 0.1])), x.v_B, np.array([0.5, -0.3, 0.2]),
+                       x.q, x.qdot + np.array([0.5, -0.5, 0.5, 2.0]))
+    log, gt = _fly(spec, model, disturbed, 5.0, FailsafeGains(hold_s=1.5, descent_mps=0.8))
+    held = [d for t, d in log if 1.0 <= t < 1.5]
+    for s, (x, mode) in held[-1].items():
+        assert mode == "hold" and abs(x.R_WB[2, 2] - 1.0) < 1e-3 and np.linalg.norm(x.qdot) < 0.05
+    assert [m for _, d in log for (_, m) in d.values()][-1] == "landed"
+    for s, am in gt.ams.items():
+        assert am.p_WB[2] < 0.3

@@ -70,7 +70,7 @@ def test_ground_start_rests_the_lowest_shape_on_the_ground(spec):
 
 
 def test_hold_joints_is_a_limited_pd():
-    arm = HoldJoints([1.0, -2.0, 1.0], [6.0, 4.0, 2.0])
+    arm = HoldJoints([1.0, -2.0, 1.0], [6.0, 4.0, 2.0], (1.0, 0.4, 0.1))
     assert np.allclose(arm.joint_torques_nm([1.0, -2.0, 1.0], [0.0, 0.0, 0.0]), 0.0)
     tau = arm.joint_torques_nm([0.9, -2.0, 2.0], [0.0, 1.0, 0.0])
     assert np.allclose(tau, [20.0 * 0.1, -0.4, -2.0])  # the last one at its 2 N m limit
