@@ -14,13 +14,17 @@ from __future__ import annotations
 
 import time
 
-from amlink.offboard_handshake import (MSG_ATTITUDE_QUATERNION, MSG_ATTITUDE_TARGET, MSG_ODOMETRY, OffboardHandshake,
-                                      control_streams)
+from amlink.offboard_handshake import (MSG_ATTITUDE, MSG_ATTITUDE_QUATERNION, MSG_ATTITUDE_TARGET, MSG_HIGHRES_IMU,
+                                       MSG_LOCAL_POSITION_NED, MSG_ODOMETRY, STOP, OffboardHandshake,
+                                       control_streams)
 from amlink.px4link import Px4Link
 
 TYPE_MASK = 0
 ENGAGE_TIMEOUT_S = 6.0
 ANCHOR_MAX_NS = 50_000_000  # fc_time_us anchors on a sample at most this old [ns]
+
+
+UNREAD_STREAMS = (MSG_ATTITUDE, MSG_HIGHRES_IMU, MSG_LOCAL_POSITION_NED)  # stopped by the handshake
 
 
 class Autopilot:
@@ -32,8 +36,12 @@ class Autopilot:
     @classmethod
     def for_rate(cls, link: Px4Link, control_rate_hz: float, type_mask: int = TYPE_MASK) -> "Autopilot":
         """The handshake asking for the control streams at the loop's rate (the autopilot caps them)."""
-        # what the loop reads: not HIGHRES_IMU (the law takes the autopilot's estimate, not its raw IMU)
+        # what the loop reads: not HIGHRES_IMU (the law takes the autopilot's estimate, not its raw IMU).
+        # The onboard defaults it does not read are stopped: ATTITUDE (100 Hz), HIGHRES_IMU (50 Hz) and
+        # LOCAL_POSITION_NED (30 Hz) would cost every step their wake-ups and decoding, and on a serial
+        # link their bandwidth (ODOMETRY at 250 Hz alone is ~61 kB/s of a 921600-baud UART's ~92 kB/s)
         streams = control_streams(control_rate_hz, (MSG_ODOMETRY, MSG_ATTITUDE_QUATERNION, MSG_ATTITUDE_TARGET))
+        streams += [(m, STOP) for m in UNREAD_STREAMS]
         # the engage shows in a HEARTBEAT, 1 Hz of the autopilot's clock: 6 s leaves room for a SITL at 0.5x
         return cls(link, OffboardHandshake(streams, engage_timeout_s=ENGAGE_TIMEOUT_S), type_mask)
 
