@@ -40,6 +40,7 @@ sys.path.append(str(ROOT))
 sys.path.append(str(ROOT / "benchmarks"))
 
 from bench_core import run as lockstep_run, spec_for  # noqa: E402
+from cputime import wrap  # noqa: E402
 
 from amlink.endpoint import parse_endpoint  # noqa: E402
 from simulator.freerun import FreeRun  # noqa: E402
@@ -129,20 +130,6 @@ def _free_udp_ports(n: int) -> list[int]:
     return ports
 
 
-def _timed(obj, name: str, acc: dict, key: str) -> None:
-    """Wrap obj.name so its thread CPU time adds to acc[key]."""
-    f = getattr(obj, name)
-    clock = time.thread_time_ns
-
-    def timed(*a, **kw):
-        t0 = clock()
-        try:
-            return f(*a, **kw)
-        finally:
-            acc[key] += clock() - t0
-    setattr(obj, name, timed)
-
-
 def freerun(n: int, duration_s: float, speed: float) -> dict:
     spec = spec_for("attitude", n, devices=True)
     ports = _free_udp_ports(n)
@@ -151,15 +138,15 @@ def freerun(n: int, duration_s: float, speed: float) -> dict:
                   wrist_sensors=wrists, mocap=mocap)
     run.open()
     acc = dict.fromkeys(("physics", "vehicles", "ports", "devices"), 0)
-    _timed(run.core.world, "step", acc, "physics")
-    _timed(run, "_vehicle", acc, "vehicles")
+    wrap(run.core.world, "step", acc, "physics")
+    wrap(run, "_vehicle", acc, "vehicles")
     for p in run.ports:
-        _timed(p, "poll", acc, "ports")
-        _timed(p, "publish", acc, "ports")
-    _timed(run, "_poll_arms", acc, "devices")
+        wrap(p, "poll", acc, "ports")
+        wrap(p, "publish", acc, "ports")
+    wrap(run, "_poll_arms", acc, "devices")
     for d in run._devices():
-        _timed(d, "poll", acc, "devices")
-        _timed(d, "publish", acc, "devices")
+        wrap(d, "poll", acc, "devices")
+        wrap(d, "publish", acc, "devices")
     hover = run.model.mass_kg * spec.vehicle.gravity_mps2 / run.thrust_scale_n
     cfg = {"sysids": run.sysids, "ports": ports, "buses": [a.address[1] for a in arms], "n_joints": spec.vehicle.n_joints,
            "hover": hover, "seconds": duration_s / speed + 5.0}

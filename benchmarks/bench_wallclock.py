@@ -29,30 +29,16 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.append(str(ROOT))
+sys.path.append(str(ROOT / "benchmarks"))
 
 from companion import wallclock, wallrun  # noqa: E402
 from companion.devices import arm as arm_mod, netft  # noqa: E402
 from companion.pilot import Pilot  # noqa: E402
 from amlink import px4link  # noqa: E402
+from cputime import wrap  # noqa: E402
 
 INSTANCE = 80
 PARTS = ("law", "inputs", "bus", "link", "ft")
-
-
-def _wrap(cls, name: str, acc: dict, key: str, nested: dict | None = None) -> None:
-    f = getattr(cls, name)
-    clock = time.thread_time_ns
-
-    def timed(*a, **kw):
-        t0 = clock()
-        try:
-            return f(*a, **kw)
-        finally:
-            d = clock() - t0
-            acc[key] += d
-            if nested is not None:  # a part inside another: taken out of the outer one
-                nested[key] += d
-    setattr(cls, name, timed)
 
 
 def main(argv=None) -> None:
@@ -65,18 +51,18 @@ def main(argv=None) -> None:
     start = 6.0
     acc = dict.fromkeys(PARTS, 0)
     inner = dict.fromkeys(PARTS, 0)  # the bus's time inside _inputs
-    _wrap(Pilot, "command", acc, "law")
+    wrap(Pilot, "command", acc, "law")
     for name in ("request", "write_torques"):
-        _wrap(arm_mod.ArmClient, name, acc, "bus")
+        wrap(arm_mod.ArmClient, name, acc, "bus")
     for name in ("collect", "read"):  # (called inside _inputs)
-        _wrap(arm_mod.ArmClient, name, acc, "bus", inner)
+        wrap(arm_mod.ArmClient, name, acc, "bus", inner)
     loop_cpu = {"loop": 0}
-    _wrap(wallclock.WallClockLoop, "run", loop_cpu, "loop")
-    _wrap(wallclock.WallClockLoop, "_inputs", acc, "inputs")
+    wrap(wallclock.WallClockLoop, "run", loop_cpu, "loop")
+    wrap(wallclock.WallClockLoop, "_inputs", acc, "inputs")
     for name in ("poll", "send_attitude_target", "send_heartbeat"):
-        _wrap(px4link.Px4Link, name, acc, "link")
+        wrap(px4link.Px4Link, name, acc, "link")
     for name in ("poll", "read"):
-        _wrap(netft.NetFtClient, name, acc, "ft")
+        wrap(netft.NetFtClient, name, acc, "ft")
     with tempfile.TemporaryDirectory() as tmp:
         run_dir = Path(tmp)
         sim = subprocess.Popen([sys.executable, "-m", "simulator", "--realtime", "--speed", str(a.speed), "--config",
