@@ -188,8 +188,9 @@ def test_a_mode_switched_away_is_yielded_to_a_stalled_companion_fails_over_and_a
     assert a5b["ended"] == "stopped by SIGTERM" or a5b["ended"].startswith("the autopilot has been silent"), \
         log5b[-2000:]
     assert "joining the mission" in log5b and a5b["engaged_fc_s"] > fs[0]["t_s"]
-    engages = [e for e in ev5 if e.get("event") == "mode" and e.get("to") == "OFFBOARD" and e.get("armed")]
-    assert len(engages) >= 2 and engages[-1]["t_s"] > fs[0]["t_s"], ev5
+    # (the first engage comes before arming; a resumed companion's stray setpoint may add one in between)
+    engages = [e for e in ev5 if e.get("event") == "mode" and e.get("to") == "OFFBOARD"]
+    assert len(engages) >= 2 and engages[-1]["t_s"] > fs[0]["t_s"] and engages[-1]["armed"], ev5
     assert o["vehicles"]["5"]["mode_at_end"] == "OFFBOARD" and o["vehicles"]["5"]["armed_at_end"]
     # the verdict names the first failover (vehicle 0's HOLD) and counts the others
     v = o["verdict"]
