@@ -506,6 +506,9 @@ class MissionSpec:
     object_pose: str = "config"
 
 
+LINK_JOINT_PATHS = ("servo_bus", "link")  # [link].joints
+
+
 @dataclass(frozen=True)
 class LinkSpec:
     """[link] table: the simulator <-> companion link (see `amlink.signing`, `amlink.impair`).
@@ -515,6 +518,11 @@ class LinkSpec:
       the scenario); else a PUBLIC development key (integrity and anti-replay only).
     - loss, delay_s, jitter_s, reorder, duplicate: impairment of the companion -> flight
       controller path in simulation time (`amlink.impair.LinkImpairment`); all 0 = ideal.
+    - joints: the path the arm's joint torques take. "servo_bus" (default): the companion's
+      own servo bus, as on an AM whose arm hangs off the companion (Dynamixel over USB), so
+      the impairment above delays and drops only the flight controller's setpoints; "link":
+      the joint torques travel with them and share their loss and delay (an arm driven
+      through the flight controller).
     """
 
     signing: bool = True
@@ -524,6 +532,7 @@ class LinkSpec:
     jitter_s: float = 0.0
     reorder: float = 0.0
     duplicate: float = 0.0
+    joints: str = "servo_bus"
 
     def key_path(self, scenario_path: Path | None) -> Path | None:
         if not self.key_file:
@@ -1403,7 +1412,7 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
         am_link = None
         if "link" in t:
             own = t["link"]
-            allowed = {"loss", "delay_s", "jitter_s", "reorder", "duplicate"}
+            allowed = {"loss", "delay_s", "jitter_s", "reorder", "duplicate", "joints"}
             if not isinstance(own, dict) or set(own) - allowed:
                 raise ConfigError(f"{w}.link: expected a table of {', '.join(sorted(allowed))}")
             am_link = _link_spec({**link_table, **own}, f"{w}.link")
@@ -1628,6 +1637,8 @@ def _link_spec(table: dict, where: str) -> LinkSpec:
     for key in ("delay_s", "jitter_s"):
         if getattr(link, key) < 0.0:
             raise ConfigError(f"{where}.{key}: must be >= 0, got {getattr(link, key)!r}")
+    if link.joints not in LINK_JOINT_PATHS:
+        raise ConfigError(f"{where}.joints: must be one of {', '.join(map(repr, LINK_JOINT_PATHS))}, got {link.joints!r}")
     return link
 
 

@@ -154,6 +154,10 @@ class SitlCore:
                                   slip_from_s=ms.grasp_end_s)
         self.fc_links = {am.sysid: ImpairedLink(LinkImpairment.for_scenario(
             dataclasses.replace(spec, link=am.link or spec.link)), stream=am.sysid) for am in spec.ams}
+        # [link].joints = "servo_bus": the arm's torques reach its servos on the companion's own bus,
+        # untouched by the link's impairment: the last ones computed act (zero-order hold)
+        self._joints_on_bus = {am.sysid for am in spec.ams if (am.link or spec.link).joints == "servo_bus"}
+        self._bus_torques: dict[int, np.ndarray] = {}
         self.sensors = {} if spec.sensors.exact else {
             am.sysid: SensorModel(spec.sensors, self.model.n, spec.control_dt_s, spec.seed, am.sysid) for am in spec.ams}
         # [devices]: each AM's sensors and estimator, sampled every physics step (made at the first)
@@ -361,10 +365,13 @@ class SitlCore:
             setpoint = None
         if setpoint is not None:
             self.rejected_in_a_row[s] = 0
+            if s in self._joints_on_bus:
+                self._bus_torques[s] = setpoint.tau_q_nm
         link = self.fc_links[s]
         sp = link.step(k, setpoint)
         if sp is None:  # nothing has reached this flight controller yet: keep the last command
             return
+        tau_q = self._bus_torques.get(s, sp.tau_q_nm)  # the servo bus's (or, [link].joints = "link", the link's)
         if link.silent_for(k) > self.offboard_loss_steps:
             self._offboard_lost(s, link.silent_for(k))
             return
@@ -374,10 +381,10 @@ class SitlCore:
                                                                              self.devices[s].autopilot_rate.tolist())
             out = self.fcs[s].step(quat, w_B, sp.attitude)
             axes = out.allocation.saturated_axes
-            joints = self.world.apply_rotors(s, out.rotor_thrusts_n, sp.tau_q_nm, axes)
+            joints = self.world.apply_rotors(s, out.rotor_thrusts_n, tau_q, axes)
             rotors_saturated, joints_saturated = out.allocation.saturated, joints.saturated
         else:
-            rep = self.world.apply(s, sp.thrust_n, sp.tau_B_nm, sp.tau_q_nm)
+            rep = self.world.apply(s, sp.thrust_n, sp.tau_B_nm, tau_q)
             axes = rep.mix.allocation.saturated_axes
             rotors_saturated, joints_saturated = rep.mix.saturated, rep.joints.saturated
         if rotors_saturated or joints_saturated:

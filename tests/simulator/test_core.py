@@ -15,8 +15,7 @@ from ..conftest import SCENARIO
 def test_per_am_link_override(tmp_path):
     text = SCENARIO.read_text().replace('vehicle = "../vehicles/am3dof.toml"',
                                         f'vehicle = "{SCENARIO.parent.parent / "vehicles" / "am3dof.toml"}"')
-    # 2 ms: within what the grasp tolerates; with 10 ms am4 turns unstable within 0.1 s and its
-    # implausible setpoints are refused before they reach the link
+    # 2 ms: within what the grasp tolerates even with the arm's torques on the link
     text = text.replace("sysid = 4\n", "sysid = 4\nlink = { delay_s = 0.002, loss = 0.3 }\n")
     p = tmp_path / "s.toml"
     p.write_text(text + "\n[link]\njitter_s = 0.0\n")
@@ -350,3 +349,44 @@ def test_ground_truth_is_sampled_every_10_ms_of_simulated_time_at_any_rate(rate_
     assert truth_every(rate_hz) == round(TRUTH_PERIOD_S * rate_hz)
     assert len(times) == 20 and times[0] == 0.0
     assert all(b - a == pytest.approx(TRUTH_PERIOD_S) for a, b in zip(times, times[1:]))
+
+
+@pytest.mark.parametrize("joints", ["servo_bus", "link"])
+def test_the_link_s_delay_reaches_the_joint_torques_only_when_they_travel_on_the_link(joints):
+    """[link].joints: on the companion's servo bus (the default) the arm's torques act at the
+    step they were computed, while the flight controller flies the setpoint of 10 ms before;
+    on the link they come as late as the rest of their setpoint."""
+    import numpy as np
+
+    from amlink.types import TorqueSetpoint
+    from simulator.core import SitlCore
+
+    base = load_scenario(SCENARIO)
+    assert base.link.joints == "servo_bus"
+    spec = dataclasses.replace(base, link=dataclasses.replace(base.link, delay_s=0.010, joints=joints))
+    assert spec.control_every == 1 and spec.rate_hz == 1000.0
+    core = SitlCore(spec)
+    core.connect()
+    applied = []  # (k, thrust, tau_q[2]) of AM 4
+    real_apply = core.world.apply
+
+    def recording_apply(s, thrust_n, tau_B_nm, tau_q_nm, *a, **kw):
+        if s == 4:
+            applied.append((k, thrust_n, float(np.asarray(tau_q_nm)[2])))
+        return real_apply(s, thrust_n, tau_B_nm, tau_q_nm, *a, **kw)
+
+    core.world.apply = recording_apply
+    try:
+        m = core.model
+        for k in range(40):
+            core.frames(k)
+            sps = {s: TorqueSetpoint(step=k, thrust_n=m.mass_kg * m.gravity_mps2 + 1e-3 * k, tau_B_nm=[0.0, 0.0, 0.0],
+                                     tau_q_nm=[0.0, 0.0, 1e-4 * k]) for s in core.sysids}
+            core.actuate(k, sps)
+            core.step()
+    finally:
+        core.close()
+    assert [a[0] for a in applied] == list(range(10, 40))  # nothing reaches the flight controller for 10 ms
+    for k, thrust, tau_q in applied:
+        assert thrust == pytest.approx(m.mass_kg * m.gravity_mps2 + 1e-3 * (k - 10))
+        assert tau_q == pytest.approx(1e-4 * (k if joints == "servo_bus" else k - 10))

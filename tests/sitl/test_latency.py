@@ -1,7 +1,9 @@
-"""A link that delays every setpoint ([link].delay_s, jitter_s) and the arm law's prediction over
-it ([options].offboard_latency_s, amcore.offboard): in the in-process SITL, the law on the
-measured error sends implausible joint torques within half a second, the law on the predicted
-error none (docs/flight_controller.md, "Latency")."""
+"""A link that delays every setpoint, the arm's torques with them ([link].delay_s, jitter_s,
+joints = "link"), and the arm law's prediction over it ([options].offboard_latency_s,
+amcore.offboard): in the in-process SITL, the law on the measured error sends implausible joint
+torques within half a second, the law on the predicted error none (docs/flight_controller.md,
+"Latency"). With the arm on its own servo bus (the default) the same delay reaches the
+autopilot's setpoints only, and the grasp holds without a prediction."""
 from __future__ import annotations
 
 import pytest
@@ -18,7 +20,7 @@ def _delayed(tmp_path, latency_s: float):
     text = (SCENARIOS / "two_am_comp_attitude.toml").read_text().replace(
         'vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{SCENARIOS.parent / "vehicles" / "am3dof.toml"}"')
     path = tmp_path / f"delayed-{latency_s}.toml"
-    path.write_text(text + f"\n[link]\ndelay_s = 0.005\njitter_s = 0.002\n\n[options]\noffboard_latency_s = {latency_s}\n")
+    path.write_text(text + f"\n[link]\ndelay_s = 0.005\njitter_s = 0.002\njoints = 'link'\n\n[options]\noffboard_latency_s = {latency_s}\n")
     return load_scenario(path)
 
 
