@@ -74,6 +74,7 @@ from amcore.mission import TAKEOFF_S
 from amcore.model import AmState, build_model
 from amlink import px4
 from amlink.endpoint import Endpoint
+from amlink.impair import LinkImpairment
 
 from . import scene
 from .bullet import pb
@@ -300,9 +301,18 @@ class FreeRun:
         hover = self.model.mass_kg * v.gravity_mps2 / self.thrust_scale_n
         p = params or cm.CommanderParams(COM_OF_LOSS_T=v.flight_controller.COM_OF_LOSS_T, MPC_THR_HOVER=hover)
         self.commanders = {s: cm.Commander(p) for s in self.sysids}
+        # [link]: each onboard port impairs what reaches its autopilot (simulator.px4.port, Impairment);
+        # the arm's torques go on its own bus here, so an impairment of them ("link") cannot be flown
+        links = [am.link or spec.link for am in spec.ams]
+        for am, ln in zip(spec.ams, links):
+            if ln.joints == "link" and not LinkImpairment.for_scenario(dataclasses.replace(spec, link=ln)).is_ideal:
+                raise ValueError(f"{spec.name}: [link].joints = \"link\" (sysid {am.sysid}): free-running, the arm's "
+                                 f"torques go on its own servo bus, never through the autopilot's link; use "
+                                 f"\"servo_bus\" (the default)")
         self.ports = [Px4Port(i, s, self.commanders[s], endpoints[i], signing_key=onboard_key,
-                              require_signed=onboard_key is not None, rotor_count=v.rotors.count, log=log)
-                      for i, s in enumerate(self.sysids)]
+                              require_signed=onboard_key is not None, rotor_count=v.rotors.count, log=log,
+                              impairment=LinkImpairment.for_scenario(dataclasses.replace(spec, link=ln)))
+                      for i, (s, ln) in enumerate(zip(self.sysids, links))]
         if gcs is not None and len(gcs) != n:
             raise ValueError(f"{len(gcs)} GCS endpoints for {n} vehicles (one per [[am]], in order)")
         # each vehicle's GCS instance (simulator.px4.port, role "gcs"), HEARTBEATs forwarded both ways
@@ -716,6 +726,7 @@ class FreeRun:
                 "offboard_engaged_s": c.offboard_engaged_s, "armed_at_end": c.armed,
                 "mode_at_end": cm.nav_name(c.nav_state), "landed_at_end": c.landed, "failsafe_at_end": c.failsafe,
                 "events": c.events, "link": dataclasses.asdict(port.stats),
+                "impairment": None if port.impaired is None else vars(port.impaired.stats),
                 "start_p_WB_m": self.starts[port.sysid].p_WB.tolist()}
         for g in self.gcs_ports:
             vehicles[str(g.sysid)]["gcs"] = {

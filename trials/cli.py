@@ -3,6 +3,7 @@ mission verdict, on a local process pool or a Dask distributed cluster.
 
     am-trials SCENARIO --trials N --seed S --out DIR [--workers K] [--scheduler ADDRESS]
               [--randomize FILE] [--controller NAME ...] [--set TABLE.KEY=VALUE ...] [--screening]
+              [--realtime [--speed F] [--instance N]]
 
 What varies: --randomize FILE's [randomize] table, else the scenario's own, else
 configs/randomize/default.toml (see trials/randomize.py). Trial i of seed S is the same
@@ -19,6 +20,10 @@ an option on the same trials; `--set devices.estimator.gyro_cutoff_hz=0` sets a 
 sweeps and, in attitude mode, half the physics rate in two substeps): faster, its verdicts
 measured against the scenario's own world in docs/trials.md; confirm the ones that matter
 without it.
+--realtime flies each trial free-running instead, through the processes `am-run --realtime`
+starts (trials/freerun.py): one at a time, paced to the wall clock at --speed, its run folder in
+DIR/runs/trial-NNNN and its timing (the real-time factor flown, deadline misses, the companions'
+periods and latency) in its row; such a trial is not bit-reproducible, its draws are.
 Every --controller is checked against the scenario, and the --scheduler address parsed and
 connected to, before anything is drawn or written to DIR.
 Exit codes: 0 the campaign ran (whatever its success rate), 2 bad arguments or
@@ -102,6 +107,26 @@ def _seed(text: str) -> int:
     return v
 
 
+def _speed(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (v > 0.0 and v <= 10.0):
+        raise argparse.ArgumentTypeError(f"must be a real-time factor in (0, 10], got {text}")
+    return v
+
+
+def _instance(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if not 0 <= v <= 200:
+        raise argparse.ArgumentTypeError(f"must be in 0..200 (PX4 SITL's ports shift by it), got {v}")
+    return v
+
+
 def _scheduler(text: str) -> str:
     try:
         return parse_scheduler_address(text)
@@ -130,6 +155,13 @@ def parse_args(argv):
     ap.add_argument("--screening", action="store_true",
                     help="fly the trials in the screening world (fewer solver sweeps; in attitude mode half the "
                          "physics rate in two substeps): faster; --set applies after it")
+    ap.add_argument("--realtime", action="store_true",
+                    help="fly each trial free-running, as `am-run --realtime` does (each vehicle a PX4 SITL, each "
+                         "companion on its own clock), one at a time; its timing in the row (trials/freerun.py)")
+    ap.add_argument("--speed", type=_speed, default=None, metavar="F",
+                    help="free-running real-time factor (implies --realtime; default: am-run's, 0.5)")
+    ap.add_argument("--instance", type=_instance, default=0, metavar="N",
+                    help="free-running: the vehicles are PX4 SITL instances N, N+1, ... (am-run --instance)")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar (there is one on a terminal only)")
     ap.add_argument("--no-plots", action="store_true", help="no plots")
     return ap.parse_args(argv)
@@ -256,6 +288,16 @@ def main(argv: list[str] | None = None) -> int:
 def _main(argv: list[str] | None) -> int:
     a = parse_args(argv)
     scenario = a.scenario.resolve()
+    if a.speed is not None:
+        a.realtime = True
+    if a.realtime:  # one trial at a time on this machine's cores, in the scenario's own world
+        for flag, given in (("--scheduler", a.scheduler is not None), ("--workers", a.workers not in (None, 1)),
+                            ("--screening", a.screening)):
+            if given:
+                return cliargs.fail("am-trials", f"{flag} is not for --realtime: free-running trials fly one at a "
+                                                 f"time, paced to this machine's wall clock, in the scenario's world")
+    elif a.instance:
+        return cliargs.fail("am-trials", "--instance is for --realtime (the in-process trials open no ports)")
     try:
         load_scenario(scenario)
         if a.screening:  # before the user's --set, which may change what it set
@@ -268,6 +310,9 @@ def _main(argv: list[str] | None) -> int:
                 scenario_from_dict(base, scenario)
             except ConfigError as exc:
                 raise ConfigError(f"--set {' --set '.join(a.overrides)}: the scenario cannot take it: {exc}") from None
+        if a.realtime and scenario_from_dict(base, scenario).vehicle.flight_controller.mode != "attitude":
+            raise ConfigError(f"{scenario.name}: --realtime flies PX4's attitude setpoints: it needs "
+                              f"[flight_controller].mode = \"attitude\" (an *_attitude.toml scenario)")
         rand, rand_source = _randomization(a, base, scenario)
         controllers = a.controller or [None]
         if a.controller:
@@ -282,6 +327,11 @@ def _main(argv: list[str] | None) -> int:
             return cliargs.fail("am-trials", f"{out / 'trials.csv'} exists: choose another --out")
     workers = a.workers or os.cpu_count() or 1
     where = f"Dask at {a.scheduler}" if a.scheduler else f"{workers} local worker(s)"
+    if a.realtime:
+        from simulator.launch import REALTIME_SPEED
+
+        a.speed = a.speed or REALTIME_SPEED
+        where = f"free-running at {a.speed:g}x real time, one trial at a time (PX4 SITL instances {a.instance}+)"
     summaries = []
     try:
         with contextlib.ExitStack() as stack:
@@ -341,8 +391,13 @@ def _campaign(a, tasks: list[TrialTask], out: Path, controller: str | None,
             partial.flush()
             on_result(row)
 
-        with pool as ex:
-            rows = run_all(tasks, ex, keep)
+        if a.realtime:
+            from . import freerun
+
+            rows = freerun.run_serial(tasks, a.speed, a.instance, out / "runs", keep)
+        else:
+            with pool as ex:
+                rows = run_all(tasks, ex, keep)
     wall = time.perf_counter() - t0
     bar.close()
     errors = [r for r in rows if r["verdict"] == "error"]
@@ -360,6 +415,10 @@ def _campaign(a, tasks: list[TrialTask], out: Path, controller: str | None,
                                executor=where, wall_s=wall, trials_per_minute=60.0 * len(rows) / wall,
                                # a refused trial costs the pre-flight check alone: the rate of flights is apart
                                flown_per_minute=60.0 * len(flown) / wall)
+    if a.realtime:
+        from . import freerun
+
+        summary["timing"] = freerun.timing_summary(rows)
     report.write_summary(summary, out / "summary.json")
     if not a.no_plots:  # success against the draws of the trials that flew (refused ones did not)
         report.plot_parameters(flown, params, out / "plots", f"{a.scenario.stem}, {summary['controller']}, "
@@ -368,6 +427,15 @@ def _campaign(a, tasks: list[TrialTask], out: Path, controller: str | None,
     if summary["refused"]:
         per_min += f" ({summary['flown_per_minute']:.1f} flown/min)"
     print(f"am-trials: {report.summary_line(summary)}; {per_min}; in {out}", file=sys.stderr)
+    tm = summary.get("timing")
+    if tm:
+        def ms(v):
+            return "-" if v is None else f"{v:.1f} ms"
+        print(f"am-trials: free-running timing: real-time factor flown median {tm['real_time_factor_median']:.2f}x "
+              f"(lowest {tm['real_time_factor_min']:.2f}x); physics steps late at most "
+              f"{100 * (tm['physics_miss_share_max'] or 0):.0f} %; companion period p99 at most "
+              f"{ms(tm['companion_period_p99_ms_max'])}, deadline misses at most {tm['companion_deadline_misses_max']}, "
+              f"sample to setpoint p99 at most {ms(tm['sample_to_setpoint_p99_ms_max'])}", file=sys.stderr)
     return summary
 
 

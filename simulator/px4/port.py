@@ -46,6 +46,15 @@ call; the rest waits in the socket buffer (1 MiB; the kernel drops beyond that, 
 a flood of setpoints the newest one per physics step is flown; the others are counted as
 superseded.
 
+Impairment. `impairment` (the scenario's [link] table, `amlink.impair.LinkImpairment`: loss,
+delay_s, jitter_s, reorder, duplicate) impairs what reaches the autopilot, as a lossy or slow
+network between the companion and PX4 would: every datagram read is lost, delayed, held back or
+doubled by `amlink.impair.ImpairedChannel`'s model and draws (the stream of this vehicle's
+sysid), in whole physics steps of the autopilot's clock, and handled when it arrives. So the
+delay is in simulated time (at --speed 0.5, 10 ms is 20 ms of wall time), and a datagram that
+arrives after its step's first poll is handled one step later than the model says (at most
+1 ms at 1 kHz). Commands and TIMESYNC are impaired with the setpoints: a handshake retries.
+
 Commands (mavlink_receiver.cpp:478-679). A command not addressed to (sysid, 1 or 0) gets
 COMMAND_ACK FAILED (:484-495; REQUEST_AUTOPILOT_CAPABILITIES and REQUEST_PROTOCOL_VERSION may be
 broadcast, :368-388). The receiver answers itself: REQUEST_AUTOPILOT_CAPABILITIES,
@@ -92,6 +101,7 @@ from dataclasses import dataclass, field
 
 from amlink import px4
 from amlink.endpoint import UDP_IN, UDP_OUT, Endpoint, EndpointError, parse_endpoint
+from amlink.impair import ImpairedChannel, LinkImpairment
 from amlink.wire import Decoder, Encoder, StreamFramer, mav
 
 from . import commander as cm
@@ -227,7 +237,7 @@ class Px4Port:
     def __init__(self, index: int, sysid: int, commander: cm.Commander, endpoint: Endpoint | None = None, *,
                  role: str = "onboard", signing_key: bytes | None = None, require_signed: bool = False,
                  local_port: int | None = None,
-                 rotor_count: int = 4, max_datagrams: int = 64,
+                 rotor_count: int = 4, max_datagrams: int = 64, impairment: LinkImpairment | None = None,
                  unix_time_us: Callable[[], int] | None = None, log: Callable[[str], None] = lambda _m: None) -> None:
         if role not in ROLE_RATES_HZ:
             raise ValueError(f"role {role!r}: one of {', '.join(ROLE_RATES_HZ)}")
@@ -262,6 +272,12 @@ class Px4Port:
         self._setpoints_since_step = 0
         self._next_due = -math.inf  # the earliest time a stream is due (publish's fast path)
         self._warned: set[str] = set()
+        # the scenario's [link] impairment of what reaches the autopilot (Impairment): None, or ideal, for none
+        self.impaired: ImpairedChannel | None = None
+        if impairment is not None and not impairment.is_ideal:
+            self.impaired = ImpairedChannel(impairment, impairment.rng(sysid))
+        self._rate_hz = impairment.rate_hz if impairment is not None else 1000.0
+        self._delivered_step = -1  # the last physics step whose impaired arrivals were handled
 
     # -- life cycle ---------------------------------------------------------------------
     def open(self) -> None:
@@ -327,29 +343,47 @@ class Px4Port:
                 continue
             n += 1
             self.stats.datagrams_rx += 1
-            if self.partner is None:
-                if self._remote is None or _is_loopback(self._remote[0]) or now_s - self._opened_s > PARTNER_WAIT_S:
-                    self.partner = addr[:2]
-                    self.log(f"vehicle {self.index} (sysid {self.sysid}): partner {addr[0]}:{addr[1]}")
-                else:
-                    self.stats.before_partner += 1
-                    continue
-            if len(data) > MAX_DATAGRAM:
-                self.stats.oversized += 1
-                data = data[:MAX_DATAGRAM]
-            before = self._framer.junk_bytes
-            frames = self._framer.feed(data)
-            self.stats.junk_bytes += self._framer.junk_bytes - before
-            if frames:
-                for msgid, sysid, compid, body in self._decoder.feed_records(frames):
-                    try:
-                        self._handle(now_s, msgid, sysid, compid, body)
-                    except Exception as exc:  # a message that trips a bug must not end the run: say it once
-                        self.stats.handler_errors += 1
-                        self._warn_once(f"handler {msgid}",
-                                        f"message id {msgid} from ({sysid}, {compid}) not handled: "
-                                        f"{type(exc).__name__}: {exc}; counted, further not printed")
+            if self.impaired is not None:
+                self.impaired.send(self._step(now_s), (data, addr))
+                continue
+            self._datagram(now_s, data, addr)
+        if self.impaired is not None:
+            k = self._step(now_s)
+            if k > self._delivered_step:
+                self._delivered_step = k
+                for _sent, (data, addr) in self.impaired.deliver(k):
+                    self._datagram(now_s, data, addr)
         return n
+
+    def _step(self, now_s: float) -> int:
+        """The physics step of autopilot time `now_s` (the impairment's time base)."""
+        return max(round(now_s * self._rate_hz), self._delivered_step)
+
+    def _datagram(self, now_s: float, data: bytes, addr: tuple) -> None:
+        """One datagram as PX4's receiver takes it: its sender latched as the partner (the first
+        one), cut to MAX_DATAGRAM, its frames parsed and handled."""
+        if self.partner is None:
+            if self._remote is None or _is_loopback(self._remote[0]) or now_s - self._opened_s > PARTNER_WAIT_S:
+                self.partner = addr[:2]
+                self.log(f"vehicle {self.index} (sysid {self.sysid}): partner {addr[0]}:{addr[1]}")
+            else:
+                self.stats.before_partner += 1
+                return
+        if len(data) > MAX_DATAGRAM:
+            self.stats.oversized += 1
+            data = data[:MAX_DATAGRAM]
+        before = self._framer.junk_bytes
+        frames = self._framer.feed(data)
+        self.stats.junk_bytes += self._framer.junk_bytes - before
+        if frames:
+            for msgid, sysid, compid, body in self._decoder.feed_records(frames):
+                try:
+                    self._handle(now_s, msgid, sysid, compid, body)
+                except Exception as exc:  # a message that trips a bug must not end the run: say it once
+                    self.stats.handler_errors += 1
+                    self._warn_once(f"handler {msgid}",
+                                    f"message id {msgid} from ({sysid}, {compid}) not handled: "
+                                    f"{type(exc).__name__}: {exc}; counted, further not printed")
 
     def _handle(self, now: float, msgid: int, sysid: int, compid: int, body) -> None:
         rx = self.stats.rx

@@ -184,3 +184,21 @@ def test_pacer_catches_up_at_most_max_behind_periods_then_moves_its_schedule():
     assert p.to_dict()["schedule_shifts"] == 1
     with pytest.raises(ValueError, match="max_behind_periods"):
         Pacer(lambda: 0, period, serve, max_behind_periods=-1)
+
+
+def test_each_onboard_port_carries_its_vehicle_s_link_impairment_and_the_arm_stays_off_it(spec):
+    """[link] (with an [[am]]'s own on top) impairs what reaches each autopilot; the arm's
+    torques go on its own bus free-running, so joints = "link" with an impairment is refused."""
+    import dataclasses
+
+    link = dataclasses.replace(spec.link, delay_s=0.010, jitter_s=0.002)
+    am1 = dataclasses.replace(spec.ams[1], link=dataclasses.replace(link, loss=0.1))
+    run = FreeRun(dataclasses.replace(spec, link=link, ams=(spec.ams[0], am1)),
+                  [parse_endpoint("udpin:127.0.0.1:0")] * 2)
+    p0, p1 = run.ports
+    assert (p0.impaired.impairment.delay_steps, p0.impaired.impairment.jitter_steps, p0.impaired.impairment.loss) == (10, 2, 0.0)
+    assert p1.impaired.impairment.loss == 0.1
+    assert FreeRun(spec, [parse_endpoint("udpin:127.0.0.1:0")] * 2).ports[0].impaired is None
+    with pytest.raises(ValueError, match=r'joints = "link" \(sysid 4\).*own servo bus'):
+        FreeRun(dataclasses.replace(spec, link=dataclasses.replace(link, joints="link")),
+                [parse_endpoint("udpin:127.0.0.1:0")] * 2)

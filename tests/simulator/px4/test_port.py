@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import socket
 import struct
+import time
 
 import pytest
 
@@ -280,3 +281,55 @@ def test_a_setpoint_flood_costs_a_bounded_poll(link):
     port.publish(0.0, REPORT)
     assert port.stats.superseded_setpoints == 199
     assert port.commander.target.thrust == pytest.approx(0.199)
+
+
+def _impaired_port(client: Client, **impairment) -> Px4Port:
+    from amlink.impair import LinkImpairment
+
+    port = Px4Port(0, SYSID, cm.Commander(), parse_endpoint(f"udpout:127.0.0.1:{client.port}"),
+                   impairment=LinkImpairment(rate_hz=1000.0, seed=3, **impairment))
+    port.open()
+    return port
+
+
+def test_a_delayed_link_hands_each_datagram_over_when_it_arrives():
+    """[link].delay_s = 10 ms: a setpoint read at t = 0 reaches the commander at 10 ms of the
+    autopilot's clock, however often the port is polled before."""
+    client = Client()
+    port = _impaired_port(client, delay_s=0.010)
+    try:
+        client.send(port, sat(target=(0, 0)))
+        for t in (0.0, 0.0, 0.004, 0.009):
+            port.poll(t)
+            assert port.stats.setpoints == 0
+        port.poll(0.010)
+        assert port.stats.setpoints == 1 and not port.commander.offboard_lost(0.010)
+        assert port.impaired.stats.delayed == port.impaired.stats.sent == 1
+    finally:
+        port.close()
+        client.close()
+
+
+def test_a_lossy_link_drops_its_share_of_datagrams_and_an_ideal_one_none():
+    """loss = 0.3 of 400 setpoints, one per physics step: about 120 lost (binomial, 4 sigma),
+    each reaching the commander when it was read; an ideal impairment builds no channel."""
+    client = Client()
+    port = _impaired_port(client, loss=0.3)
+    try:
+        for k in range(400):
+            client.send(port, sat(target=(0, 0)))
+            time_s = k * 1e-3
+            deadline = time.monotonic() + 0.5
+            while port.stats.datagrams_rx < k + 1 and time.monotonic() < deadline:
+                port.poll(time_s)
+            port.poll(time_s)
+        lost = port.impaired.stats.lost
+        assert abs(lost - 120) < 4 * math.sqrt(400 * 0.3 * 0.7)
+        assert port.stats.setpoints == 400 - lost and port.impaired.stats.delayed == 0
+    finally:
+        port.close()
+        client.close()
+    from amlink.impair import LinkImpairment
+
+    ideal = Px4Port(0, SYSID, cm.Commander(), impairment=LinkImpairment())
+    assert ideal.impaired is None
