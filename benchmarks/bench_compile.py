@@ -1,7 +1,7 @@
 """The first run's compile on a machine: wall and CPU time of each kernel group compiled on an
 empty numba cache, at LLVM optimization levels side by side (`amcore.jit`, NUMBA_OPT).
 
-    python benchmarks/bench_compile.py [--levels 1 3] [--rounds 2] [--scenario configs/scenarios/two_am_comp_attitude.toml]
+    python -m benchmarks.bench_compile [--levels 1 3] [--rounds 2] [--scenario configs/scenarios/two_am_comp_attitude.toml]
 
 Each measurement is a new Python process with an empty NUMBA_CACHE_DIR of its own and
 NUMBA_OPT set to the level (the cache does not record the level it was compiled at, so a

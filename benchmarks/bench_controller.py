@@ -1,7 +1,7 @@
 """Benchmark of one full controller step (pinocchio terms included): median and p95, where the
 time goes, and the ratio to the literal transcription of the paper timed in the same run.
 
-    python benchmarks/bench_controller.py [--iters 3000]
+    python -m benchmarks.bench_controller [--iters 3000]
 
 Targets (medians on the project's 2-core machines): controller step, pinocchio's terms
 included, <= 20 us (issue 26; issue 15's was 30 us, goal 15 us); against the literal
@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import time
 from pathlib import Path
 
@@ -45,14 +44,13 @@ from amcore.model import AmState, build_model, create_data, pin_configuration
 from amcore.so3 import R_to_quat_wxyz, exp_so3
 from amlink.types import SensorFrame
 from companion.adapter import setpoint_from_result, state_from_frame
+from tests.amcore.literal import controller_literal
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))  # tests/amcore/literal.py
-from tests.amcore.literal import controller_literal  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> dict[str, float]:
-    """Print the table; return its medians [us] (`benchmarks/bench_targets.py` reads them)."""
+    """Print the table; return its medians [us] (`benchmarks.bench_targets` reads them)."""
     ap = argparse.ArgumentParser()
     ap.add_argument("--iters", type=int, default=3000)
     a = ap.parse_args(argv)

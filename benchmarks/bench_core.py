@@ -3,7 +3,7 @@ driven as `simulator.main` drives it, with the MAVLink work of `amlink.server` f
 (frame and sign the sensor batch; verify and decode a signed answer) but no sockets and no
 companions: every AM answers each control step with the same hovering setpoint.
 
-    python benchmarks/bench_core.py [--n 2 10] [--duration 2] [--mode attitude torque] [--devices]
+    python -m benchmarks.bench_core [--n 2 10] [--duration 2] [--mode attitude torque] [--devices]
 
 Each part is timed with `time.perf_counter` around it inside the running loop (caches as a
 run leaves them, not back to back), summed over the run and divided by AMs x physics steps:
@@ -31,20 +31,18 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.append(str(ROOT))  # if not installed; PYTHONPATH wins (benchmarks/ab.py)
+from amcore.config import load_scenario
+from amlink import fastcodec, wire
+from amlink.types import AttitudeSetpoint, AttitudeTarget, TorqueSetpoint
+from amlink.udp import SIM_COMPID, SIM_SYSID
+from simulator.core import SitlCore
 
-from amcore.config import load_scenario  # noqa: E402
-from amlink import fastcodec, wire  # noqa: E402
-from amlink.types import AttitudeSetpoint, AttitudeTarget, TorqueSetpoint  # noqa: E402
-from amlink.udp import SIM_COMPID, SIM_SYSID  # noqa: E402
-from simulator.core import SitlCore  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 SCENARIOS = {"attitude": ROOT / "configs" / "scenarios" / "ten_am_attitude.toml",
              "torque": ROOT / "configs" / "scenarios" / "ten_am.toml"}

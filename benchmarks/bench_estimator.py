@@ -1,7 +1,7 @@
 """Benchmark of the flight controller's estimator (amcore.estimator) and of one AM's devices
 (simulator.devices): median and p95 per physics step.
 
-    python benchmarks/bench_estimator.py [--iters 20000]
+    python -m benchmarks.bench_estimator [--iters 20000]
 
 Target (issue 23): the estimator compiled like the law, at most 10 us per AM step. Rows:
 the compiled kernel alone (`estimator_step`, with and without a motion-capture pose that
@@ -13,19 +13,17 @@ Rows are timed in interleaved rounds so that a change in machine load hits them 
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 import tomllib
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.append(str(ROOT))  # if not installed; PYTHONPATH wins (benchmarks/ab.py)
+from amcore.config import devices_from_table
+from amcore.estimator import Estimator, estimator_step
+from simulator.devices import DeviceSuite
 
-from amcore.config import devices_from_table  # noqa: E402
-from amcore.estimator import Estimator, estimator_step  # noqa: E402
-from simulator.devices import DeviceSuite  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 DT, G = 0.001, 9.81
 VALUES = [0.1, 0.2, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.5, -1.0, 0.3, 0.0, 0.0, 0.0,

@@ -1,7 +1,7 @@
 """Benchmark of attitude mode's per-step cost: the emulated autopilot and what the simulator
 adds around it, per AM and physics step (median and p95), and the companion's extra work.
 
-    python benchmarks/bench_flight_controller.py [--iters 5000]
+    python -m benchmarks.bench_flight_controller [--iters 5000]
 
 Rows, each timed in interleaved rounds so that a change in machine load hits all alike:
 - the flight controller's loop (simulator.flight_controller.FlightController.step at 1 kHz,

@@ -2,7 +2,7 @@
 its CPU goes; beside it, the lockstep simulator's CPU per AM and physics step for the same N
 (`bench_core.py`'s measurement), in the same run.
 
-    python benchmarks/bench_freerun.py [--n 1 2 4 10] [--duration 10] [--speed 1.0]
+    python -m benchmarks.bench_freerun [--n 1 2 4 10] [--duration 10] [--speed 1.0]
 
 For each N: ten_am_attitude's object with N AMs (`bench_core.spec_for`, [devices] on), flown by
 `simulator.freerun.FreeRun` in this process with every device the free-running simulator
@@ -28,23 +28,20 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import socket
 import subprocess
 import sys
 import textwrap
 import time
 from pathlib import Path
 
+from amlink.endpoint import parse_endpoint
+from benchmarks.bench_core import run as lockstep_run, spec_for
+from benchmarks.cputime import wrap
+from simulator.freerun import FreeRun
+from simulator.main import freerun_devices
+from tests.ports import free_udp_ports
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.append(str(ROOT))
-sys.path.append(str(ROOT / "benchmarks"))
-
-from bench_core import run as lockstep_run, spec_for  # noqa: E402
-from cputime import wrap  # noqa: E402
-
-from amlink.endpoint import parse_endpoint  # noqa: E402
-from simulator.freerun import FreeRun  # noqa: E402
-from simulator.main import freerun_devices  # noqa: E402
 
 INSTANCE = 60  # device ports 7260+, 49212+, mocap 7460: apart from runs on the defaults
 
@@ -120,19 +117,9 @@ _CLIENT = textwrap.dedent('''
 ''')
 
 
-def _free_udp_ports(n: int) -> list[int]:
-    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(n)]
-    for s in socks:
-        s.bind(("127.0.0.1", 0))
-    ports = [s.getsockname()[1] for s in socks]
-    for s in socks:
-        s.close()
-    return ports
-
-
 def freerun(n: int, duration_s: float, speed: float) -> dict:
     spec = spec_for("attitude", n, devices=True)
-    ports = _free_udp_ports(n)
+    ports = free_udp_ports(n)
     arms, wrists, mocap = freerun_devices(spec, INSTANCE)
     run = FreeRun(spec, [parse_endpoint(f"udpout:127.0.0.1:{p}") for p in ports], speed=speed, arms=arms,
                   wrist_sensors=wrists, mocap=mocap)

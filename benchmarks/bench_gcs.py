@@ -1,6 +1,6 @@
 """What the GCS link costs: on the lockstep's main loop, on its own thread, and on a whole run.
 
-    python benchmarks/bench_gcs.py [--runs 3] [--duration 2]
+    python -m benchmarks.bench_gcs [--runs 3] [--duration 2]
 
 1. Main loop: `GcsSession.update` (snapshot, status changes, commands) per call and per
    step (it runs every `snapshot_every` steps), for the 2- and 10-AM scenarios.
@@ -21,15 +21,14 @@ import time
 from pathlib import Path
 from tempfile import TemporaryDirectory
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from amcore.config import load_scenario
+from amlink.codec import Encoder
+from simulator import gcs_messages
+from simulator.core import SitlCore
+from simulator.gcs import GcsSession, snapshot_every
+from simulator.gcs_link import GcsLink
 
-from amcore.config import load_scenario  # noqa: E402
-from amlink.codec import Encoder  # noqa: E402
-from simulator import gcs_messages  # noqa: E402
-from simulator.core import SitlCore  # noqa: E402
-from simulator.gcs import GcsSession, snapshot_every  # noqa: E402
-from simulator.gcs_link import GcsLink  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def main_loop_cost(scenario: str, calls: int = 2000) -> tuple[float, int]:

@@ -1,7 +1,7 @@
 """What compiling the simulator's hold step as a whole could save, at most: attitude mode with
 `[devices]`, the steps between control steps (three of every four at 250 Hz setpoints).
 
-    python benchmarks/bench_hold_ceiling.py [--n 2 10] [--steps 3000] [--rounds 3]
+    python -m benchmarks.bench_hold_ceiling [--n 2 10] [--steps 3000] [--rounds 3]
 
 A hold step does, per AM: read the base from PyBullet, run the devices and the estimator,
 hold the last setpoint (the link), run the emulated autopilot and its allocation, and set
@@ -28,24 +28,17 @@ same scenario (`bench_core.spec_for`: ten_am_attitude's object and quadrotor, N 
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.append(str(ROOT))  # if not installed; PYTHONPATH wins (benchmarks/ab.py)
-sys.path.append(str(ROOT / "benchmarks"))
-
-from bench_core import spec_for  # noqa: E402
-
-from amcore.allocation import _WEAK_EFFECTIVENESS, _YAW_MARGIN  # noqa: E402
-from amcore.estimator import estimator_update  # noqa: E402
-from amlink.types import AttitudeSetpoint, AttitudeTarget  # noqa: E402
-from simulator import device_kernels as dk  # noqa: E402
-from simulator.bullet import pb  # noqa: E402
-from simulator.core import SitlCore  # noqa: E402
+from amcore.allocation import _WEAK_EFFECTIVENESS, _YAW_MARGIN
+from amcore.estimator import estimator_update
+from amlink.types import AttitudeSetpoint, AttitudeTarget
+from benchmarks.bench_core import spec_for
+from simulator import device_kernels as dk
+from simulator.bullet import pb
+from simulator.core import SitlCore
 
 WARM_S = 3.0
 

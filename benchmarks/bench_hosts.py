@@ -2,7 +2,7 @@
 process, each AM's companion a thread of its group's process (a prototype for measuring, not
 a supported way to run the stack).
 
-    python benchmarks/bench_hosts.py [--n 10] [--per-process 1 5 10] [--duration 3] [--attitude] [--robust] [--devices]
+    python -m benchmarks.bench_hosts [--n 10] [--per-process 1 5 10] [--duration 3] [--attitude] [--robust] [--devices]
 
 Each AM keeps its own companion (`companion.main`, its own MAVLink link, signing key, pilot and
 telemetry session); only the process around it is shared: the first companion of a group
@@ -25,10 +25,6 @@ import tempfile
 import threading
 import time
 from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.append(str(ROOT))
-sys.path.append(str(ROOT / "benchmarks"))
 
 
 def _argv_for(argv: list[str], own: int, sysid: int) -> list[str]:
@@ -85,7 +81,7 @@ def measure(path: Path, per_process: int, duration: float, run_dir: Path, teleme
 
     def command(name: str) -> list[str]:  # K = 1: the companions' own console script, as shipped
         if name == "companion" and per_process > 1:
-            return [sys.executable, __file__, "--host", str(per_process), "--"]
+            return [sys.executable, "-m", "benchmarks.bench_hosts", "--host", str(per_process), "--"]
         return real(name)
     launch._command = command
     try:
@@ -112,7 +108,7 @@ def measure(path: Path, per_process: int, duration: float, run_dir: Path, teleme
 def main() -> None:
     if len(sys.argv) > 2 and sys.argv[1] == "--host":
         sys.exit(host(int(sys.argv[2]), sys.argv[sys.argv.index("--") + 1:]))
-    from bench_sitl import base_scenario, scenario_with
+    from benchmarks.bench_sitl import base_scenario, scenario_with
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--n", type=int, default=10)
     ap.add_argument("--per-process", type=int, nargs="+", default=[1, 5, 10])

@@ -1,7 +1,7 @@
 """Where a lockstep step's CPU goes in place: the whole SITL (`am-run`, telemetry on) with the
-simulator and every companion timed part by part (`benchmarks/inplace_parts.py`).
+simulator and every companion timed part by part (`benchmarks.inplace_parts`).
 
-    python benchmarks/bench_inplace.py [--n 2] [--duration 3] [--attitude] [--devices] [--actuation-delay D]
+    python -m benchmarks.bench_inplace [--n 2] [--duration 3] [--attitude] [--devices] [--actuation-delay D]
 
 Runs the scenario of `bench_sitl.py` (ten_am's object with N AMs, approach phase) through
 `am-run`'s own main, with the simulator and the companions started through
@@ -9,7 +9,7 @@ Runs the scenario of `bench_sitl.py` (ten_am's object with N AMs, approach phase
 90th percentile of one call's thread CPU time and its CPU per physics step (all calls of the
 run over its physics steps). A part's time in place is what it costs between the other
 processes on the same cores (caches and branch predictors cold), typically several times
-its cost back to back (`simulator/bench_world.py`, `bench_controller.py`).
+its cost back to back (`bench_world.py`, `bench_controller.py`).
 """
 from __future__ import annotations
 
@@ -20,13 +20,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.append(str(ROOT))
-sys.path.append(str(ROOT / "benchmarks"))
-
-from bench_sitl import ATTITUDE, BASE, scenario_with  # noqa: E402
-
-from amcore.config import load_scenario  # noqa: E402
+from amcore.config import load_scenario
+from benchmarks.bench_sitl import ATTITUDE, BASE, scenario_with
 
 
 def main() -> None:
@@ -47,7 +42,7 @@ def main() -> None:
 
         def command(name: str) -> list[str]:  # the simulator and the companions, timed by part
             if name in ("simulator", "companion"):
-                return [sys.executable, str(ROOT / "benchmarks" / "inplace_parts.py"), name,
+                return [sys.executable, "-m", "benchmarks.inplace_parts", name,
                         str(tmp / f"{name}-{next(count)}.json"), "--"]
             return real(name)
 

@@ -2,7 +2,7 @@
 numba's compiled code and its runtime (allocation, reference counts, dispatch), the C
 library's malloc and memcpy, PyBullet, pinocchio, the kernel.
 
-    python benchmarks/bench_perf.py [--what trial law sitl] [--duration S] [--window S] [--freq HZ]
+    python -m benchmarks.bench_perf [--what trial law sitl] [--duration S] [--window S] [--freq HZ]
 
 The timers of `bench_trial_step.py` and `bench_inplace.py` say which of the project's parts
 takes the time; this says what kind of work it is, inside all parts at once. Sampling
@@ -39,8 +39,6 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.append(str(ROOT))
-sys.path.append(str(ROOT / "benchmarks"))
 
 # (category, substrings of the shared object's file name), first match wins
 CATEGORIES = (
@@ -140,7 +138,7 @@ def _print_refcount_addresses() -> None:
 
 
 def _child_trial(duration: float) -> None:
-    from bench_trial_step import _trial_spec
+    from benchmarks.bench_trial_step import _trial_spec
 
     import simulator.inprocess as ip
     with tempfile.TemporaryDirectory() as tmp:
@@ -194,8 +192,8 @@ def _child_law(duration: float) -> None:
 
 
 def _run_child(what: str, duration: float, window: float, freq: int, top: int) -> None:
-    proc = subprocess.Popen([sys.executable, __file__, "--child", what, "--duration", str(duration)],
-                            stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen([sys.executable, "-m", "benchmarks.bench_perf", "--child", what, "--duration",
+                             str(duration)], stdout=subprocess.PIPE, text=True, cwd=ROOT)
     refcounts = None
     for line in proc.stdout:
         if line.startswith("refcounts"):
@@ -246,7 +244,7 @@ def _kind(pid: int) -> str:
 
 
 def _run_sitl(duration: float, window: float, freq: int, top: int, attach_after: float) -> None:
-    from bench_sitl import am_run_command, base_scenario, scenario_with
+    from benchmarks.bench_sitl import am_run_command, base_scenario, scenario_with
     with tempfile.TemporaryDirectory() as tmp:
         path = scenario_with(2, Path(tmp), base_scenario(attitude=True, robust=True), devices=True)
         run = subprocess.Popen(am_run_command(path, duration, Path(tmp) / "run"), stdout=subprocess.DEVNULL,

@@ -2,7 +2,7 @@
 velocity, position) and one SYNC WRITE (goal current) of 3 servos through dynamixel-sdk over
 TCP (companion.devices.arm.ArmClient against simulator.servo_bus.ServoBus).
 
-    python benchmarks/bench_servo_bus.py [--cycles 1000] [--servos 3]
+    python -m benchmarks.bench_servo_bus [--cycles 1000] [--servos 3]
 
 The bus runs in its own process (as the simulator does), served two ways:
 - "select": it wakes when bytes arrive (the latency floor of the protocol and the SDK);
@@ -16,15 +16,10 @@ import argparse
 import multiprocessing as mp
 import select
 import statistics
-import sys
 import time
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from companion.devices.arm import ArmClient  # noqa: E402
-from simulator.servo_bus import ServoBus  # noqa: E402
+from companion.devices.arm import ArmClient
+from simulator.servo_bus import ServoBus
 
 
 def serve(n: int, mode: str, ready, stop) -> None:

@@ -2,7 +2,7 @@
 MAVLink over loopback UDP, lockstep) for N = 2, 5, 10, 20 AMs, next to bare PyBullet stepping
 of the same world measured in the same run, and how the processes' CPU and memory grow with N.
 
-    python benchmarks/bench_sitl.py [--duration 3] [--n 2 5 10 20] [--attitude] [--robust] [--devices]
+    python -m benchmarks.bench_sitl [--duration 3] [--n 2 5 10 20] [--attitude] [--robust] [--devices]
                                     [--actuation-delay D] [--physics-rate HZ] [--substeps 2] [--sitl-only]
 
 --attitude runs ten_am_attitude (SET_ATTITUDE_TARGET at 250 Hz, the emulated autopilot at
@@ -72,14 +72,13 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.append(str(ROOT))  # if not installed; PYTHONPATH wins (benchmarks/ab.py)
+from amcore.config import load_scenario
+from amcore.mission import am_mission
+from amcore.model import build_model
+from simulator.verdict import MISSION_FAILED
+from simulator.world import World
 
-from amcore.config import load_scenario  # noqa: E402
-from amcore.mission import am_mission  # noqa: E402
-from amcore.model import build_model  # noqa: E402
-from simulator.verdict import MISSION_FAILED  # noqa: E402
-from simulator.world import World  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 BASE = ROOT / "configs" / "scenarios" / "ten_am.toml"
 ATTITUDE = ROOT / "configs" / "scenarios" / "ten_am_attitude.toml"
@@ -223,8 +222,9 @@ def echo_rtf(path: Path, duration: float, run_dir: Path, spin_us: float = 0.0) -
                 raise RuntimeError(f"the simulator did not start (exit {sim.wait()})")
             event = json.loads(line)
             bind = event.get("connect") if event.get("event") == "ready" else None
-        echoes = [subprocess.Popen([sys.executable, str(ROOT / "benchmarks" / "echo_companion.py"), "--sysid",
-                                    str(am.sysid), "--sim", bind, "--config", str(path), "--spin-us", str(spin_us)], stderr=subprocess.DEVNULL)
+        echoes = [subprocess.Popen([sys.executable, "-m", "benchmarks.echo_companion", "--sysid", str(am.sysid),
+                                    "--sim", bind, "--config", str(path), "--spin-us", str(spin_us)],
+                                   stderr=subprocess.DEVNULL, cwd=ROOT)
                   for am in spec.ams]
         sim.stdout.read()
         if sim.wait(timeout=600) not in (0, MISSION_FAILED):  # echoes fly no mission: its verdict fails

@@ -1,23 +1,23 @@
 """The speed issue's six targets (issue 26), measured one after another in one invocation.
 
-    python benchmarks/bench_targets.py [--rounds 1] [--duration 3] [--trials 8] [--iters 3000]
+    python -m benchmarks.bench_targets [--rounds 1] [--duration 3] [--trials 8] [--iters 3000]
 
 Each figure comes from the benchmark that docs/benchmarks.md cites for it, called here as a
 function, each measurement alone on the machine (one after another, never side by side):
 - ten AMs and two AMs in attitude mode: `bench_sitl` (am-run of `--duration` simulated seconds
   of the approach, telemetry on; ten_am_robust_attitude's hexarotor and law options, the
-  default randomization's devices and the estimator on), as `bench_sitl.py --n 2 10 --attitude
-  --robust --devices --sitl-only`;
+  default randomization's devices and the estimator on), as `python -m benchmarks.bench_sitl
+  --n 2 10 --attitude --robust --devices --sitl-only`;
 - two AMs in torque mode at 1 kHz: `bench_sitl` on its torque-mode scenario (the paper's law,
-  no devices), as `bench_sitl.py --n 2 --sitl-only`;
+  no devices), as `python -m benchmarks.bench_sitl --n 2 --sitl-only`;
 - the simulator's lockstep work per AM and physics step: `bench_core.run` with two AMs and the
-  devices on, in attitude mode and in torque mode, as `bench_core.py --n 2 --devices`;
+  devices on, in attitude mode and in torque mode, as `python -m benchmarks.bench_core --n 2 --devices`;
 - campaign throughput: `bench_trials.throughput`, `--trials` draws of the default
   randomization (seed 1) of two_am_robust_attitude on two workers, flown trials a minute, as
-  `bench_trials.py --scenario configs/scenarios/two_am_robust_attitude.toml --trials 8
-  --workers 2`;
+  `python -m benchmarks.bench_trials --scenario configs/scenarios/two_am_robust_attitude.toml
+  --trials 8 --workers 2`;
 - the controller step, pinocchio's terms included: `bench_controller.main` (median), as
-  `bench_controller.py --iters 3000`.
+  `python -m benchmarks.bench_controller --iters 3000`.
 
 With --rounds R every figure is measured R times, round by round, so that a change in the
 machine's load shows as a spread within a row rather than between rows. The table gives each
@@ -33,22 +33,15 @@ import argparse
 import contextlib
 import io
 import os
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-import bench_controller  # noqa: E402
-import bench_core  # noqa: E402
-import bench_sitl  # noqa: E402
-import bench_trials  # noqa: E402
-
-from amcore.config import _read_toml  # noqa: E402
-from trials.cli import DEFAULT_RANDOMIZE  # noqa: E402
-from trials.randomize import load_randomize  # noqa: E402
+from amcore.config import _read_toml
+from benchmarks import bench_controller, bench_core, bench_sitl, bench_trials
+from trials.cli import DEFAULT_RANDOMIZE
+from trials.randomize import load_randomize
 
 ROOT = Path(__file__).resolve().parents[1]
 CAMPAIGN = ROOT / "configs" / "scenarios" / "two_am_robust_attitude.toml"

@@ -1,6 +1,6 @@
 """Telemetry speed figures (never timed tests): CPU per step, publish cost on the caller, recorder throughput.
 
-    python benchmarks/bench_telemetry.py [--ams 10] [--rate 1000] [--truth-every 1] [--seconds 5]
+    python -m benchmarks.bench_telemetry [--ams 10] [--rate 1000] [--truth-every 1] [--seconds 5]
         [--encoding binary|json] [--skip-cpu] [--skip-caller] [--skip-throughput] [--cpu-steps 3000] [--cpu-rounds 3]
         [--before REV] [--cpu-setups "binary,binary (before)"]
 
@@ -26,7 +26,7 @@
    Payloads are real: one simulated second of the two-AM scenario, cycled, in --encoding
    (binary: the JSON templates converted once, t and sysid patched per step).
 3. Recorder capacity: pre-encoded samples (--encoding) put as fast as the recorder takes them.
-Run from the repository root (it reuses the tests' short-run helper for real payloads).
+Run from the repository root (it reuses the tests' short-run helper for real payloads: `tests.ground_station.simrun`).
 """
 from __future__ import annotations
 
@@ -44,16 +44,15 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from telemetry import binary, capture, schema, wire
+from telemetry.auth import publisher_key
+from telemetry.publisher import TelemetryPublisher
+from telemetry.schema import Channel, Keys
+from telemetry.session import ZenohOptions, build_config
+from telemetry.wiring import CompanionTelemetry, SimulatorTelemetry
+from tests.telemetry.zenoh_testing import free_endpoint
 
-from telemetry import binary, capture, schema, wire  # noqa: E402
-from telemetry.auth import publisher_key  # noqa: E402
-from telemetry.publisher import TelemetryPublisher  # noqa: E402
-from telemetry.schema import Channel, Keys  # noqa: E402
-from telemetry.session import ZenohOptions, build_config  # noqa: E402
-from telemetry.wiring import CompanionTelemetry, SimulatorTelemetry  # noqa: E402
-from tests.telemetry.zenoh_testing import free_endpoint  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 KEYS = Keys()
 MASTER = bytes(range(32))  # the run key of the CPU benchmark's recorders (every message sealed, as am-run does)
@@ -123,8 +122,9 @@ class _KeyedRecorder:
 
 def load_before(rev: str) -> None:
     """Add the setup "binary (before)": the telemetry package at git revision `rev`, imported
-    as the package `telemetry_before` (its imports of itself are relative)."""
+    as the package `telemetry_before` (its imports of itself are relative), from its own folder."""
     import importlib
+    import importlib.util
     import io
     import tarfile
 
@@ -132,8 +132,11 @@ def load_before(rev: str) -> None:
     archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "telemetry"], check=True,
                              capture_output=True).stdout
     tarfile.open(fileobj=io.BytesIO(archive)).extractall(out)
-    (out / "telemetry").rename(out / "telemetry_before")
-    sys.path.insert(0, str(out))
+    package = (out / "telemetry").rename(out / "telemetry_before")
+    spec = importlib.util.spec_from_file_location("telemetry_before", package / "__init__.py",
+                                                  submodule_search_locations=[str(package)])
+    sys.modules["telemetry_before"] = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(sys.modules["telemetry_before"])
     pub, wiring = (importlib.import_module(f"telemetry_before.{m}") for m in ("publisher", "wiring"))
     SETUPS["binary (before)"] = "binary"
     IMPLS["binary (before)"] = (pub.TelemetryPublisher, wiring.CompanionTelemetry, wiring.SimulatorTelemetry)
@@ -427,10 +430,10 @@ def throughput(templates: dict, n_ams: int, rate: float, seconds: float, truth_e
         common = ["--data", str(data), "--endpoint", ep, "--rate", str(rate), "--seconds", str(seconds),
                   "--ams", str(n_ams), "--start-at", str(start_at), "--truth-every", str(truth_every),
                   "--encoding", encoding]
-        kids = [subprocess.Popen([sys.executable, __file__, "--child", "companion", "--sysid", str(s), *common],
-                                 stdout=subprocess.PIPE, text=True) for s in range(n_ams)]
-        kids.append(subprocess.Popen([sys.executable, __file__, "--child", "sim", *common], stdout=subprocess.PIPE,
-                                     text=True))
+        child = [sys.executable, "-m", "benchmarks.bench_telemetry", "--child"]
+        kids = [subprocess.Popen([*child, "companion", "--sysid", str(s), *common], stdout=subprocess.PIPE, text=True,
+                                 cwd=ROOT) for s in range(n_ams)]
+        kids.append(subprocess.Popen([*child, "sim", *common], stdout=subprocess.PIPE, text=True, cwd=ROOT))
         reports = [json.loads(k.communicate(timeout=120 + 5 * seconds)[0].strip().splitlines()[-1]) for k in kids]
         last, quiet, deadline = -1, 0, time.monotonic() + 60.0
         while quiet < 3 and time.monotonic() < deadline:  # the recorder flushes every second: wait until idle

@@ -1,7 +1,7 @@
 """Where a campaign trial's physics step goes: CPU time per step of `simulator.inprocess.run`
 for one trial of `am-trials` (default randomization, seed 1, trial 0), whole and by part.
 
-    python benchmarks/bench_trial_step.py [--scenario configs/scenarios/two_am_comp.toml] [--duration 20]
+    python -m benchmarks.bench_trial_step [--scenario configs/scenarios/two_am_comp.toml] [--duration 20]
 
 First the trial runs as it is (after a short warm-up run that loads the compiled kernels):
 CPU time of this thread per physics step. Then it runs again with each part below wrapped
@@ -11,7 +11,7 @@ more than the unwrapped step; "other" is what no part holds (the run loop, the l
 zero-order hold, the flight controllers' bookkeeping, the digest's inputs). A part that a
 mode calls less than once in 100 steps is not printed: torque mode's setpoint_from_result,
 attitude mode's offboard step, autopilot, rotors and joint-effort sensor. For
-`benchmarks/ab.py`: a name wrapped that a tree compared does not have is skipped.
+`benchmarks.ab`: a name wrapped that a tree compared does not have is skipped.
 
 With --in-situ, a third run times the two largest pure calls of a controller step where the
 run makes them and then again at once on the same arguments (the second result dropped, the

@@ -1,7 +1,7 @@
 """Trial campaign throughput: trials per minute of `am-trials` on this machine, for a local
 pool of 1 and of 2 worker processes, on the same trials (default randomization).
 
-    python benchmarks/bench_trials.py [--scenario configs/scenarios/two_am_comp.toml] [--trials 4]
+    python -m benchmarks.bench_trials [--scenario configs/scenarios/two_am_comp.toml] [--trials 4]
         [--set TABLE.KEY=VALUE ...] [--screening]
 
 Each row runs the same `--trials` trials (seed 1) through `trials.runner` and prints wall

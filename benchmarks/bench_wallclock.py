@@ -1,6 +1,6 @@
 """Where a wall-clock companion's CPU goes, part by part, flying the free-running simulator.
 
-    python benchmarks/bench_wallclock.py [--speed 0.5] [--duration 8] [--scenario two_am_comp_attitude]
+    python -m benchmarks.bench_wallclock [--speed 0.5] [--duration 8] [--scenario two_am_comp_attitude]
 
 Starts `simulator --realtime` (no telemetry, no GCS ports) and runs `companion --clock wall`
 for the scenario's first AM in this process (the other AMs stand on the ground), with each
@@ -27,15 +27,13 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.append(str(ROOT))
-sys.path.append(str(ROOT / "benchmarks"))
+from amlink import px4link
+from benchmarks.cputime import wrap
+from companion import wallclock, wallrun
+from companion.devices import arm as arm_mod, netft
+from companion.pilot import Pilot
 
-from companion import wallclock, wallrun  # noqa: E402
-from companion.devices import arm as arm_mod, netft  # noqa: E402
-from companion.pilot import Pilot  # noqa: E402
-from amlink import px4link  # noqa: E402
-from cputime import wrap  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 INSTANCE = 80
 PARTS = ("law", "inputs", "bus", "link", "ft")

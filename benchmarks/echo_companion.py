@@ -1,6 +1,6 @@
 """A companion without a controller, for measuring the lockstep's own cost.
 
-    python benchmarks/echo_companion.py --sysid 2 --sim udp:127.0.0.1:PORT --config scenario.toml [--spin-us 175]
+    python -m benchmarks.echo_companion --sysid 2 --sim udp:127.0.0.1:PORT --config scenario.toml [--spin-us 175]
 
 It connects, arms and answers every sensor frame at once, through the same `amlink` client,
 codec and signing as the real companion: in torque mode with the same torque setpoint (the
@@ -22,13 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from amcore.config import load_scenario  # noqa: E402
-from amcore.model import build_model  # noqa: E402
-from amlink import signing  # noqa: E402
-from amlink.lockstep import CompanionClient  # noqa: E402
-from amlink.types import AttitudeSetpoint, AttitudeTarget, TorqueSetpoint  # noqa: E402
+from amcore.config import load_scenario
+from amcore.model import build_model
+from amlink import signing
+from amlink.lockstep import CompanionClient
+from amlink.types import AttitudeSetpoint, AttitudeTarget, TorqueSetpoint
 
 
 def main() -> int:

@@ -1,6 +1,6 @@
 """A simulator or companion process with its per-step parts timed in place (bench_inplace.py).
 
-    python benchmarks/inplace_parts.py simulator|companion OUT.json -- <the process's arguments>
+    python -m benchmarks.inplace_parts simulator|companion OUT.json -- <the process's arguments>
 
 Wraps the methods that make up a lockstep step (the list below) so that each call adds its
 thread CPU time (`time.thread_time_ns`: waiting in select() costs nothing) to its part, then

@@ -16,10 +16,7 @@ import collections
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from trials.report import read_csv, wilson_interval  # noqa: E402
+from trials.report import read_csv, wilson_interval
 
 G = 9.81
 

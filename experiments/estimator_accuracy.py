@@ -15,18 +15,16 @@ see.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from amcore.config import _read_toml, scenario_from_dict
+from amcore.estimator import quat_log, quat_mul, rotation
+from trials.cli import apply_overrides
+from trials.randomize import _merged, load_randomize
 
-from amcore.config import _read_toml, scenario_from_dict  # noqa: E402
-from amcore.estimator import quat_log, quat_mul, rotation  # noqa: E402
-from trials.cli import apply_overrides  # noqa: E402
-from trials.randomize import _merged, load_randomize  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 STATES = ("p_x mm", "p_y mm", "p_z mm", "tilt mrad", "yaw mrad", "v_x mm/s", "v_y mm/s", "v_z mm/s",
           "w_x rad/s", "w_y rad/s", "w_z rad/s")

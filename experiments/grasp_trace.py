@@ -19,14 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from amcore.config import ConfigError, _read_toml, scenario_from_dict  # noqa: E402
-from amcore.so3 import quat_wxyz_to_R  # noqa: E402
-from companion.pilot import Pilot  # noqa: E402
-from simulator import inprocess  # noqa: E402
-from trials.cli import apply_overrides  # noqa: E402
+from amcore.config import ConfigError, _read_toml, scenario_from_dict
+from amcore.so3 import quat_wxyz_to_R
+from companion.pilot import Pilot
+from simulator import inprocess
+from trials.cli import apply_overrides
 
 PER_AM = ("pad_O_x", "pad_O_y", "pad_O_z", "contact_E_x", "contact_E_y", "contact_E_z", "normal_n",
           "friction_W_x", "friction_W_y", "friction_W_z", "base_W_x", "base_W_y", "base_W_z",

@@ -13,14 +13,12 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from amcore.config import load_scenario
+from simulator.inprocess import run
 
-from amcore.config import load_scenario  # noqa: E402
-from simulator.inprocess import run  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def holds(o: dict) -> tuple[bool, str]:

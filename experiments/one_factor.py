@@ -13,11 +13,10 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from amcore.config import _read_toml
+from trials.randomize import load_randomize
 
-from amcore.config import _read_toml  # noqa: E402
-from trials.randomize import load_randomize  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 SENSORS = load_randomize(ROOT / "configs" / "randomize" / "stress_states.toml").sensors  # white noise on the states
 DEVICES = load_randomize(ROOT / "configs" / "randomize" / "default.toml").devices  # devices and estimator

@@ -35,12 +35,11 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from amcore.config import _read_toml, load_scenario, scenario_from_dict
+from trials import cli
+from trials.report import read_csv
 
-from amcore.config import _read_toml, load_scenario, scenario_from_dict  # noqa: E402
-from trials import cli  # noqa: E402
-from trials.report import read_csv  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 FIGURES = ("hover_min_lift_m", "final_lift_m", "max_slip_m", "force_share_error", "peak_com_err_m", "peak_e_R_rad",
            "peak_y_err_x_m")

@@ -1,11 +1,15 @@
-"""Helpers of the simulator tests: AM placements and experiment set-ups (imported by tests)."""
+"""Helpers of the simulator tests: AM placements and experiment set-ups (imported by tests, and
+by benchmarks/bench_world.py for the 10-AM ring)."""
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 import pinocchio as pin
 import pybullet as pb
 
-from amcore.model import AmState, generalized_gravity
+from amcore.config import AmSpec, ObjectSpec, ScenarioSpec
+from amcore.model import AmState, build_model, generalized_gravity
 from amcore.so3 import Rz
 from simulator.world import World
 
@@ -45,6 +49,36 @@ def facing_object(spec, model, depth_m: float) -> dict[int, AmState]:
         u = np.array([np.cos(az), np.sin(az), 0.0])  # from the object centre to the AM
         R = Rz(az + np.pi)
         p_ee = c + (half - depth_m) * u
+        states[a.sysid] = at_rest(p_ee - R @ e, R, q)
+    return states
+
+
+# The paper's 10-AM layout (Sec. V-C): a cylinder of radius 0.6 m and 5 kg, AMs 36 deg apart,
+# each facing the object, arm at RING_Q, pad face RING_GAP_M outside the surface.
+RING_Q = np.array([1.0472, -1.0472, 0.0])
+RING_GAP_M = 0.02
+
+
+def ten_am_spec(base: ScenarioSpec) -> ScenarioSpec:
+    """`base` with the 10-AM layout's cylinder and ten AMs at azimuths 0, 36, ..., 324 deg."""
+    obj = ObjectSpec(shape="cylinder", mass_kg=5.0, position_m=(0.0, 0.0, 0.6), radius_m=0.6, height_m=0.3,
+                     lateral_friction=base.object.lateral_friction)
+    ams = tuple(AmSpec(sysid=2 + i, azimuth_deg=36.0 * i) for i in range(10))
+    return dataclasses.replace(base, name="ten_am_bench", object=obj, ams=ams)
+
+
+def ring_placement(spec: ScenarioSpec, q: np.ndarray, gap_m: float) -> dict[int, AmState]:
+    """Each AM on its azimuth, facing the object (yaw = azimuth + 180 deg), arm at q, pad face
+    gap_m [m] outside the surface (cylinder or box), ee at the object's centre height."""
+    obj = spec.object
+    e = p_BE(build_model(spec.vehicle), q)
+    half_width = obj.radius_m if obj.shape == "cylinder" else 0.5 * obj.size_m[0]
+    c = np.array(obj.position_m)
+    states = {}
+    for a in spec.ams:
+        az = np.deg2rad(a.azimuth_deg)
+        R = Rz(az + np.pi)
+        p_ee = c + (half_width + gap_m) * np.array([np.cos(az), np.sin(az), 0.0])
         states[a.sysid] = at_rest(p_ee - R @ e, R, q)
     return states
 

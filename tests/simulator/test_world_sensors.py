@@ -15,7 +15,8 @@ from amcore.so3 import Rz, quat_wxyz_to_R
 from simulator.inprocess import run
 from simulator.scene import table_geometry
 
-from .sim_testing import at_rest, facing_object, far_apart, hold_arm, hold_base, p_BE, push_link, push_object
+from .sim_testing import (RING_GAP_M, RING_Q, at_rest, facing_object, far_apart, hold_arm, hold_base, p_BE, push_link,
+                          push_object, ring_placement, ten_am_spec)
 
 
 def test_ee_pose_is_the_urdf_link_frame(spec, model, make_world):
@@ -256,10 +257,8 @@ def test_ams_pass_through_each_other_but_pads_touch_the_ground(spec, model, make
 
 def test_ten_am_ring_around_a_cylinder(spec, make_world):
     """The paper's 10-AM layout: pads 2 cm off the cylinder, nothing touches, object rests."""
-    from simulator.bench_world import GAP_M, Q_BENCH, ring_placement, ten_am_spec
-
     ten = ten_am_spec(spec)
-    w = make_world(ring_placement(ten, Q_BENCH, GAP_M), scenario=ten)
+    w = make_world(ring_placement(ten, RING_Q, RING_GAP_M), scenario=ten)
     assert len(w.sysids) == 10
     assert w.wrench_ee(w.sysids[0]).tolist() == [0.0] * 6  # nothing measured before the first step
     for _ in range(20):
@@ -269,7 +268,7 @@ def test_ten_am_ring_around_a_cylinder(spec, make_world):
     for s in w.sysids:
         am = gt.ams[s]
         gap = np.linalg.norm((am.p_WE - centre)[:2]) - ten.object.radius_m
-        assert gap == pytest.approx(GAP_M, abs=2e-3)  # 20 ms of free fall moves it 2 mm down only
+        assert gap == pytest.approx(RING_GAP_M, abs=2e-3)  # 20 ms of free fall moves it 2 mm down only
         assert am.pad_object_contact.n_points == 0 and am.pad_other_contacts == () and am.base_contacts == ()
     assert gt.object.touching == ("table",)
     np.testing.assert_allclose(gt.object.p_WO, centre, atol=1e-3)

@@ -18,7 +18,6 @@ import asyncio
 import json
 import math
 import signal
-import socket
 import subprocess
 import threading
 import time
@@ -26,6 +25,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.ports import free_udp_ports
 from tests.sitl.runner import SCENARIOS, script
 
 mavsdk = pytest.importorskip("mavsdk", minversion="4", reason="needs MAVSDK >= 4 (pip install 'mavsdk>=4')")
@@ -37,16 +37,6 @@ from simulator.px4.commander import NavState, custom_mode_of  # noqa: E402
 COM_OF_LOSS_T = 1.0  # the vehicle's (am3dof.toml keeps PX4's default)
 HOLD_MODE = custom_mode_of(NavState.AUTO_LOITER)
 OFFBOARD_MODE = custom_mode_of(NavState.OFFBOARD)
-
-
-def free_udp_ports(n: int) -> list[int]:
-    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(n)]
-    for s in socks:
-        s.bind(("127.0.0.1", 0))
-    ports = [s.getsockname()[1] for s in socks]
-    for s in socks:
-        s.close()
-    return ports
 
 
 def scenario_copy(tmp_path: Path) -> Path:

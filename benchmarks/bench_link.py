@@ -1,6 +1,6 @@
 """Benchmark: lockstep steps per second over loopback, signed or not, clean or lossy.
 
-Run ``python -m amlink.bench_link``; prints steps/s for each case.  Not a test:
+Run ``python -m benchmarks.bench_link``; prints steps/s for each case.  Not a test:
 timings depend on the machine (and the companions here are trivial threads).
 """
 

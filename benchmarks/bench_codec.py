@@ -1,6 +1,6 @@
 """Benchmark: encode + decode of the lockstep batches, pymavlink path vs fast path, in one run.
 
-Run ``python -m amlink.bench_codec``; prints median microseconds per operation
+Run ``python -m benchmarks.bench_codec``; prints median microseconds per operation
 for the old path (:mod:`amlink.codec`: pymavlink message objects, ``Encoder.pack``
 / ``Decoder.feed``) next to the new one (:mod:`amlink.fastcodec`:
 ``Encoder.pack_payloads`` / ``Decoder.feed_records``) and their ratio.  The two

@@ -1,6 +1,6 @@
 """Per-step cost of the world with 2 AMs (two_am_comp) and 10 AMs (the paper's Sec. V-C).
 
-Run: python -m simulator.bench_world [--steps 2000]  (or as a file: python simulator/bench_world.py)
+Run: python -m benchmarks.bench_world [--steps 2000]
 
 "bare step" is `World.step()` alone (it re-applies the stored commands); "full loop" adds
 what a lockstep server does per step: `apply`, `state` and `wrench_ee` for every AM;
@@ -16,72 +16,34 @@ which run every physics step. "floor" is what the same work
 costs in calls that no Python code around them can avoid: the PyBullet getters and setters
 it makes and one SHA-256 per signed frame (hashlib), back to back. In a running SITL every
 figure is ~3x this (the caches are cold after the other processes ran; see
-docs/benchmarks.md). The 10-AM layout: cylinder of radius 0.6 m
-and 5 kg, AMs 36 deg apart, each facing the object (yaw = azimuth + 180 deg), arm at
-q = [1.0472, -1.0472, 0], pad face 2 cm outside the surface, ee at the object's centre height.
+docs/benchmarks.md). The 10-AM layout is the simulator tests' ring (`tests.simulator.sim_testing`):
+cylinder of radius 0.6 m and 5 kg, AMs 36 deg apart, each facing the object (yaw = azimuth + 180 deg),
+arm at q = [1.0472, -1.0472, 0], pad face 2 cm outside the surface, ee at the object's centre height.
 """
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import hashlib
 import time
 import timeit
 from itertools import cycle
 
 import numpy as np
-import pinocchio as pin
 
-from simulator.bullet import pb
-
-from amcore.config import SCENARIOS_DIR, AmSpec, ObjectSpec, ScenarioSpec, load_scenario
-from amcore.model import AmState, build_model
-from amcore.so3 import Rz
+from amcore.config import SCENARIOS_DIR, ScenarioSpec, load_scenario
 from amlink import fastcodec, wire
 from amlink.types import AttitudeTarget, TorqueSetpoint, sensor_frame_from_wire
 from amlink.udp import SIM_COMPID, SIM_SYSID
-
+from simulator.bullet import pb
 from simulator.world import World
+from tests.simulator.sim_testing import RING_GAP_M, RING_Q, ring_placement, ten_am_spec
 
 SCENARIO = SCENARIOS_DIR / "two_am_comp.toml"
-Q_BENCH = np.array([1.0472, -1.0472, 0.0])
-GAP_M = 0.02
 KEY = bytes(range(32))  # a signing key for the per-AM figures
 
 
-def ee_offset_B(spec: ScenarioSpec, q: np.ndarray) -> np.ndarray:
-    """End-effector origin in the base frame at joint angles q [m] (pinocchio)."""
-    model = build_model(spec.vehicle)
-    data = model.pin_model.createData()
-    pin.framesForwardKinematics(model.pin_model, data, np.concatenate([np.zeros(3), [0, 0, 0, 1], q]))
-    return data.oMf[model.ee_frame_id].translation.copy()
-
-
-def ring_placement(spec: ScenarioSpec, q: np.ndarray, gap_m: float) -> dict[int, AmState]:
-    """Each AM on its azimuth, facing the object, pad face gap_m outside the surface."""
-    obj = spec.object
-    reach = ee_offset_B(spec, q)
-    half_width = obj.radius_m if obj.shape == "cylinder" else 0.5 * obj.size_m[0]
-    c = np.array(obj.position_m)
-    states = {}
-    for a in spec.ams:
-        az = np.deg2rad(a.azimuth_deg)
-        R = Rz(az + np.pi)
-        p_ee = c + (half_width + gap_m) * np.array([np.cos(az), np.sin(az), 0.0])
-        states[a.sysid] = AmState(p_WB=p_ee - R @ reach, R_WB=R, v_B=np.zeros(3), w_B=np.zeros(3), q=q.copy(),
-                                  qdot=np.zeros(len(q)))
-    return states
-
-
-def ten_am_spec(base: ScenarioSpec) -> ScenarioSpec:
-    obj = ObjectSpec(shape="cylinder", mass_kg=5.0, position_m=(0.0, 0.0, 0.6), radius_m=0.6, height_m=0.3,
-                     lateral_friction=base.object.lateral_friction)
-    ams = tuple(AmSpec(sysid=2 + i, azimuth_deg=36.0 * i) for i in range(10))
-    return dataclasses.replace(base, name="ten_am_bench", object=obj, ams=ams)
-
-
 def bench(spec: ScenarioSpec, steps: int) -> dict[str, float]:
-    world = World(spec, ring_placement(spec, Q_BENCH, GAP_M))
+    world = World(spec, ring_placement(spec, RING_Q, RING_GAP_M))
     world.connect()
     try:
         T = world.total_mass_kg(spec.ams[0].sysid) * spec.vehicle.gravity_mps2
@@ -118,7 +80,7 @@ def _us(fn, number: int = 2000, repeat: int = 7) -> float:
 
 def per_am(spec: ScenarioSpec) -> dict[str, float]:
     """The lockstep simulator's per-AM work and its floor, [us] per AM and step (module doc)."""
-    world = World(spec, ring_placement(spec, Q_BENCH, GAP_M))
+    world = World(spec, ring_placement(spec, RING_Q, RING_GAP_M))
     world.connect()
     try:
         s = world.sysids[0]
