@@ -137,8 +137,9 @@ def _scheduler(text: str) -> str:
 def parse_args(argv):
     ap = cliargs.ArgumentParser(prog="am-trials", description=" ".join(__doc__.split("\n\n")[0].split()),
                                  epilog="Exit codes: 0 the campaign ran (whatever its success rate); 1 a trial "
-                                        "raised or the --scheduler did not answer; 2 bad arguments or configuration; "
-                                        "130 interrupted (SIGINT or SIGTERM).")
+                                        "raised, a free-running trial's processes failed, or the --scheduler did not "
+                                        "answer; 2 bad arguments or configuration; 130 interrupted (SIGINT or "
+                                        "SIGTERM).")
     ap.add_argument("scenario", type=Path, help="base scenario TOML")
     ap.add_argument("--trials", type=_positive_int, required=True, help="number of trials")
     ap.add_argument("--seed", type=_seed, required=True, help="campaign seed (0..2**32-1)")

@@ -9,10 +9,13 @@ deadline misses, and each companion's period (p99, worst), deadline misses and l
 sample to setpoint (p99), the worst AM's. Trials fly one at a time: each wants the machine's
 cores for its processes (docs/freerun.md, "Where it stands").
 
-Exit codes of `am-run` and what a row says: 0 and 4 (the mission succeeded, or failed: its
-verdict); 2 (the trial's scenario refused by a check `am-run` makes and the campaign did not):
-verdict "error"; 1 (a process failed or did not start), or no outcome.json: verdict "error", the
-reason its last lines of output. A campaign with an error row exits 1, as one whose trial raised.
+What a row says, from `am-run`'s exit code (`exit_code`) and outcome.json: the verdict in
+outcome.json when the mission failed, whatever the code (a companion that handed its vehicle
+back to PX4 exits 1 and the verdict names the failover); the verdict "success" when the code
+is 0. Verdict "error", with the last lines of the trial's output as the reason: no verdict (a
+process did not start, the world never came up, code 2 for a check the campaign did not make),
+a success with a process that failed, or a trial past its time limit. A campaign with an error
+row exits 1, as one whose trial raised.
 """
 from __future__ import annotations
 
@@ -38,11 +41,10 @@ def command(path: str, run_dir: Path, speed: float, instance: int) -> list[str]:
             "--gcs", "none"]
 
 
-def run_trial(task, speed: float, instance: int, runs: Path, log=lambda _m: None) -> dict:
+def run_trial(task, speed: float, instance: int, runs: Path) -> dict:
     """Fly one trial free-running (module doc); its table row."""
     from amcore.config import scenario_from_dict
     from amcore.preflight import refusal
-    from simulator.verdict import summary_figures
 
     spec = scenario_from_dict(task.data, Path(task.path))
     controller = getattr(spec.vehicle.options, "controller", "passivity")
@@ -66,19 +68,30 @@ def run_trial(task, speed: float, instance: int, runs: Path, log=lambda _m: None
         except BaseException:  # interrupted: the trial's stack goes down with the campaign
             _stop(proc)
             raise
-    wall = time.perf_counter() - t0
+    row = judged(head, rc, run_dir, out, spec, timeout)
+    row["wall_s"] = time.perf_counter() - t0
+    return row
+
+
+def judged(head: dict, rc: int | None, run_dir: Path, log: Path, spec, timeout_s: float) -> dict:
+    """A flown trial's row from `am-run`'s exit code `rc` (None: past its time limit) and its run
+    folder (module doc: which verdict a row gets)."""
+    from simulator.verdict import summary_figures
+
     outcome = run_dir / "outcome.json"
-    if rc not in (0, 4) or not outcome.is_file():
-        tail = " / ".join(out.read_text(errors="replace").strip().splitlines()[-3:])
-        what = f"timed out after {timeout:.0f} s" if rc is None else f"am-run exited {rc}"
-        return {**head, "verdict": "error", "failure_class": "", "reason": f"{what}: {tail} (log {out})",
-                "wall_s": wall}
-    o = json.loads(outcome.read_text())
-    v = o["verdict"]
+    o = json.loads(outcome.read_text()) if outcome.is_file() else {}
+    v = o.get("verdict")
+    # a failed flight is a verdict, whatever the processes did (a companion that handed its vehicle
+    # back exits 1); no verdict, or a success with a process that failed, is an error of the stack
+    if v is None or rc is None or (rc not in (0, 4) and v["status"] == "success"):
+        lines = log.read_text(errors="replace").strip().splitlines() if log.is_file() else []
+        what = f"timed out after {timeout_s:.0f} s" if rc is None else f"am-run exited {rc}"
+        return {**head, "verdict": "error", "failure_class": "", "reason": f"{what}: {' / '.join(lines[-3:])} "
+                f"(log {log})", "exit_code": rc}
     share = spec.object.mass_kg * spec.vehicle.gravity_mps2 / len(spec.ams)
     return {**head, "verdict": v["status"], "failure_class": v["failure_class"] or "", "reason": v["text"],
             **summary_figures(o, share), **timing_figures(o, run_dir, [am.sysid for am in spec.ams]),
-            "run_dir": str(run_dir), "wall_s": wall}
+            "exit_code": rc, "run_dir": str(run_dir)}
 
 
 def timing_figures(outcome: dict, run_dir: Path, sysids: list[int]) -> dict:

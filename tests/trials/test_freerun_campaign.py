@@ -76,3 +76,36 @@ def test_a_free_running_trial_flies_through_am_run_and_its_row_is_its_outcome(tm
         assert imp["sent"] > 1000 and 0.05 < imp["lost"] / imp["sent"] < 0.15
     summary = json.loads((out / "summary.json").read_text())
     assert summary["timing"]["real_time_factor_min"] == pytest.approx(float(row["real_time_factor"]))
+
+
+def _outcome(status: str, failure_class: str | None) -> dict:
+    am = {"hover_mean_ft_force_W_n": [0.0, 0.0, -5.9], "slip_max_m": 1e-4, "saturated_steps": 3}
+    return {"verdict": {"status": status, "failure_class": failure_class, "text": f"mission {status}"},
+            "object": {"hover_min_lift_m": 0.28, "max_lift_m": 0.284, "final_lift_m": 0.283},
+            "ams": {"4": am, "5": am}, "real_time_factor": 0.49, "timing": {"steps": 100, "deadline_misses": 7}}
+
+
+@pytest.mark.parametrize("rc,status,cls,verdict", [
+    (0, "success", None, "success"),
+    (4, "failed", "base contact", "failed"),
+    (1, "failed", "failover", "failed"),  # a companion that handed its vehicle back exits 1: still a verdict
+    (1, "success", None, "error"),  # a process failed under a flight that succeeded
+    (None, "success", None, "error"),  # past its time limit
+    (1, None, None, "error"),  # no outcome at all
+])  # fmt: skip
+def test_a_flown_trial_s_row_is_its_verdict_unless_the_stack_failed(tmp_path, rc, status, cls, verdict):
+    from amcore.config import load_scenario
+
+    spec = load_scenario(SCENARIOS / "two_am_comp_attitude.toml")
+    run, log = tmp_path / "trial-0000", tmp_path / "trial-0000.log"
+    run.mkdir()
+    log.write_text("am-run: starting\nam-run: FAILED: companion 5\n")
+    if status is not None:
+        (run / "outcome.json").write_text(json.dumps(_outcome(status, cls)))
+    row = freerun.judged({"trial": 0}, rc, run, log, spec, 240.0)
+    assert row["verdict"] == verdict and row["exit_code"] == rc
+    if verdict == "error":
+        assert "FAILED: companion 5" in row["reason"] and str(log) in row["reason"]
+        assert ("timed out after 240 s" if rc is None else f"am-run exited {rc}") in row["reason"]
+    else:
+        assert row["failure_class"] == (cls or "") and row["physics_miss_share"] == 0.07
