@@ -6,8 +6,10 @@ each AM, the nominal CoM offset) are computed, never entered; see `amcore.missio
 """
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
+import os
 import tomllib
 import types
 import typing
@@ -1296,9 +1298,112 @@ def load_scenario(path: str | Path) -> ScenarioSpec:
     force compensation off), safety settings with [safety], the pad with [pad], the flight
     controller with [flight_controller] (e.g. attitude mode) and rotor settings with [rotors]
     (e.g. the rotors' time constant); each is merged key by key onto the vehicle's table.
+    A scenario with a top-level `base` is an overlay of that scenario (`resolve_base`).
     """
     path = Path(path).resolve()
     return scenario_from_dict(_read_toml(path), path)
+
+
+# ----------------------------------------------------------------------------- overlays
+# Keys of scenario data that hold a path, (table, key): a relative one is read from the folder of
+# the file that wrote it, so a base's is rewritten when it is laid under a file in another folder.
+SCENARIO_PATH_KEYS = (("scenario", "vehicle"), ("link", "key_file"))
+
+
+def merge_tables(base: dict, overlay: dict) -> dict:
+    """`overlay` laid on `base`: a table merges key by key, recursively; any other value (a number,
+    a string, a boolean, an array, an array of tables such as [[am]]) replaces the base's whole.
+    Neither argument is changed."""
+    out = {k: copy.deepcopy(v) for k, v in base.items()}
+    for key, value in overlay.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = merge_tables(out[key], value)
+        else:
+            out[key] = copy.deepcopy(value)
+    return out
+
+
+def read_scenario(path: str | Path) -> dict:
+    """A scenario file's TOML data as the loader flies it: its `base` resolved (`resolve_base`),
+    self-contained, relative paths taken from `path`'s folder. A file without `base` reads as it is."""
+    path = Path(path).resolve()
+    return resolve_base(_read_toml(path), path)
+
+
+def resolve_base(data: dict, path: Path) -> dict:
+    """Scenario `data`, read from `path`, with its top-level `base` resolved.
+
+    `base = "other.toml"` (relative to `path`'s folder) makes `data` an overlay: the base is read
+    (and its own base, and so on), then `data`'s keys are laid on it by `merge_tables`. A top-level
+    `unset = ["rotors", "mission.squeeze_max_n"]` first removes those keys or tables from the base
+    (what `merge_tables` alone cannot: an overlay sets keys, never deletes them). Paths in the base
+    ([scenario].vehicle, [link].key_file) keep pointing where its file meant them. Raises
+    ConfigError naming the file and the key (and both files for a base that cannot be read)."""
+    return _resolved(data, Path(path), ())[0]
+
+
+def _resolved(data: dict, path: Path, chain: tuple[Path, ...]) -> tuple[dict, tuple[Path, ...]]:
+    """(`resolve_base`'s data, the bases laid under it, nearest first); `chain`: the files whose
+    bases led here, to name a cycle."""
+    if "base" not in data and "unset" not in data:
+        return data, ()
+    where = str(path)
+    data = dict(data)
+    text, unset = data.pop("base", None), data.pop("unset", None)
+    if text is None:
+        raise ConfigError(f"{where}: unset: needs a base (the keys it removes are the base's)")
+    if not isinstance(text, str) or not text:
+        raise ConfigError(f"{where}: base: expected the path of a scenario TOML (relative to this file's folder), "
+                          f"got {text!r}")
+    here = path.resolve()
+    bpath = (here.parent / text).resolve()
+    chain = (*chain, here)
+    if bpath in chain:
+        cycle = " -> ".join(str(p) for p in (*chain[chain.index(bpath):], bpath))
+        raise ConfigError(f"{where}: base = {text!r}: a cycle of bases: {cycle}")
+    try:
+        bdata, bases = _resolved(_read_toml(bpath), bpath, chain)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}: base = {text!r}: {exc}") from None
+    bdata = _rebased(bdata, bpath.parent, here.parent)
+    if unset is not None:
+        bdata = _unset(bdata, unset, f"{where}: unset", bpath)
+    return merge_tables(bdata, data), (bpath, *bases)
+
+
+def _rebased(data: dict, src_dir: Path, dst_dir: Path) -> dict:
+    """Scenario data read in `src_dir` with its relative paths (SCENARIO_PATH_KEYS) rewritten
+    for a file in `dst_dir`; unchanged when the two are one folder."""
+    if src_dir == dst_dir:
+        return data
+    out = dict(data)
+    for table, key in SCENARIO_PATH_KEYS:
+        t = out.get(table)
+        rel = t.get(key) if isinstance(t, dict) else None
+        if isinstance(rel, str) and rel and not Path(rel).is_absolute():
+            target = (src_dir / rel).resolve()
+            try:
+                moved = os.path.relpath(target, dst_dir)
+            except ValueError:  # another drive: no relative path reaches it
+                moved = str(target)
+            out[table] = {**t, key: Path(moved).as_posix()}
+    return out
+
+
+def _unset(data: dict, keys, where: str, bpath: Path) -> dict:
+    """`data` without each dotted key (a key of a table, or a whole table) in `keys`."""
+    if not isinstance(keys, list) or not all(isinstance(k, str) and k for k in keys):
+        raise ConfigError(f"{where}: expected a list of dotted keys of the base, e.g. [\"rotors\"], got {keys!r}")
+    out = copy.deepcopy(data)
+    for key in keys:
+        *tables, last = key.split(".")
+        t = out
+        for name in tables:
+            t = t.get(name) if isinstance(t, dict) else None
+        if not isinstance(t, dict) or last not in t:
+            raise ConfigError(f"{where}: {key!r} is not in the base ({bpath})")
+        del t[last]
+    return out
 
 
 SCENARIO_TABLES = ("scenario", "object", "mission", "am", "options", "safety", "pad", "flight_controller",
@@ -1307,8 +1412,10 @@ SCENARIO_TABLES = ("scenario", "object", "mission", "am", "options", "safety", "
 
 def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     """`load_scenario` on TOML data already read; relative paths in it are taken from
-    `path`'s folder and errors name `path`. A [randomize] table is left to `trials`."""
-    where = str(path)
+    `path`'s folder and errors name `path` (and the bases under it, `resolve_base`). A
+    [randomize] table is left to `trials`."""
+    data, bases = _resolved(data, Path(path), ())
+    where = str(path) if not bases else f"{path} (over {', '.join(b.name for b in bases)})"
     extra = set(data) - set(SCENARIO_TABLES)
     if extra:
         raise ConfigError(f"{where}: unknown table [{sorted(extra)[0]}]")
@@ -1645,9 +1752,10 @@ def _link_spec(table: dict, where: str) -> LinkSpec:
 def scenario_id(spec: ScenarioSpec) -> int:
     """A 32-bit fingerprint of everything that defines a run (AM_SCENARIO.scenario_id).
 
-    Computed from the parsed scenario and vehicle (not file paths or formatting) plus the
-    URDF's bytes, so a simulator and a companion on different hosts agree exactly when
-    they load the same scenario, and a companion started with another one is told so.
+    Computed from the parsed scenario and vehicle (not file paths, formatting, or whether the
+    file is an overlay of another: the resolved data only) plus the URDF's bytes, so a simulator
+    and a companion on different hosts agree exactly when they load the same scenario, and a
+    companion started with another one is told so.
     """
     import hashlib
     import json

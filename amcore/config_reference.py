@@ -53,6 +53,32 @@ table says what `am-trials` varies ([campaigns](../guides/campaigns.md)).
 TOML's path relative to the scenario's folder). [[am]] is an array: one entry per aerial
 manipulator; [[am]].link takes [link]'s keys for that AM alone.
 
+## Overlays: `base` and `unset`
+
+A variant of a scenario is written as an overlay of it, not a copy: a top-level
+`base = "two_am_comp.toml"` (a path relative to the overlay's own folder) makes the file
+the base scenario with the overlay's keys laid on top. The base is read first (and its own
+base, if it has one, and so on), then merged with the overlay by one rule:
+
+- a table merges key by key, recursively: `[mission] squeeze_max_n = 12.0` changes that key
+  and keeps the base's other [mission] keys;
+- any other value replaces the base's whole: a number, a string, a boolean, an array
+  (`size_m = [...]`), and an array of tables: an overlay's `[[am]]` entries are the whole team,
+  none of the base's is kept.
+
+An overlay cannot delete by setting a key, so a top-level `unset = ["rotors",
+"mission.envelope_check"]` removes those keys or whole tables (dotted: table.key) from the base
+before the overlay is laid on: `unset = ["rotors"]` flies the vehicle's own rotors where the
+base set ideal ones. Each name must be in the base. A path in a base (`[scenario].vehicle`,
+`[link].key_file`) stays relative to the file that wrote it, wherever the overlay is. The
+resolved scenario is what every tool reads (`amcore.config.read_scenario`); its fingerprint
+(AM_SCENARIO.scenario_id) is that of the data, so an overlay that resolves to a file's data
+flies that file's run. `base` that is not a string, a base that is missing, unreadable or not
+TOML (both files named), a cycle of bases (the chain named) and a bad `unset` are refused with
+exit 2; an error in the resolved scenario names the overlay and the bases under it. Each `*_attitude.toml` in `configs/scenarios/` is an overlay of its torque-mode twin.
+What `am-run` writes as RUN/scenario.toml and `am-trials` as each trial's file is the resolved
+scenario, self-contained (no `base`).
+
 This page is written by `python -m amcore.config_reference` from the loader's own tables.
 """
 

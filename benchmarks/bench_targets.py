@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from amcore.config import _read_toml
+from amcore.config import read_scenario
 from benchmarks import bench_controller, bench_core, bench_sitl, bench_trials
 from trials.cli import DEFAULT_RANDOMIZE
 from trials.randomize import load_randomize
@@ -74,7 +74,7 @@ def one_round(a, folder: Path) -> dict[str, dict]:
         out[key] = sitl(n, attitude, a.duration, folder / key)
     for mode in ("attitude", "torque"):
         out[f"lockstep_{mode}"] = {"value": bench_core.run(mode, 2, 2.0, True)["lockstep work"]}
-    r = bench_trials.throughput(_read_toml(CAMPAIGN), CAMPAIGN, load_randomize(DEFAULT_RANDOMIZE), a.trials, 2)
+    r = bench_trials.throughput(read_scenario(CAMPAIGN), CAMPAIGN, load_randomize(DEFAULT_RANDOMIZE), a.trials, 2)
     out["campaign"] = {"value": r["flown_per_min"], "cpu_per_flown_s": r["cpu_per_flown_s"]}
     with contextlib.redirect_stdout(io.StringIO()):  # its own table is not this one's
         out["controller"] = {"value": bench_controller.main(["--iters", str(a.iters)])["step"]}

@@ -32,7 +32,7 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
-from amcore.config import _read_toml, scenario_from_dict
+from amcore.config import read_scenario, scenario_from_dict
 from trials.cli import DEFAULT_RANDOMIZE, build_tasks
 from trials.randomize import load_randomize
 
@@ -68,7 +68,7 @@ PARTS = (
 
 
 def _trial_spec(scenario: Path, tmp: Path):
-    tasks = build_tasks(_read_toml(scenario), scenario.resolve(), load_randomize(DEFAULT_RANDOMIZE), 1, 1, tmp, None)
+    tasks = build_tasks(read_scenario(scenario), scenario.resolve(), load_randomize(DEFAULT_RANDOMIZE), 1, 1, tmp, None)
     return scenario_from_dict(tasks[0].data, Path(tasks[0].path))
 
 

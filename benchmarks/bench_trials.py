@@ -26,7 +26,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from amcore.config import _read_toml, scenario_from_dict
+from amcore.config import read_scenario, scenario_from_dict
 from trials.cli import DEFAULT_RANDOMIZE, apply_overrides, build_tasks, screening_for
 from trials.randomize import load_randomize
 from trials.runner import executor, run_all
@@ -45,7 +45,7 @@ def main() -> None:
     a = ap.parse_args()
     if a.screening:
         a.overrides = [*screening_for(a.scenario.resolve(), a.overrides), *a.overrides]
-    data = apply_overrides(_read_toml(a.scenario), a.overrides)
+    data = apply_overrides(read_scenario(a.scenario), a.overrides)
     spec = scenario_from_dict(data, a.scenario.resolve())
     rand = load_randomize(DEFAULT_RANDOMIZE)
     print(f"{a.trials} trials of {a.scenario.name} ({spec.duration_s:g} s simulated each), default randomization"

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from amcore.config import _read_toml, scenario_from_dict
+from amcore.config import read_scenario, scenario_from_dict
 from amcore.estimator import quat_log, quat_mul, rotation
 from trials.cli import apply_overrides
 from trials.randomize import _merged, load_randomize
@@ -75,7 +75,7 @@ def main() -> int:
     ap.add_argument("--set", action="append", default=[], dest="overrides")
     a = ap.parse_args()
     path = Path(a.scenario).resolve()
-    base = with_default_devices(apply_overrides(_read_toml(path), a.overrides))
+    base = with_default_devices(apply_overrides(read_scenario(path), a.overrides))
     errs = []
     for seed in a.seeds or [base.get("scenario", {}).get("seed", 0)]:
         data = apply_overrides(base, [f"scenario.seed={seed}"])

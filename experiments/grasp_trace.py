@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from amcore.config import ConfigError, _read_toml, scenario_from_dict
+from amcore.config import ConfigError, read_scenario, scenario_from_dict
 from amcore.so3 import quat_wxyz_to_R
 from companion.pilot import Pilot
 from simulator import inprocess
@@ -40,7 +40,7 @@ def main() -> int:
     a = ap.parse_args()
     path = a.scenario.resolve()
     try:
-        spec = scenario_from_dict(apply_overrides(_read_toml(path), a.set), path)
+        spec = scenario_from_dict(apply_overrides(read_scenario(path), a.set), path)
     except ConfigError as exc:
         print(f"grasp_trace: {exc}", file=sys.stderr)
         return 2

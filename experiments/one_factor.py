@@ -13,7 +13,7 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from amcore.config import _read_toml
+from amcore.config import read_scenario
 from trials.randomize import load_randomize
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -88,7 +88,7 @@ def main() -> int:
     ap.add_argument("--only", default=None, help="run only variations whose name contains this")
     a = ap.parse_args()
     path = Path(a.scenario).resolve()
-    base = _read_toml(path)
+    base = read_scenario(path)
     jobs = [(n, d, str(path), a.duration) for n, d in variations(base).items() if a.only is None or a.only in n]
     with ProcessPoolExecutor(a.workers) as ex:
         for name, v, lift, slip, sat in ex.map(_run, jobs):

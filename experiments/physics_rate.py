@@ -35,7 +35,7 @@ import sys
 import time
 from pathlib import Path
 
-from amcore.config import _read_toml, load_scenario, scenario_from_dict
+from amcore.config import load_scenario, read_scenario, scenario_from_dict
 from trials import cli
 from trials.report import read_csv
 
@@ -110,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
     campaigns = []
     base = load_scenario(a.scenario)
     if a.screening:
-        screened = scenario_from_dict(cli.apply_overrides(_read_toml(a.scenario), cli.screening_for(a.scenario)),
+        screened = scenario_from_dict(cli.apply_overrides(read_scenario(a.scenario), cli.screening_for(a.scenario)),
                                       a.scenario)
         a.rates = [a.rates[0], screened.rate_hz]  # a new list: argparse's default is shared
         a.substeps, a.iterations = screened.physics_substeps, screened.solver_iterations

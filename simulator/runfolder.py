@@ -23,7 +23,7 @@ import sys
 from importlib import metadata
 from pathlib import Path
 
-from amcore.config import SCENARIOS_DIR, _read_toml, load_scenario  # noqa: F401 (SCENARIOS_DIR: am-run)
+from amcore.config import SCENARIOS_DIR, _read_toml, load_scenario, read_scenario  # noqa: F401 (SCENARIOS_DIR: am-run)
 
 MANIFEST = "manifest.json"
 SCENARIO_AS_FLOWN = "scenario.toml"
@@ -72,7 +72,7 @@ def write_scenario_as_flown(run_dir: Path, scenario: Path, duration_s: float | N
     from trials.toml_write import dumps  # a plain TOML writer (no simulator, no I/O of its own)
 
     scenario = Path(scenario).resolve()
-    data = copy.deepcopy(_read_toml(scenario))
+    data = copy.deepcopy(read_scenario(scenario))  # resolved: RUN/scenario.toml needs no base
     sc = data.setdefault("scenario", {})
     vdst = Path(run_dir) / "vehicle"
     if "vehicle" in sc:

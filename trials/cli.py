@@ -46,7 +46,8 @@ import time
 from pathlib import Path
 
 from amcore import cliargs
-from amcore.config import CONFIGS_DIR, CONTROLLERS, ConfigError, _read_toml, load_scenario, scenario_from_dict
+from amcore.config import (CONFIGS_DIR, CONTROLLERS, ConfigError, _read_toml, load_scenario, read_scenario,
+                           scenario_from_dict)
 
 from . import report
 from .randomize import RandomizeSpec, draw_trial, load_randomize, randomize_from_table, relocate
@@ -84,7 +85,7 @@ def screening_overrides(spec) -> list[str]:
 def screening_for(scenario: Path, overrides: list[str] = ()) -> list[str]:
     """`screening_overrides` of a scenario file with `overrides` (--set) applied; they go before
     those, which may change what they set. ConfigError as `apply_overrides` and the scenario's."""
-    return screening_overrides(scenario_from_dict(apply_overrides(_read_toml(scenario), list(overrides)), scenario))
+    return screening_overrides(scenario_from_dict(apply_overrides(read_scenario(scenario), list(overrides)), scenario))
 
 
 def _positive_int(text: str) -> int:
@@ -305,7 +306,7 @@ def _main(argv: list[str] | None) -> int:
             screening = screening_for(scenario, a.overrides)
             a.overrides = [*screening, *a.overrides]
             print(f"am-trials: screening world: --set {' --set '.join(screening)}", file=sys.stderr)
-        base = apply_overrides(_read_toml(scenario), a.overrides)
+        base = apply_overrides(read_scenario(scenario), a.overrides)
         if a.overrides:  # an override the scenario cannot take stops here, named
             try:
                 scenario_from_dict(base, scenario)

@@ -47,7 +47,8 @@ from pathlib import Path
 
 import numpy as np
 
-from amcore.config import MASS_TOLERANCE_MAX, OBJECT_POSE_SOURCES, ConfigError, SensorSpec, _build, _read_toml, devices_from_table
+from amcore.config import (MASS_TOLERANCE_MAX, OBJECT_POSE_SOURCES, SCENARIO_PATH_KEYS, ConfigError, SensorSpec, _build,
+                           devices_from_table, read_scenario)
 
 Range = tuple[float, ...]
 
@@ -127,7 +128,7 @@ def randomize_from_table(table: dict, where: str) -> RandomizeSpec:
 def load_randomize(path: str | Path) -> RandomizeSpec:
     """The [randomize] table of a TOML file (a scenario, or a file holding only that table)."""
     path = Path(path).resolve()
-    data = _read_toml(path)
+    data = read_scenario(path)  # a scenario's own [randomize] may come from its base
     if "randomize" not in data:
         raise ConfigError(f"{path}: no [randomize] table")
     return randomize_from_table(data["randomize"], str(path))
@@ -217,17 +218,11 @@ def _merged(under: dict, over: dict) -> dict:
 def relocate(data: dict, src: Path, dst_dir: Path) -> dict:
     """Scenario data read next to `src`, with its relative paths (the vehicle file, a link
     key file) rewritten for a file written in `dst_dir`."""
+    import os
+
     out = copy.deepcopy(data)
-    base = src.parent
-
-    def moved(rel: str) -> str:
-        import os
-        return os.path.relpath((base / rel).resolve(), dst_dir.resolve())
-
-    sc = out.get("scenario", {})
-    if "vehicle" in sc:
-        sc["vehicle"] = moved(sc["vehicle"])
-    link = out.get("link", {})
-    if link.get("key_file"):
-        link["key_file"] = moved(link["key_file"])
+    for table, key in SCENARIO_PATH_KEYS:
+        t = out.get(table, {})
+        if t.get(key):
+            t[key] = os.path.relpath((src.parent / t[key]).resolve(), dst_dir.resolve())
     return out

@@ -175,9 +175,9 @@ def test_touch_align_squeeze_presses_the_touch_force_holds_it_then_squeezes():
     ({"touch_force_n": 2.0, "touch_hold_s": 2.0}, "must fit in the grasp phase"),
 ])
 def test_touch_options_are_checked_naming_the_key(tmp_path, mission, words):
-    from amcore.config import ConfigError, _read_toml, scenario_from_dict
+    from amcore.config import ConfigError, read_scenario, scenario_from_dict
 
-    data = _read_toml(SCENARIO)
+    data = read_scenario(SCENARIO)
     data["mission"].update(mission)
     with pytest.raises(ConfigError, match=words):
         scenario_from_dict(data, SCENARIO)

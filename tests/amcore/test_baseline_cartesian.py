@@ -13,7 +13,7 @@ import pytest
 
 from amcore import baseline as bl
 from amcore.attitude import desired_attitude
-from amcore.config import _read_toml, load_scenario, scenario_from_dict
+from amcore.config import load_scenario, read_scenario, scenario_from_dict
 from amcore.control import Reference
 from amcore.mission import am_mission, squeeze_plan
 from amcore.model import AmState, build_model, create_data
@@ -27,7 +27,7 @@ G = 9.81
 
 @pytest.fixture(scope="module")
 def hex_spec():
-    return scenario_from_dict(apply_overrides(_read_toml(ROBUST), ['options.controller="baseline"']), ROBUST)
+    return scenario_from_dict(apply_overrides(read_scenario(ROBUST), ['options.controller="baseline"']), ROBUST)
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from amcore.config import ConfigError, load_scenario
+from amcore.config import ConfigError, load_scenario, read_scenario
 from trials.toml_write import dumps
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -44,7 +44,7 @@ def _dump(data: dict) -> str:
 
 def _scenario(tmp_path, table: str, key: str, value, vehicle_table: str | None = None) -> Path:
     """two_am_short with one value changed; `vehicle_table`: change it in a copy of the vehicle."""
-    data = tomllib.loads(SHORT.read_text())
+    data = read_scenario(SHORT)
     vdata = tomllib.loads(VEHICLE.read_text())
     vdata["vehicle"]["urdf"] = str(URDF)
     if vehicle_table is not None:

@@ -178,7 +178,7 @@ def test_the_baseline_flies_two_am_robust_without_the_wrist_sensor_admittances()
     ignores: under it they are off whatever [options] says (the baseline's step takes no turned
     task frame), and the trim, which reads the CoM error both laws give, stays on."""
     from amcore import baseline
-    from amcore.config import _read_toml, scenario_from_dict
+    from amcore.config import read_scenario, scenario_from_dict
     from trials.cli import apply_overrides
 
     from ..conftest import ROOT
@@ -186,7 +186,7 @@ def test_the_baseline_flies_two_am_robust_without_the_wrist_sensor_admittances()
     robust = ROOT / "configs" / "scenarios" / "two_am_robust.toml"
     paper = Pilot(load_scenario(robust), 4)
     assert paper.heading is not None and paper.lateral is not None and paper.trim is not None
-    spec_b = scenario_from_dict(apply_overrides(_read_toml(robust), ['options.controller="baseline"']), robust)
+    spec_b = scenario_from_dict(apply_overrides(read_scenario(robust), ['options.controller="baseline"']), robust)
     base = Pilot(spec_b, 4, model=paper.model)
     assert base.law is baseline.step
     assert base.heading is None and base.lateral is None and base.trim is not None

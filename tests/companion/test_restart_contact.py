@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from amcore.config import _read_toml, scenario_from_dict
+from amcore.config import read_scenario, scenario_from_dict
 from companion.pilot import Pilot
 from simulator.core import SitlCore
 from simulator.inprocess import as_on_the_wire
@@ -19,7 +19,7 @@ SHORT = Path(__file__).resolve().parents[2] / "configs" / "scenarios" / "two_am_
 
 
 def _restart_run(resume: bool) -> dict:
-    data = copy.deepcopy(_read_toml(SHORT))
+    data = copy.deepcopy(read_scenario(SHORT))
     data["mission"]["resume_contact_force"] = resume  # the default is true
     spec = scenario_from_dict(data, SHORT)
     core = SitlCore(spec)

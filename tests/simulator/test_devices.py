@@ -205,7 +205,7 @@ def test_closed_loop_estimate_tracks_the_truth_up_to_the_motion_capture_bias():
     """Two AMs flying their approach on the estimator's odometry, default device levels: after
     the first second, the estimate's error beyond the motion capture's fixed bias is small, and
     the ground truth handed to telemetry carries the estimate beside it."""
-    from amcore.config import _read_toml, scenario_from_dict
+    from amcore.config import read_scenario, scenario_from_dict
     from companion.pilot import Pilot
     from simulator.core import SitlCore
     from simulator.inprocess import as_on_the_wire, setpoint_as_on_the_wire
@@ -215,7 +215,7 @@ def test_closed_loop_estimate_tracks_the_truth_up_to_the_motion_capture_bias():
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[2]
-    data = _read_toml(SCENARIO)
+    data = read_scenario(SCENARIO)
     data["devices"] = load_randomize(root / "configs" / "randomize" / "default.toml").devices
     data["scenario"]["seed"] = 11
     spec = scenario_from_dict(data, SCENARIO)
@@ -276,14 +276,14 @@ def test_attitude_mode_with_devices_flies_its_rate_loop_without_saturating():
     verdict's 5 % of the steps (measured: 0 and 59 of 1500, the 59 in the first 70 ms on the
     ground, rotors near idle, before the estimator has the turn-on gyro bias). Fed the odometry's
     low-passed rate, which it filtered a second time, the rate loop oscillated: 552 of 1500."""
-    from amcore.config import _read_toml, scenario_from_dict
+    from amcore.config import read_scenario, scenario_from_dict
     from simulator import inprocess
     from trials.randomize import load_randomize
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[2]
     path = root / "configs" / "scenarios" / "two_am_comp_hex_attitude.toml"
-    data = _read_toml(path)
+    data = read_scenario(path)
     data["devices"] = load_randomize(root / "configs" / "randomize" / "default.toml").devices
     data["scenario"]["seed"] = 17
     res = inprocess.run(scenario_from_dict(data, path), duration_s=1.5)

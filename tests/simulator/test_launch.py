@@ -29,9 +29,7 @@ def test_a_bad_gcs_key_file_exits_2_before_anything_starts(tmp_path, capsys, con
 
 def test_a_gcs_key_file_with_signing_off_is_refused(tmp_path, capsys):
     scenario = tmp_path / "s.toml"
-    scenario.write_text((SCENARIOS / "two_am_short.toml").read_text().replace(
-        'vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{SCENARIOS.parent / "vehicles" / "am3dof.toml"}"')
-        + "\n[link]\nsigning = false\n")
+    scenario.write_text(f'base = "{SCENARIOS / "two_am_short.toml"}"\n\n[link]\nsigning = false\n')
     key = tmp_path / "gcs.key"
     key.write_text("a passphrase\n")
     assert main([str(scenario), "--gcs-key-file", str(key), "--run-dir", str(tmp_path / "run")]) == 2

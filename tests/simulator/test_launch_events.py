@@ -74,8 +74,7 @@ def test_a_urdf_pybullet_cannot_load_is_a_configuration_error_on_am_runs_termina
                                                              '</geometry>'))
     (tmp_path / "am3dof.toml").write_text((vehicles / "am3dof.toml").read_text())
     scenario = tmp_path / "s.toml"
-    scenario.write_text((SCENARIOS / "two_am_short.toml").read_text().replace(
-        'vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{tmp_path / "am3dof.toml"}"'))
+    scenario.write_text(f'base = "{SCENARIOS / "two_am_short.toml"}"\n\n[scenario]\nvehicle = "{tmp_path / "am3dof.toml"}"\n')
     code = launch.main([str(scenario), "--no-telemetry", "--gcs", "none", "--run-dir", str(tmp_path / "run"),
                         "--no-progress"])
     err = capsys.readouterr().err

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import stat
 import sys
+import tomllib
 
 import pytest
 
@@ -37,6 +38,7 @@ def test_the_scenario_as_flown_replays_with_its_own_vehicle_files(tmp_path):
     assert (tmp_path / "vehicle" / "am3dof.toml").read_bytes() == (SCENARIOS_DIR.parent / "vehicles" /
                                                                    "am3dof.toml").read_bytes()
     assert flown.ams == source.ams and flown.object == source.object and flown.mission == source.mission
+    assert "base = " in SHORT.read_text() and "base" not in tomllib.loads(out.read_text())  # resolved: stands alone
 
 
 def test_the_manifest_names_what_was_flown_how_where_and_when(tmp_path):

@@ -7,14 +7,14 @@ from pathlib import Path
 
 import pytest
 
-from amcore.config import _read_toml, scenario_from_dict
+from amcore.config import read_scenario, scenario_from_dict
 from simulator.inprocess import run
 
 SHORT = Path(__file__).resolve().parents[2] / "configs" / "scenarios" / "two_am_short.toml"
 
 
 def _run(changes: dict, duration=None, lost_from=None):
-    data = copy.deepcopy(_read_toml(SHORT))
+    data = copy.deepcopy(read_scenario(SHORT))
     for table, values in changes.items():
         if table == "am4":
             data["am"][0].update(values)

@@ -10,7 +10,7 @@ import pinocchio as pin
 import pybullet as pb
 import pytest
 
-from amcore.config import PadSpec, _read_toml, scenario_from_dict
+from amcore.config import PadSpec, read_scenario, scenario_from_dict
 from amcore.so3 import Rz, quat_wxyz_to_R
 from simulator.inprocess import run
 from simulator.scene import table_geometry
@@ -148,7 +148,7 @@ def test_contact_truth_support_is_the_object_weight_in_the_hover(pad, substeps):
     forces carry the object's weight, m g up on the object (the object pushes the pads down
     with m g), nothing sideways; with PyBullet's contacts in two substeps of each step too
     ([scenario].physics_substeps)."""
-    data = copy.deepcopy(_read_toml(SHORT))
+    data = copy.deepcopy(read_scenario(SHORT))
     data["scenario"]["physics_substeps"] = substeps
     if PAD_SHAPES[pad]:
         data["pad"] = dict(PAD_SHAPES[pad])

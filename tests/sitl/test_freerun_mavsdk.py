@@ -40,10 +40,8 @@ OFFBOARD_MODE = custom_mode_of(NavState.OFFBOARD)
 
 
 def scenario_copy(tmp_path: Path) -> Path:
-    text = (SCENARIOS / "two_am_comp_attitude.toml").read_text()
-    vehicle = SCENARIOS.parent / "vehicles" / "am3dof.toml"
     path = tmp_path / "two_am_comp_attitude.toml"
-    path.write_text(text.replace('vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{vehicle}"'))
+    path.write_text(f'base = "{SCENARIOS / "two_am_comp_attitude.toml"}"\n')
     return path
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from amcore.config import _read_toml, scenario_from_dict
+from amcore.config import read_scenario, scenario_from_dict
 from amcore.so3 import quat_wxyz_to_R
 from simulator.inprocess import run
 
@@ -27,7 +27,7 @@ DRAW = Path(__file__).resolve().parent / "data" / "buckling_draw.toml"
 
 def _fly(crown_radius_m: float) -> tuple[float, float]:
     """The box's largest turn from the grasp's end [deg] and the largest slip [m] over 16 s."""
-    data = _read_toml(DRAW)
+    data = read_scenario(DRAW)
     data["pad"]["crown_radius_m"] = crown_radius_m
     spec = scenario_from_dict(data, DRAW)
     yaw = []

@@ -16,10 +16,9 @@ LITERAL_OPTIONS = '\n[options]\noffboard_inputs = "sent"\noffboard_torque_cutoff
 
 
 def _attitude_scenario(tmp_path, name: str, text_edit=lambda t: t, literal: bool = False):
-    """two_am_comp_attitude.toml copied to tmp_path/name (its vehicle path made absolute), edited,
-    with the literal options appended if `literal`."""
-    text = (SCENARIOS / "two_am_comp_attitude.toml").read_text().replace(
-        'vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{SCENARIOS.parent / "vehicles" / "am3dof.toml"}"')
+    """An overlay of two_am_comp_attitude.toml at tmp_path/name (its [flight_controller] restated for
+    `text_edit`), edited, with the literal options appended if `literal`."""
+    text = f'base = "{SCENARIOS / "two_am_comp_attitude.toml"}"\n\n[flight_controller]\nmode = "attitude"\n'
     path = tmp_path / name
     path.write_text(text_edit(text) + (LITERAL_OPTIONS if literal else ""))
     return path
@@ -90,12 +89,12 @@ def test_a_drawn_trial_is_bit_identical_in_process_and_through_the_processes(tmp
     in-process runner agree bit for bit, so a campaign's rows replay through the processes.
     In attitude mode with the arm law on the autopilot's reports, those reports (ATTITUDE_TARGET,
     AM_JOINT_STATE's measured effort) travel the wire to each companion process."""
-    from amcore.config import _read_toml
+    from amcore.config import read_scenario
     from trials.cli import build_tasks
     from trials.randomize import load_randomize
 
     base = SCENARIOS / scenario
-    data = _read_toml(base)
+    data = read_scenario(base)
     data.setdefault("options", {}).update(options)
     task = build_tasks(data, base, load_randomize(SCENARIOS.parent / "randomize" / "stress.toml"), 11, 1, tmp_path,
                        None)[0]
@@ -112,9 +111,8 @@ def test_a_drawn_trial_is_bit_identical_in_process_and_through_the_processes(tmp
 def test_a_failed_mission_makes_am_run_say_so_and_exit_4(tmp_path):
     """A vehicle started turned 20 deg away from its heading saturates its rotors fighting
     back: the verdict names it and am-run exits 4."""
-    text = (SCENARIOS / "two_am_short.toml").read_text().replace(
-        'vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{SCENARIOS.parent / "vehicles" / "am3dof.toml"}"')
-    text = text.replace("sysid = 4\n", "sysid = 4\nstart_heading_deg = 20.0\n")
+    text = (f'base = "{SCENARIOS / "two_am_short.toml"}"\n\n'  # [[am]] replaces the base's whole team
+            "[[am]]\nsysid = 4\nazimuth_deg = 180.0\nstart_heading_deg = 20.0\n\n[[am]]\nsysid = 5\nazimuth_deg = 0.0\n")
     path = tmp_path / "turned.toml"
     path.write_text(text)
     r = am_run(str(path), tmp_path / "r", "--duration", "1.0", "--no-telemetry", timeout_s=300)
@@ -143,13 +141,13 @@ def test_baseline_squeezes_two_am_robusts_object_with_the_planned_force():
     reaction feed-forward) in the in-process SITL: at the end of the grasp each pad presses the
     object with the squeeze sizing's planned force (within 2 %, PyBullet's contact), not the
     fixed K_y,x squeeze_m, and no base touches anything."""
-    from amcore.config import _read_toml, scenario_from_dict
+    from amcore.config import read_scenario, scenario_from_dict
     from amcore.mission import squeeze_plan
     from amcore.model import build_model
     from trials.cli import apply_overrides
 
     path = SCENARIOS / "two_am_robust.toml"
-    spec = scenario_from_dict(apply_overrides(_read_toml(path), ['options.controller="baseline"']), path)
+    spec = scenario_from_dict(apply_overrides(read_scenario(path), ['options.controller="baseline"']), path)
     plan = squeeze_plan(spec, build_model(spec.vehicle))
     assert plan.force_n > spec.vehicle.gains.K_y[0] * spec.mission.squeeze_m + 1.0
     normal: dict[int, list[float]] = {}
@@ -191,11 +189,9 @@ def test_a_world_in_physics_substeps_is_bit_identical_in_process_and_through_the
     """The screening campaign's world ([scenario].rate_hz = 500 in two PyBullet substeps, the
     autopilot at 500 Hz): both runners step it alike, and the substeps act (another run than
     the same world at 500 Hz in one step)."""
-    text = (SCENARIOS / "two_am_comp_attitude.toml").read_text().replace(
-        'vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{SCENARIOS.parent / "vehicles" / "am3dof.toml"}"')
-    text = text.replace("rate_hz = 1000.0", "rate_hz = 500.0\nphysics_substeps = 2", 1)
     path = tmp_path / "substeps.toml"
-    path.write_text(text.replace('mode = "attitude"', 'mode = "attitude"\nrate_hz = 500.0', 1))
+    path.write_text(f'base = "{SCENARIOS / "two_am_comp_attitude.toml"}"\n\n[scenario]\nrate_hz = 500.0\n'
+                    "physics_substeps = 2\n\n[flight_controller]\nrate_hz = 500.0\n")
     spec = load_scenario(path)
     assert (spec.rate_hz, spec.physics_substeps, spec.vehicle.flight_controller.rate_hz) == (500.0, 2, 500.0)
     ours = run(spec, duration_s=0.4)
@@ -214,8 +210,7 @@ def test_rejected_setpoints_are_answered_at_once_and_the_run_stays_deterministic
     each refusal is answered at once (the flight controller holds the last valid command), K in
     a row send the vehicle to failsafe, and no step waits for --step-timeout (5 s). Two am-run
     runs and the in-process run agree on digest, events and verdict."""
-    text = (SCENARIOS / "two_am_short.toml").read_text().replace(
-        'vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{SCENARIOS.parent / "vehicles" / "am3dof.toml"}"')
+    text = f'base = "{SCENARIOS / "two_am_short.toml"}"\n'
     path = tmp_path / "late.toml"
     path.write_text(text + "\n[sensors]\nlatency_s = 0.008\n")
     ours = run(load_scenario(path), duration_s=0.6)
@@ -241,7 +236,7 @@ def test_a_deployment_trial_plans_from_the_same_measured_object_in_process_and_t
     table, measured by motion capture, [mission].object_pose = "mocap"): the simulator sends its
     measurement in the handshake (AM_OBJECT_POSE), each companion plans from it, and `am-run`
     agrees with the in-process runner bit for bit."""
-    from amcore.config import _read_toml
+    from amcore.config import read_scenario
     from amcore.mission import config_object_pose
     from amcore.preflight import preflight
     from simulator.object_mocap import measure_object
@@ -250,7 +245,7 @@ def test_a_deployment_trial_plans_from_the_same_measured_object_in_process_and_t
 
     base = SCENARIOS / "two_am_robust.toml"
     rand = load_randomize(SCENARIOS.parent / "randomize" / "default.toml")
-    tasks = build_tasks(_read_toml(base), base, rand, 23, 6, tmp_path, None)
+    tasks = build_tasks(read_scenario(base), base, rand, 23, 6, tmp_path, None)
     task = next(t for t in tasks if preflight(load_scenario(t.path)).inside)  # a draw the team flies
     spec = load_scenario(task.path)
     measured, truth = measure_object(spec), config_object_pose(spec)

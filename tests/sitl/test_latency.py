@@ -17,8 +17,7 @@ pytestmark = pytest.mark.sitl
 
 
 def _delayed(tmp_path, latency_s: float):
-    text = (SCENARIOS / "two_am_comp_attitude.toml").read_text().replace(
-        'vehicle = "../vehicles/am3dof.toml"', f'vehicle = "{SCENARIOS.parent / "vehicles" / "am3dof.toml"}"')
+    text = f'base = "{SCENARIOS / "two_am_comp_attitude.toml"}"\n'
     path = tmp_path / f"delayed-{latency_s}.toml"
     path.write_text(text + f"\n[link]\ndelay_s = 0.005\njitter_s = 0.002\njoints = 'link'\n\n[options]\noffboard_latency_s = {latency_s}\n")
     return load_scenario(path)

@@ -4,13 +4,12 @@ paper's box in the short mission (two_am_short's timing) without saturating, the
 rotor below 95 % of its range in the hover window (am3dof's reached 90.4 % in torque mode)."""
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from amcore.config import scenario_from_dict
+from amcore.config import read_scenario, scenario_from_dict
 from amcore.mission import am_mission
 from amcore.model import build_model
 from simulator.inprocess import run
@@ -25,7 +24,7 @@ def short_grasp(vehicle: Path, mode: str):
     """two_am_short on `vehicle`; attitude mode as the *_attitude scenarios fly it (the companions
     at 250 Hz, the vehicle's own lagging rotors)."""
     path = ROOT / "configs" / "scenarios" / "two_am_short.toml"
-    data = tomllib.loads(path.read_text())
+    data = read_scenario(path)
     data["scenario"].update(vehicle=str(vehicle.resolve()), name=f"two_am_short_{vehicle.stem}_{mode}")
     if mode == "attitude":
         data["scenario"]["control_rate_hz"] = 250.0

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from amcore.config import _read_toml
+from amcore.config import read_scenario
 from trials import cli, runner
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -106,11 +106,11 @@ def test_every_controller_is_checked_before_any_trial_runs(tmp_path, capsys, sce
 
 
 def test_controllers_the_scenario_can_fly_pass_the_check():
-    base = _read_toml(SHORT)
+    base = read_scenario(SHORT)
     cli.check_controllers(base, SHORT, ["passivity", "baseline"])  # torque mode, with a [baseline] table
-    cli.check_controllers(_read_toml(ATTITUDE), ATTITUDE, ["passivity"])
+    cli.check_controllers(read_scenario(ATTITUDE), ATTITUDE, ["passivity"])
     with pytest.raises(cli.ConfigError, match="--controller 'baseline'"):
-        cli.check_controllers(_read_toml(ATTITUDE), ATTITUDE, ["passivity", "baseline"])
+        cli.check_controllers(read_scenario(ATTITUDE), ATTITUDE, ["passivity", "baseline"])
     with pytest.raises(cli.ConfigError, match="--controller 'baseline' given twice"):
         cli.check_controllers(base, SHORT, ["baseline", "passivity", "baseline"])
 

@@ -6,7 +6,7 @@ import shutil
 from dataclasses import replace
 from pathlib import Path
 
-from amcore.config import _read_toml
+from amcore.config import read_scenario
 from trials import cli
 from trials.randomize import load_randomize
 from trials.runner import bundle_files, run_all, run_trial, trial_folder
@@ -17,7 +17,7 @@ DURATION_S = 0.5  # a trial cut short: enough to fly (its verdict then "incomple
 
 
 def _tasks(out: Path, n: int = 1):
-    tasks = cli.build_tasks(_read_toml(SHORT), SHORT, load_randomize(cli.DEFAULT_RANDOMIZE), 3, n, out, None)
+    tasks = cli.build_tasks(read_scenario(SHORT), SHORT, load_randomize(cli.DEFAULT_RANDOMIZE), 3, n, out, None)
     short = []
     for t in tasks:
         data = {**t.data, "scenario": {**t.data["scenario"], "duration_s": DURATION_S}}

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from amcore.config import _read_toml, load_scenario, scenario_from_dict
+from amcore.config import load_scenario, read_scenario, scenario_from_dict
 from simulator.inprocess import run
 from simulator.verdict import FAILURE_CLASSES
 from trials import cli
@@ -78,7 +78,7 @@ def test_a_dask_cluster_runs_the_same_trials_as_the_local_pool(campaign, tmp_pat
     from dask.distributed import LocalCluster
 
     rows = read_csv(campaign / "trials.csv")
-    tasks = cli.build_tasks(_read_toml(SHORT), SHORT, load_randomize(cli.DEFAULT_RANDOMIZE), SEED, 4, tmp_path, None)
+    tasks = cli.build_tasks(read_scenario(SHORT), SHORT, load_randomize(cli.DEFAULT_RANDOMIZE), SEED, 4, tmp_path, None)
     tasks = [t for t in tasks if t.index in (0, 3)]
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         with cli.executor(2, cluster.scheduler_address) as ex:
@@ -136,7 +136,7 @@ def test_a_trial_that_raises_is_an_error_row_and_the_others_run_on():
 
 
 def test_set_changes_the_base_scenario_of_every_trial_and_only_what_it_names(tmp_path):
-    base = _read_toml(SHORT)
+    base = read_scenario(SHORT)
     data = cli.apply_overrides(base, ["mission.squeeze_sizing=true", "pad.shape=\"crowned\"",
                                       "am.misalignment_deg=1.5"])
     assert data["mission"]["squeeze_sizing"] is True and data["pad"]["shape"] == "crowned"
@@ -206,7 +206,7 @@ def test_the_screening_world_keeps_the_contact_step_and_the_companions_rate(name
     at their rate; the emulated autopilot at most at the new rate."""
     path = ROOT / "configs" / "scenarios" / f"{name}.toml"
     spec = load_scenario(path)
-    screened = scenario_from_dict(cli.apply_overrides(_read_toml(path), cli.screening_overrides(spec)), path)
+    screened = scenario_from_dict(cli.apply_overrides(read_scenario(path), cli.screening_overrides(spec)), path)
     assert screened.solver_iterations == cli.SCREENING_SWEEPS < spec.solver_iterations == 50
     assert (screened.rate_hz, screened.physics_substeps, screened.control_every) == (rate_hz, substeps, control_every)
     assert screened.dt_s / screened.physics_substeps == spec.dt_s
@@ -219,7 +219,7 @@ def test_the_screening_world_keeps_an_actuation_delay_in_time(delay, rate_hz, sc
     """[flight_controller].actuation_delay_steps counts physics steps: two steps at 1 kHz are
     one at 500 Hz; one step has no half, so the world keeps its rate (the sweeps still change)."""
     path = ROOT / "configs" / "scenarios" / "two_am_robust_attitude.toml"
-    data = cli.apply_overrides(_read_toml(path), [f"flight_controller.actuation_delay_steps={delay}"])
+    data = cli.apply_overrides(read_scenario(path), [f"flight_controller.actuation_delay_steps={delay}"])
     spec = scenario_from_dict(data, path)
     screened = scenario_from_dict(cli.apply_overrides(data, cli.screening_overrides(spec)), path)
     assert (screened.rate_hz, screened.vehicle.flight_controller.actuation_delay_steps) == (rate_hz, screened_delay)

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from amcore.config import ConfigError, _read_toml, scenario_from_dict
+from amcore.config import ConfigError, read_scenario, scenario_from_dict
 from trials.randomize import draw_trial, load_randomize, randomize_from_table, relocate
 from trials.toml_write import dumps
 
@@ -21,7 +21,7 @@ DEFAULT = load_randomize(ROOT / "configs" / "randomize" / "default.toml")
 
 
 def test_a_trial_is_a_function_of_seed_and_index_alone():
-    base = _read_toml(SCENARIO)
+    base = read_scenario(SCENARIO)
     a = [draw_trial(base, DEFAULT, 5, i) for i in range(6)]
     b = [draw_trial(base, DEFAULT, 5, i) for i in (5, 3, 1, 0, 2, 4)]
     assert a[3] == b[1] and a[0] == b[3] and a[5] == b[0]
@@ -30,7 +30,7 @@ def test_a_trial_is_a_function_of_seed_and_index_alone():
 
 
 def test_draws_stay_in_the_default_ranges_and_make_valid_scenarios():
-    base = _read_toml(SCENARIO)  # a paper scenario: the draws make it plan from the measured object
+    base = read_scenario(SCENARIO)  # a paper scenario: the draws make it plan from the measured object
     assert base.get("mission", {}).get("object_pose", "config") == "config"
     for i in range(40):
         data, p = draw_trial(base, DEFAULT, 1, i)
@@ -48,7 +48,7 @@ def test_draws_stay_in_the_default_ranges_and_make_valid_scenarios():
 
 
 def test_a_table_that_moves_the_object_sets_or_demands_where_the_team_takes_its_pose_from():
-    base = _read_toml(SCENARIO)
+    base = read_scenario(SCENARIO)
     moved = {"object_position_m": 0.1, "object_yaw_deg": 30.0}
     with pytest.raises(ConfigError) as e:  # a blind team would miss the moved object: refused, named
         draw_trial(base, randomize_from_table(moved, "r.toml"), 1, 0)
@@ -59,13 +59,13 @@ def test_a_table_that_moves_the_object_sets_or_demands_where_the_team_takes_its_
     assert scenario_from_dict(measured, SCENARIO).mission.object_pose == "mocap"
     # the key draws nothing: the same trial with or without it, but for where the pose comes from
     assert {k: v for k, v in measured.items() if k != "mission"} == {k: v for k, v in blind.items() if k != "mission"}
-    robust = _read_toml(ROBUST)  # a scenario that plans from the measurement already needs no key
+    robust = read_scenario(ROBUST)  # a scenario that plans from the measurement already needs no key
     assert scenario_from_dict(draw_trial(robust, randomize_from_table(moved, "r.toml"), 1, 0)[0],
                               ROBUST).mission.object_pose == "mocap"
 
 
 def test_a_cylinder_scales_radius_and_height():
-    data, p = draw_trial(_read_toml(TEN), DEFAULT, 2, 0)
+    data, p = draw_trial(read_scenario(TEN), DEFAULT, 2, 0)
     spec = scenario_from_dict(data, TEN)
     assert spec.object.radius_m == pytest.approx(0.6 * p["object_size_scale"])
     assert spec.object.height_m == pytest.approx(0.3 * p["object_size_scale"])
@@ -73,7 +73,7 @@ def test_a_cylinder_scales_radius_and_height():
 
 
 def test_a_written_trial_reads_back_as_the_same_scenario(tmp_path):
-    data, _ = draw_trial(_read_toml(SCENARIO), DEFAULT, 3, 17)
+    data, _ = draw_trial(read_scenario(SCENARIO), DEFAULT, 3, 17)
     out = tmp_path / "deep" / "t.toml"
     out.parent.mkdir(parents=True)
     moved = relocate(data, SCENARIO, out.parent)
@@ -83,6 +83,25 @@ def test_a_written_trial_reads_back_as_the_same_scenario(tmp_path):
     assert a.vehicle == b.vehicle and a.object == b.object and a.ams == b.ams and a.sensors == b.sensors
     assert a.devices == b.devices
     assert a.link == b.link and a.seed == b.seed
+
+
+def test_the_trials_of_an_overlay_are_self_contained_and_its_campaign_may_be_its_bases(tmp_path):
+    """A trial of an overlay is written resolved (no base, the vehicle's rotors where the overlay
+    unset the base's) and loads alone; an overlay's [randomize] is its base's unless it gives one."""
+    from trials.cli import build_tasks
+
+    overlay = ROOT / "configs" / "scenarios" / "ten_am_robust_attitude.toml"
+    own = tomllib.loads(overlay.read_text())
+    assert "base" in own and "randomize" not in own
+    rand = load_randomize(overlay)
+    assert rand == load_randomize(ROOT / "configs" / "scenarios" / "ten_am_robust.toml") and rand.object_mass_kg
+    tasks = build_tasks(read_scenario(overlay), overlay, rand, 4, 2, tmp_path, None)
+    for task in tasks:
+        data = tomllib.loads(Path(task.path).read_text())
+        assert not {"base", "unset", "rotors", "randomize"} & set(data)
+        spec = scenario_from_dict(data, Path(task.path))
+        assert spec.vehicle.flight_controller.mode == "attitude" and spec.vehicle.rotors.lagging
+        assert spec.vehicle.urdf.parent == tmp_path / "scenarios" / "vehicle"  # its own copy (snapshot_vehicle)
 
 
 @settings(max_examples=60, deadline=None)
@@ -119,7 +138,7 @@ def test_a_bad_randomize_table_names_the_key(table, words):
 
 def test_the_stress_option_draws_white_noise_on_the_states():
     stress = load_randomize(ROOT / "configs" / "randomize" / "stress_states.toml")
-    data, _ = draw_trial(_read_toml(SCENARIO), stress, 1, 0)
+    data, _ = draw_trial(read_scenario(SCENARIO), stress, 1, 0)
     spec = scenario_from_dict(data, SCENARIO)
     assert not spec.devices.enabled and spec.sensors.force_noise_n == stress.sensors["force_noise_n"]
     assert 0.0 <= spec.sensors.latency_s <= 0.002
@@ -133,7 +152,7 @@ def test_the_sensors_only_campaign_has_the_default_device_levels_and_nothing_els
 
 
 def test_a_scenarios_own_device_keys_win_over_the_randomized_ones():
-    base = _read_toml(SCENARIO)
+    base = read_scenario(SCENARIO)
     base["devices"] = {"scale": 3.0, "estimator": {"gyro_cutoff_hz": 0.0}}
     spec = scenario_from_dict(draw_trial(base, DEFAULT, 1, 0)[0], SCENARIO)
     assert spec.devices.scale == 3.0 and spec.devices.estimator.gyro_cutoff_hz == 0.0
@@ -145,7 +164,7 @@ STRESS = load_randomize(ROOT / "configs" / "randomize" / "stress.toml")
 
 
 def test_the_default_draws_on_two_am_robust_make_deployment_trials():
-    base = _read_toml(ROBUST)
+    base = read_scenario(ROBUST)
     yaws = []
     for i in range(40):
         data, p = draw_trial(base, DEFAULT, 11, i)
@@ -179,7 +198,7 @@ def test_the_stress_and_ten_am_files_keep_the_default_device_levels():
 
 def test_a_table_without_the_new_keys_draws_none_of_them():
     old = randomize_from_table({"object_mass_kg": [0.5, 2.0], "misalignment_deg": 5.0, "setpoint_loss": [0.0, 0.1]}, "r")
-    _, p = draw_trial(_read_toml(SCENARIO), old, 5, 0)
+    _, p = draw_trial(read_scenario(SCENARIO), old, 5, 0)
     assert not {"planned_mass_kg", "object_dx_m", "object_yaw_deg"} & set(p)
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from amcore.config import _read_toml
+from amcore.config import read_scenario
 from trials import cli
 from trials.report import read_csv, summarize, summary_line, wilson_interval
 from trials.runner import TrialTask, run_trial
@@ -51,7 +51,7 @@ def test_incomplete_trials_are_counted_in_the_line_and_the_comparison():
 
 
 def test_a_refused_trial_does_not_fly_and_says_why(tmp_path):
-    data = _read_toml(ROBUST)
+    data = read_scenario(ROBUST)
     data["object"]["mass_kg"] = 2.5
     t0 = time.perf_counter()
     row = run_trial(TrialTask(0, data, str(ROBUST), {"object_mass_kg": 2.5}))
