@@ -108,26 +108,6 @@ def _seed(text: str) -> int:
     return v
 
 
-def _speed(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (v > 0.0 and v <= 10.0):
-        raise argparse.ArgumentTypeError(f"must be a real-time factor in (0, 10], got {text}")
-    return v
-
-
-def _instance(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if not 0 <= v <= 200:
-        raise argparse.ArgumentTypeError(f"must be in 0..200 (PX4 SITL's ports shift by it), got {v}")
-    return v
-
-
 def _scheduler(text: str) -> str:
     try:
         return parse_scheduler_address(text)
@@ -160,9 +140,9 @@ def parse_args(argv):
     ap.add_argument("--realtime", action="store_true",
                     help="fly each trial free-running, as `am-run --realtime` does (each vehicle a PX4 SITL, each "
                          "companion on its own clock), one at a time; its timing in the row (trials/freerun.py)")
-    ap.add_argument("--speed", type=_speed, default=None, metavar="F",
+    ap.add_argument("--speed", type=cliargs.number(0.0, 10.0, lo_open=True), default=None, metavar="F",
                     help="free-running real-time factor (implies --realtime; default: am-run's, 0.5)")
-    ap.add_argument("--instance", type=_instance, default=0, metavar="N",
+    ap.add_argument("--instance", type=cliargs.number(0, 200, integer=True), default=0, metavar="N",
                     help="free-running: the vehicles are PX4 SITL instances N, N+1, ... (am-run --instance)")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar (there is one on a terminal only)")
     ap.add_argument("--no-plots", action="store_true", help="no plots")
