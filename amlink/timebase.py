@@ -18,7 +18,11 @@ clock runs at another speed -- PX4 SITL with a speed factor, whose boot time run
 simulation's rate -- is followed, and a rate that changes is followed within a window.
 
 Kept from PX4 (src/lib/timesync/Timesync.hpp and Timesync.cpp, the constants' names): samples
-with a round trip of ``MAX_RTT_SAMPLE`` (10 ms) or more are not used; once converged, a sample
+with a round trip of ``MAX_RTT_SAMPLE`` (10 ms) or more are not used -- or, on a link whose
+fastest round trip so far is longer than half of that, of ``RTT_CUT_FACTOR`` (2) times that
+fastest one or more: PX4's cut is for its own links, serial or local UDP, and would take no
+sample at all from a link with 10 ms of latency each way, where a round trip twice the link's
+best still bounds its sample within ``rate * rtt / 2``; once converged, a sample
 more than ``MAX_DEVIATION_SAMPLE`` (100 ms of autopilot time) off the estimate is not used, and
 more than ``MAX_CONSECUTIVE_HIGH_DEVIATION`` (5) of them in a row reset the estimate (a time
 jump: the autopilot rebooted, or its speed changed abruptly); the sample that triggers the reset
@@ -42,6 +46,7 @@ from collections import deque
 from dataclasses import dataclass
 
 MAX_RTT_SAMPLE_NS = 10_000_000  # PX4 Timesync.hpp MAX_RTT_SAMPLE = 10_ms
+RTT_CUT_FACTOR = 2  # on a slow link: samples of this many times its fastest round trip or more are not used
 MAX_DEVIATION_SAMPLE_US = 100_000.0  # PX4 Timesync.hpp MAX_DEVIATION_SAMPLE = 100_ms
 MAX_CONSECUTIVE_HIGH_DEVIATION = 5  # PX4 Timesync.hpp
 WINDOW = 32  # samples in the fit: 3.2 s at the 10 Hz a PX4 link exchanges TIMESYNC
@@ -87,6 +92,7 @@ class Timebase:
         self._high_deviation = 0
         self.accepted = self.rejected_rtt = self.rejected_deviation = self.unmatched = self.resets = 0
         self.last_rtt_ns: int | None = None
+        self.min_rtt_ns: int | None = None  # the fastest round trip answered so far
 
     # -- the exchange --------------------------------------------------------------
     def request(self, mono_ns: int) -> int:
@@ -106,7 +112,8 @@ class Timebase:
         self._outstanding.remove(ts1_ns)  # a duplicate answer is unmatched
         rtt = int(rx_ns - ts1_ns)
         self.last_rtt_ns = rtt
-        if rtt >= self.max_rtt_ns:
+        self.min_rtt_ns = rtt if self.min_rtt_ns is None else min(self.min_rtt_ns, rtt)
+        if rtt >= self.rtt_cut_ns:
             self.rejected_rtt += 1
             return False
         s = _Sample(int(ts1_ns + rtt // 2), tc1_ns / 1000.0, rtt)
@@ -122,6 +129,12 @@ class Timebase:
         self._refit()
         self.accepted += 1
         return True
+
+    @property
+    def rtt_cut_ns(self) -> int:
+        """The round trip [ns] from which a sample is not used: max_rtt_ns (PX4's 10 ms), or on
+        a slower link RTT_CUT_FACTOR times its fastest round trip so far (module doc)."""
+        return max(self.max_rtt_ns, RTT_CUT_FACTOR * (self.min_rtt_ns or 0))
 
     def reset(self) -> None:
         """Forget every sample (outstanding requests stay matchable)."""

@@ -157,3 +157,32 @@ def test_bad_parameters_are_named():
         Timebase(max_rtt_ns=0)
     with pytest.raises(ValueError, match="min_samples"):
         Timebase(min_samples=1)
+
+
+def test_a_slow_link_converges_with_its_cut_at_twice_its_fastest_round_trip():
+    """20 ms of latency up and 0-4 ms of jitter (a 10 ms link delay at half speed): PX4's 10 ms
+    cut would take no sample; the cut moves to twice the fastest round trip, the samples within
+    it converge, and the estimate is off by half the legs' asymmetry, as any two-way exchange."""
+    rng = random.Random(4)
+    ap, tb = Autopilot(0.5), Timebase()
+    t = ap.t0 + 1234
+    for k in range(60):
+        up = 20 * MS + rng.uniform(0, 4 * MS)
+        down = 0.2 * MS + rng.uniform(0, 0.5 * MS) + (80 * MS if k % 10 == 5 else 0)  # every 10th: a spike
+        exchange(tb, ap, t, up, down)
+        t += PERIOD
+    assert tb.converged and tb.rejected_rtt == 6 and tb.accepted == 54
+    assert 2 * 20 * MS <= tb.rtt_cut_ns <= 2 * 21 * MS
+    # the legs' mean asymmetry, 22 - 0.45 ms: the estimate runs rate * 21.55 / 2 ms ahead of the
+    # autopilot's clock (it places each reading at the midpoint, before the autopilot made it),
+    # within the fit's bound for the 4 ms of jitter (2 B, B = rate * J / 2)
+    ahead_us = tb.fc_time_us(t) - ap.fc_us(t)
+    assert ahead_us == pytest.approx(0.5 * 21.55 * MS / 2 / 1000, abs=2 * 0.5 * 4 * MS / 2 / 1000)
+
+
+def test_a_local_link_keeps_px4_s_cut():
+    tb = Timebase()
+    ap = Autopilot(1.0)
+    exchange(tb, ap, ap.t0 + 1, 0.3 * MS, 0.3 * MS)
+    assert tb.rtt_cut_ns == 10 * MS
+    assert not exchange(tb, ap, ap.t0 + 100 * MS, 9 * MS, 2 * MS)  # 11 ms: beyond PX4's MAX_RTT_SAMPLE
