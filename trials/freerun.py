@@ -11,10 +11,11 @@ cores for its processes (docs/freerun.md, "Where it stands").
 
 What a row says, from `am-run`'s exit code (`exit_code`) and outcome.json: the verdict in
 outcome.json when the mission failed, whatever the code (a companion that handed its vehicle
-back to PX4 exits 1 and the verdict names the failover); the verdict "success" when the code
-is 0. Verdict "error", with the last lines of the trial's output as the reason: no verdict (a
-process did not start, the world never came up, code 2 for a check the campaign did not make),
-a success with a process that failed, or a trial past its time limit. A campaign with an error
+back to PX4 exits 1 and the verdict names the failover); any other verdict when the code is 0
+or 4. Verdict "error", with the last lines of the trial's output as the reason: no verdict (the
+world never came up, code 2 for a check the campaign did not make), another verdict with a
+process that failed (a success; a run cut short because a process did not start), or a trial
+past its time limit. A campaign with an error
 row exits 1, as one whose trial raised.
 """
 from __future__ import annotations
@@ -82,8 +83,9 @@ def judged(head: dict, rc: int | None, run_dir: Path, log: Path, spec, timeout_s
     o = json.loads(outcome.read_text()) if outcome.is_file() else {}
     v = o.get("verdict")
     # a failed flight is a verdict, whatever the processes did (a companion that handed its vehicle
-    # back exits 1); no verdict, or a success with a process that failed, is an error of the stack
-    if v is None or rc is None or (rc not in (0, 4) and v["status"] == "success"):
+    # back exits 1); no verdict, or any other verdict with a process that failed (a success, or a
+    # run that ended before its mission did because the stack did not start), is an error of the stack
+    if v is None or rc is None or (rc not in (0, 4) and v["status"] != "failed"):
         lines = log.read_text(errors="replace").strip().splitlines() if log.is_file() else []
         what = f"timed out after {timeout_s:.0f} s" if rc is None else f"am-run exited {rc}"
         return {**head, "verdict": "error", "failure_class": "", "reason": f"{what}: {' / '.join(lines[-3:])} "

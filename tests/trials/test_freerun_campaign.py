@@ -90,6 +90,8 @@ def _outcome(status: str, failure_class: str | None) -> dict:
     (4, "failed", "base contact", "failed"),
     (1, "failed", "failover", "failed"),  # a companion that handed its vehicle back exits 1: still a verdict
     (1, "success", None, "error"),  # a process failed under a flight that succeeded
+    (1, "incomplete", None, "error"),  # cut short: a process did not start
+    (0, "incomplete", None, "incomplete"),  # a mission shorter than its hover window
     (None, "success", None, "error"),  # past its time limit
     (1, None, None, "error"),  # no outcome at all
 ])  # fmt: skip
