@@ -4,7 +4,7 @@
 (`__pycache__` beside amcore/law.py, or NUMBA_CACHE_DIR). The first process that calls a
 kernel compiles it; every later process loads the machine code from the cache. Keeping
 processes that start together from all compiling is the callers' part
-(companion.jitcache, which holds a file lock around the first call).
+(amruntime.jitcache, which holds a file lock around the first call).
 
 All kernels live in one file (amcore/law.py): numba's cache is keyed on the source file of
 each kernel, so a change to a callee in another file would not invalidate its callers.

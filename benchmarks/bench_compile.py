@@ -5,7 +5,7 @@ empty numba cache, at LLVM optimization levels side by side (`amcore.jit`, NUMBA
 
 Each measurement is a new Python process with an empty NUMBA_CACHE_DIR of its own and
 NUMBA_OPT set to the level (the cache does not record the level it was compiled at, so a
-shared one would be loaded as it is). It warms one group as `companion.jitcache` does: the
+shared one would be loaded as it is). It warms one group as `amruntime.jitcache` does: the
 control law with the telemetry's kernels (`Pilot.warm_up`, the law's argument types of the
 scenario), or the simulator's kernels (`simulator.core.warm_up_kernels`). The levels
 alternate within each round. Imports are outside the timed span; CPU is the process's user +
@@ -28,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 _WARM = textwrap.dedent("""
     import json, sys, time
     from amcore.config import load_scenario
-    from companion import jitcache
+    from amruntime import jitcache
     from companion.pilot import Pilot
     from simulator.core import kernel_group
     spec = load_scenario(sys.argv[2])

@@ -11,7 +11,7 @@ outcome files and exit. The GIL serializes the threads' Python; the law and pino
 calls run in it as they do in a process of their own. K = 1 is `am-run` as shipped (one
 `companion` process per AM). Prints, per K, the simulator's real-time factor, its CPU per physics step and
 the companion processes' CPU per AM and control step (user + system of each companion
-process from the lockstep's start, `companion.procstats`, summed and divided by AMs and
+process from the lockstep's start, `amruntime.procstats`, summed and divided by AMs and
 control steps), in one run.
 """
 from __future__ import annotations
@@ -75,7 +75,7 @@ def host(per_process: int, argv: list[str]) -> int:
 
 
 def measure(path: Path, per_process: int, duration: float, run_dir: Path, telemetry: bool = True) -> dict:
-    import simulator.launch as launch
+    import sitl.launch as launch
     from amcore.config import load_scenario
     real = launch._command
 
@@ -93,7 +93,7 @@ def measure(path: Path, per_process: int, duration: float, run_dir: Path, teleme
     outcome = json.loads((run_dir / "outcome.json").read_text())
     spec = load_scenario(path)
     steps = outcome["steps"]
-    # companion.procstats measures its process's CPU from the lockstep's start: in a shared
+    # amruntime.procstats measures its process's CPU from the lockstep's start: in a shared
     # process each member's figure is the whole process's, so one per group counts
     cpu = {a.sysid: json.loads((run_dir / f"am{a.sysid}.json").read_text())["process"]["cpu_s"] for a in spec.ams}
     sysids = [a.sysid for a in spec.ams]

@@ -32,7 +32,7 @@ def main() -> None:
     ap.add_argument("--devices", action="store_true")
     ap.add_argument("--actuation-delay", type=int, default=0)
     a = ap.parse_args()
-    import simulator.launch as launch
+    import sitl.launch as launch
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)

@@ -10,7 +10,7 @@ takes the time; this says what kind of work it is, inside all parts at once. Sam
 attached to the running process(es), so imports, compilation and loading the kernels are
 left out.
 
-- trial: one campaign trial in process (`simulator.inprocess.run`, two_am_comp, default
+- trial: one campaign trial in process (`sitl.inprocess.run`, two_am_comp, default
   randomization, trial 0 of seed 1, as `bench_trial_step.py`), after a 0.2 s warm-up run.
 - law: `amcore.law.control_law` called back to back on one step's arguments (as
   `bench_controller.py`'s "compiled law alone"). numba's reference counts (`NRT_incref`,
@@ -140,7 +140,7 @@ def _print_refcount_addresses() -> None:
 def _child_trial(duration: float) -> None:
     from benchmarks.bench_trial_step import _trial_spec
 
-    import simulator.inprocess as ip
+    import sitl.inprocess as ip
     with tempfile.TemporaryDirectory() as tmp:
         spec = _trial_spec(ROOT / "configs" / "scenarios" / "two_am_comp.toml", Path(tmp))
         ip.run(spec, 0.2)

@@ -25,7 +25,7 @@ around it, for --duration simulated seconds of the approach phase. The SITL figu
 simulator's own (simulated time / wall time from the first lockstep step, start-up
 excluded). Targets (issue 15): 2 AMs >= 3x real time, 10 AMs >= 0.7x; goals 5x and 1x.
 
-Per process, from the outcome files of the SITL run (companion.procstats): CPU per step
+Per process, from the outcome files of the SITL run (amruntime.procstats): CPU per step
 (user + system, all threads, telemetry included) of a companion and of the simulator, and
 a companion's resident memory at the end: rss (shared libraries counted whole in every
 process), pss (shared pages divided among the processes sharing them: what N companions
@@ -38,7 +38,7 @@ physics step, a companion's per control step (attitude mode: one physics step in
 the processes are scheduled, so a target above it needs less CPU per step, not better waiting.
 
 Under each row, how the simulator's and a companion's main thread spent the run's wall time
-(companion.procstats, from Linux's scheduler statistics): on a CPU, queued for one (ready,
+(amruntime.procstats, from Linux's scheduler statistics): on a CPU, queued for one (ready,
 while the cores ran other processes or threads), and blocked. In lockstep the simulator is
 blocked while it waits for the companions' answers, and a companion while it waits for its
 next frame. The run is no faster than the simulator's main thread: a simulator on a CPU for
@@ -51,7 +51,7 @@ More columns take the whole apart, measured in the same run:
   cost when the controller costs nothing: an upper bound on the SITL's real-time factor.
 - "echo+Xus" (with --echo-spin-us X): the same, each echo busy-waiting X us per step: a
   controller's compute time without its memory traffic and telemetry.
-- "in-proc": `simulator.inprocess` on the same scenario: the same world, flight controllers
+- "in-proc": `sitl.inprocess` on the same scenario: the same world, flight controllers
   and pilots called in one loop of one process, on one core, without MAVLink, sockets,
   telemetry or processes to switch between. What the lockstep's process boundary costs.
 - "UDP": one Python process exchanging a datagram per step with N forked processes that
@@ -155,7 +155,7 @@ def bare_rtf(path: Path, duration: float) -> float:
 def am_run_command(path: Path, duration: float, run_dir: Path) -> list[str]:
     """`am-run` of a scenario for `duration` simulated seconds into `run_dir`, without a progress bar."""
     exe = Path(sys.executable).parent / "am-run"
-    return [str(exe) if exe.exists() else sys.executable, *([] if exe.exists() else ["-m", "simulator.launch"]),
+    return [str(exe) if exe.exists() else sys.executable, *([] if exe.exists() else ["-m", "sitl.launch"]),
             str(path), "--duration", str(duration), "--run-dir", str(run_dir), "--no-progress"]
 
 
@@ -178,10 +178,10 @@ def sitl_rtf(path: Path, duration: float, run_dir: Path) -> tuple[float, float, 
 
 
 def inprocess_rtf(path: Path, duration: float) -> float:
-    """x real time of `simulator.inprocess` on the same scenario: the same world, flight
+    """x real time of `sitl.inprocess` on the same scenario: the same world, flight
     controllers and companions' pilots called in one loop of one process (one core), frames
     rounded as the wire rounds them, no MAVLink, sockets or telemetry; start-up excluded."""
-    p = subprocess.run([sys.executable, "-m", "simulator.inprocess", str(path), "--duration", str(duration)],
+    p = subprocess.run([sys.executable, "-m", "sitl.inprocess", str(path), "--duration", str(duration)],
                        capture_output=True, text=True, env=dict(os.environ))
     if p.returncode not in (0, MISSION_FAILED):
         raise RuntimeError(f"in-process run failed: {p.stderr[-2000:]}")
@@ -189,7 +189,7 @@ def inprocess_rtf(path: Path, duration: float) -> float:
 
 
 def time_split(threads: list[dict | None]) -> tuple[float, float, float] | None:
-    """Per cent of the wall time the main threads (`companion.procstats.CpuMeter.main_thread`)
+    """Per cent of the wall time the main threads (`amruntime.procstats.CpuMeter.main_thread`)
     spent on a CPU, queued for one and blocked: the medians over the threads given (None
     where no process reported them: a machine without Linux's scheduler statistics)."""
     ts = [t for t in threads if t and t.get("wall_s")]
@@ -354,7 +354,7 @@ def main() -> None:
                 print(f"    N = {n}: the SITL run's {proc['verdict'].get('text', 'mission FAILED')}", flush=True)
     print("SITL: the product (am-run, telemetry on). echo: same lockstep, companions without a controller"
           + (f" (echo+{spin:g}us: each busy-waits {spin:g} us per step)" if spin is not None else "") + ".\n"
-          "in-proc: the same scenario and pilots in one process on one core (simulator.inprocess).\n"
+          "in-proc: the same scenario and pilots in one process on one core (sitl.inprocess).\n"
           "UDP: the message pattern alone. Targets: 2 AMs >= 3x, 10 AMs >= 0.7x (goals 5x, 1x); companion memory\n"
           "<= 120 MiB (goal 80). CPU per step: user + system of the whole process over the run, all threads.\n"
           "Main threads: the simulator's blocked time is its wait for the companions' answers; queued, the time it\n"

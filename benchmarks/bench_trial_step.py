@@ -1,4 +1,4 @@
-"""Where a campaign trial's physics step goes: CPU time per step of `simulator.inprocess.run`
+"""Where a campaign trial's physics step goes: CPU time per step of `sitl.inprocess.run`
 for one trial of `am-trials` (default randomization, seed 1, trial 0), whole and by part.
 
     python -m benchmarks.bench_trial_step [--scenario configs/scenarios/two_am_comp.toml] [--duration 20]
@@ -44,7 +44,7 @@ PARTS = (
     ("sense (World.sensor_values)", "simulator.world", "World.sensor_values"),
     ("devices and estimator (DeviceSuite.step)", "simulator.devices", "DeviceSuite.step"),
     ("frame (sensor_frame_from_wire, in core)", "simulator.core", "sensor_frame_from_wire"),
-    ("as_on_the_wire", "simulator.inprocess", "as_on_the_wire"),
+    ("as_on_the_wire", "sitl.inprocess", "as_on_the_wire"),
     ("state_from_frame", "companion.pilot", "state_from_frame"),
     ("mission reference", "amcore.mission", "AmMission.reference"),
     ("control.step without the law", "amcore.control", "step"),
@@ -55,7 +55,7 @@ PARTS = (
     ("attitude_setpoint_from_result, the rest", "companion.pilot", "attitude_setpoint_from_result"),
     ("Pilot.command, the rest", "companion.pilot", "Pilot.command"),
     ("record (companion.outcome)", "companion.pilot", "Pilot.record"),
-    ("setpoint_as_on_the_wire", "simulator.inprocess", "setpoint_as_on_the_wire"),
+    ("setpoint_as_on_the_wire", "sitl.inprocess", "setpoint_as_on_the_wire"),
     ("setpoint limits", "amlink.limits", "SetpointLimits.violation"),
     ("the emulated autopilot (FlightController.step)", "simulator.flight_controller", "FlightController.step"),
     ("apply (allocation, joint limits)", "simulator.world", "World.apply"),
@@ -136,7 +136,7 @@ def main() -> None:
     ap.add_argument("--in-situ", action="store_true",
                     help="a third run: the law and pinocchio's terms in the run against called again at once")
     a = ap.parse_args()
-    import simulator.inprocess as ip
+    import sitl.inprocess as ip
 
     with tempfile.TemporaryDirectory() as tmp:
         spec = _trial_spec(a.scenario, Path(tmp))

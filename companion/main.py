@@ -35,12 +35,11 @@ from amlink.endpoint import COMPANION_SIM, COMPANION_SIM_FORMS, EndpointError, a
 from amlink.errors import LinkError, SimulatorUnreachableError
 from amlink.lockstep import CompanionClient
 from amlink.tlog import TlogError, TlogWriter
-
+from amruntime import jitcache, procstats
 from telemetry.publisher import TelemetryPublisher
 from telemetry.session import TelemetryConfigError, add_zenoh_arguments, options_from_args
 from telemetry.wiring import CompanionTelemetry
 
-from . import jitcache, procstats
 from .pilot import Pilot
 
 # attitude mode: what the arm law reads every control step, requested at the control rate

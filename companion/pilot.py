@@ -10,7 +10,7 @@ setpoint and, informational, the attitude target; attitude mode: the attitude se
 the setpoint before the bookkeeping. A pilot whose first frame comes after t = 0 (a
 companion restarted during a run) starts its references at its vehicle's state and joins
 the mission's over [mission].join_blend_s (`amcore.mission.JoinBlend`). The companion
-process wraps it in the MAVLink link; the in-process runner (`simulator.inprocess`) calls
+process wraps it in the MAVLink link; the in-process runner (`sitl.inprocess`) calls
 it directly.
 """
 from __future__ import annotations
@@ -99,7 +99,7 @@ class Pilot:
     def warm_up(self) -> None:
         """Two steps of a throwaway pilot on frames of the mission's start, built as the wire
         builds them: the first calls into the compiled law (amcore.law), with the argument
-        types a run passes (companion.jitcache holds the lock around it), and with the robust
+        types a run passes (amruntime.jitcache holds the lock around it), and with the robust
         options their shaping's kernel, which the steps at rest do not reach. This pilot is untouched."""
         twin = Pilot(self.spec, self.am.sysid, model=self.model, object_pose=self.object_pose)
         x = self.mission.initial_state()

@@ -11,8 +11,8 @@ from amcore.config import ConfigError
 from amlink import signing
 from amlink.endpoint import EndpointError, parse_endpoint
 from amlink.px4link import LinkOpenError
+from amruntime import procstats
 
-from . import procstats
 from .devices import DeviceError
 from .devices.arm import parse_arm_endpoint
 from .devices.netft import parse_ft_endpoint

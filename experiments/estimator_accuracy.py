@@ -43,7 +43,7 @@ def frame_errors(exact: list[float], f) -> np.ndarray:
 
 def measure(data: dict, path: Path, duration_s: float, settle_s: float = 1.0) -> np.ndarray:
     """(steps x AMs, len(STATES)) errors of one run of scenario data `data`."""
-    from simulator.inprocess import run
+    from sitl.inprocess import run
     rows: list[np.ndarray] = []
 
     def on_frames(t, exact, frames):

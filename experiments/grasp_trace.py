@@ -22,7 +22,7 @@ import numpy as np
 from amcore.config import ConfigError, read_scenario, scenario_from_dict
 from amcore.so3 import quat_wxyz_to_R
 from companion.pilot import Pilot
-from simulator import inprocess
+from sitl import inprocess
 from trials.cli import apply_overrides
 
 PER_AM = ("pad_O_x", "pad_O_y", "pad_O_z", "contact_E_x", "contact_E_y", "contact_E_z", "normal_n",

@@ -2,7 +2,7 @@
 
 Sweeps packet loss and delay on the companion -> flight-controller path (`[link]` of the
 scenario, applied in simulation time by `amlink.impair`; the flight controller holds the
-newest command) and runs the whole two_am_comp mission in-process (`simulator.inprocess`,
+newest command) and runs the whole two_am_comp mission in-process (`sitl.inprocess`,
 bit-identical to the multi-process SITL on an ideal link). A grasp "holds" when, in the
 hover window, the object is >= 0.2 m up and off the table, pad slip < 2 mm, no base touched
 anything and no vehicle saturated for more than 1 % of the run.
@@ -16,7 +16,7 @@ import dataclasses
 from pathlib import Path
 
 from amcore.config import load_scenario
-from simulator.inprocess import run
+from sitl.inprocess import run
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -72,7 +72,7 @@ def variations(base: dict) -> dict[str, dict]:
 def _run(args):
     name, data, path, duration = args
     from amcore.config import scenario_from_dict
-    from simulator.inprocess import run
+    from sitl.inprocess import run
     r = run(scenario_from_dict(data, Path(path)), duration)
     o = r["object"]
     slip = max(a["slip_max_m"] for a in r["ams"].values())

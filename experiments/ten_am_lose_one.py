@@ -1,6 +1,6 @@
 """Ten AMs hold a 5 kg cylinder; one companion dies in the hover phase (issue 5).
 
-Runs ten_am in-process (`simulator.inprocess`, the SITL minus sockets) with the companion
+Runs ten_am in-process (`sitl.inprocess`, the SITL minus sockets) with the companion
 of one AM silent from --lose-at on: its flight controller goes to failsafe (hold position
 and attitude with a compliant arm, then land; `simulator.failsafe`) while the other nine keep their
 decentralized control. Reports whether the object stays held and how the load is shared.
@@ -13,7 +13,7 @@ import argparse
 from pathlib import Path
 
 from amcore.config import load_scenario
-from simulator.inprocess import run
+from sitl.inprocess import run
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -4,7 +4,7 @@
 flight controller sees it, `amlink.impair`; in attitude mode the emulated autopilot,
 `simulator.flight_controller`; the failsafe after companion loss, `simulator.failsafe`),
 the ground-truth outcome and a digest of every state sent. The UDP simulator main and the
-in-process runner (`simulator.inprocess`) both drive it, once per physics step k:
+in-process runner (`sitl.inprocess`) both drive it, once per physics step k:
 
     if core.is_control_step(k):              # every step, or every rate_hz / control_rate_hz
         frames = core.frames(k)              # sensor frames of step k, one per AM
@@ -115,10 +115,10 @@ def warm_up_kernels(spec: ScenarioSpec) -> None:
 
 
 def kernel_group(spec: ScenarioSpec):
-    """`warm_up_kernels(spec)` as a group of `companion.jitcache.warm_groups`: under a lock
+    """`warm_up_kernels(spec)` as a group of `amruntime.jitcache.warm_groups`: under a lock
     of its own, so that a process can compile these while another compiles the control law."""
     from amcore import allocation_kernels, estimator
-    from companion.jitcache import SIMULATOR_LOCK, Group
+    from amruntime.jitcache import SIMULATOR_LOCK, Group
 
     from . import device_kernels, fc_kernels
     return Group(SIMULATOR_LOCK, (fc_kernels, allocation_kernels, device_kernels, estimator),

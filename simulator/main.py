@@ -50,7 +50,7 @@ from amlink.limits import SetpointLimits
 from amlink.lockstep import SimServer
 from amlink.types import ScenarioInfo
 from amlink.udp import STATUSTEXT_MAX
-from companion import jitcache, procstats
+from amruntime import jitcache, procstats
 
 from telemetry import schema
 from telemetry.publisher import TelemetryPublisher
@@ -295,7 +295,7 @@ def main(argv: list[str] | None = None) -> int:
     tele.open()
     try:
         # the autopilot's, allocation's and devices' kernels: compiled on a machine's first run, under their
-        # own lock (companion.jitcache), so that a simulator and an am-run or a campaign starting together
+        # own lock (amruntime.jitcache), so that a simulator and an am-run or a campaign starting together
         # compile them once, side by side with the control law; else loaded from the cache
         jit = jitcache.warm_groups([kernel_group(spec)])
         if jit.compiled:

@@ -69,7 +69,7 @@ def write_scenario_as_flown(run_dir: Path, scenario: Path, duration_s: float | N
     """RUN/scenario.toml: `scenario` with its vehicle files copied into RUN/vehicle/ and the
     vehicle key pointing there, and [scenario].duration_s set to `duration_s` when given, so
     that `am-run RUN/scenario.toml` flies the same run again. Checked by loading it."""
-    from trials.toml_write import dumps  # a plain TOML writer (no simulator, no I/O of its own)
+    from amcore.toml_write import dumps  # a plain TOML writer (no I/O of its own)
 
     scenario = Path(scenario).resolve()
     data = copy.deepcopy(read_scenario(scenario))  # resolved: RUN/scenario.toml needs no base

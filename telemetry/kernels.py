@@ -7,7 +7,7 @@ does a whole batch in one call: each output sample is a fixed program of byte co
 its pre-sample, quaternions of the rotation matrices in it, and booleans of its numbers.
 
 Compiled and cached on disk as amcore.law is (amcore.jit: numba's cache is keyed on this
-file); `warm_up` makes the first call, which companion.jitcache.warm runs under its
+file); `warm_up` makes the first call, which amruntime.jitcache.warm runs under its
 machine-wide lock and telemetry.wiring at start-up, so no control loop waits for a compile.
 """
 from __future__ import annotations

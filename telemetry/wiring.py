@@ -98,7 +98,7 @@ class CompanionTelemetry:
         self.pub = publisher
         self._on = getattr(publisher, "enabled", True)
         if self._on and encoding == "binary":
-            kernels.warm_up()  # loaded from the cache that companion.jitcache.warm filled
+            kernels.warm_up()  # loaded from the cache that amruntime.jitcache.warm filled
         self.sysid = int(sysid)
         self.every = every
         self.keys = keys or getattr(publisher, "keys", None) or schema.Keys()

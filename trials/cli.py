@@ -48,12 +48,12 @@ from pathlib import Path
 from amcore import cliargs
 from amcore.config import (CONFIGS_DIR, CONTROLLERS, ConfigError, _read_toml, load_scenario, read_scenario,
                            scenario_from_dict)
+from amcore.toml_write import dumps
 
 from . import report
 from .randomize import RandomizeSpec, draw_trial, load_randomize, randomize_from_table, relocate
 from .runner import (SCHEDULER_ADDRESS_FORM, SchedulerUnreachable, TrialTask, bundle_files, executor,
                      parse_scheduler_address, run_all)
-from .toml_write import dumps
 
 DEFAULT_RANDOMIZE = CONFIGS_DIR / "randomize" / "default.toml"
 # --screening's PyBullet solver sweeps a step ([scenario].solver_iterations; the default is 50)
@@ -310,7 +310,7 @@ def _main(argv: list[str] | None) -> int:
     workers = a.workers or os.cpu_count() or 1
     where = f"Dask at {a.scheduler}" if a.scheduler else f"{workers} local worker(s)"
     if a.realtime:
-        from simulator.launch import REALTIME_SPEED
+        from sitl.launch import REALTIME_SPEED
 
         a.speed = a.speed or REALTIME_SPEED
         where = f"free-running at {a.speed:g}x real time, one trial at a time (PX4 SITL instances {a.instance}+)"

@@ -37,7 +37,7 @@ TIMEOUT_FACTOR, TIMEOUT_EXTRA_S = 3.0, 180.0
 def command(path: str, run_dir: Path, speed: float, instance: int) -> list[str]:
     """The `am-run` command line of one free-running trial (no telemetry, no GCS ports: a
     campaign's trials report through their outcome.json)."""
-    return [sys.executable, "-m", "simulator.launch", path, "--realtime", "--speed", repr(speed),
+    return [sys.executable, "-m", "sitl.launch", path, "--realtime", "--speed", repr(speed),
             "--instance", str(instance), "--run-dir", str(run_dir), "--no-progress", "--no-telemetry",
             "--gcs", "none"]
 

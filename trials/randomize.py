@@ -3,7 +3,7 @@
 A `[randomize]` table (in a scenario, or alone in a TOML file such as
 configs/randomize/default.toml) names ranges; `draw_trial` turns the base scenario's TOML
 data and a trial index into that trial's scenario data, so that a trial *is* a scenario:
-it loads through `amcore.config.scenario_from_dict`, and written out (`trials.toml_write`)
+it loads through `amcore.config.scenario_from_dict`, and written out (`amcore.toml_write`)
 it replays with `am-run`. Ranges are uniform:
 
     object_mass_kg = [lo, hi]     the object's mass [kg]

@@ -1,4 +1,4 @@
-"""Runs a campaign's trials: each in-process (`simulator.inprocess`, bit-identical to the
+"""Runs a campaign's trials: each in-process (`sitl.inprocess`, bit-identical to the
 multi-process SITL), on any `concurrent.futures.Executor`: a local process pool by default,
 or a Dask distributed cluster's executor (`dask.distributed.Client(address).get_executor()`),
 whose workers need this project installed and nothing else: each trial carries its scenario
@@ -145,7 +145,7 @@ def run_trial(task: TrialTask) -> dict:
     or a spawned pool process starts with none of this loaded)."""
     from amcore.config import scenario_from_dict
     from amcore.preflight import refusal
-    from simulator.inprocess import run
+    from sitl.inprocess import run
     from simulator.verdict import summary_figures
 
     with trial_folder(task) as where:

@@ -26,9 +26,9 @@ def paths(tmp_path):
 
 SIM = ("simulator.main", ["--config", SHORT, "--run-dir", "RUN"])
 COMP = ("companion.main", ["--sysid", "4", "--config", SHORT])
-AMRUN = ("simulator.launch", [SHORT, "--run-dir", "RUN", "--no-telemetry"])
+AMRUN = ("sitl.launch", [SHORT, "--run-dir", "RUN", "--no-telemetry"])
 REC = ("ground_station.cli", ["record", "--out", "RUN.mcap"])
-INPROC = ("simulator.inprocess", [SHORT])
+INPROC = ("sitl.inprocess", [SHORT])
 
 # (main, its valid arguments, the bad flag and value, the words naming it)
 CASES = [
@@ -139,7 +139,7 @@ def test_seconds_are_finite_and_positive(text, ok):
 def test_am_run_refuses_a_run_that_does_not_fit_in_memory(monkeypatch, capsys, tmp_path):
     """200 AMs need about 37 GiB: refused up front with the estimate, naming [[am]]."""
     from amcore.config import load_scenario
-    from simulator import launch
+    from sitl import launch
 
     spec = load_scenario(SHORT)
     with pytest.raises(Exception, match=r"\[\[am\]\]: 2 AMs need about 0\.\d GiB"):
@@ -155,7 +155,7 @@ def test_am_run_refuses_a_run_that_does_not_fit_in_memory(monkeypatch, capsys, t
     ("companion.main", ["--connect-timeout CONNECT_TIMEOUT seconds to wait for the simulator (default: 30.0)",
                         "(default: 10.0)", "two_am_comp_attitude.toml)"]),
     ("simulator.main", ["(default: 60.0)", "(default: 5.0)", "two_am_comp_attitude.toml)"]),
-    ("simulator.launch", ["(default: 120.0)", "two_am_comp_attitude.toml)"]),
+    ("sitl.launch", ["(default: 120.0)", "two_am_comp_attitude.toml)"]),
 ])
 def test_help_gives_every_default(module, defaults, capsys, monkeypatch):
     """The timeouts and the scenario, as --help shows them: every option with a value says its

@@ -239,7 +239,7 @@ def test_an_error_in_a_key_the_base_set_names_the_overlay_and_its_bases(tmp_path
 
 
 def test_the_clis_exit_2_on_a_bad_base_naming_both_files(tmp_path, capsys):
-    from simulator import inprocess
+    from sitl import inprocess
     from trials import cli
 
     p = _overlay(tmp_path, 'base = "nowhere.toml"\n')

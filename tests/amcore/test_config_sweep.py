@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from amcore.config import ConfigError, load_scenario, read_scenario
-from trials.toml_write import dumps
+from amcore.toml_write import dumps
 
 ROOT = Path(__file__).resolve().parents[2]
 SHORT = ROOT / "configs" / "scenarios" / "two_am_short.toml"

@@ -125,7 +125,7 @@ def _outside_file(tmp_path: Path, mission: str = "") -> Path:
 
 
 def test_the_runners_refuse_before_flight_with_exit_2(tmp_path, capsys):
-    from simulator import inprocess, launch
+    from sitl import inprocess, launch
 
     path = _outside_file(tmp_path)
     assert inprocess.main([str(path)]) == 2

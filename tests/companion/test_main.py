@@ -37,7 +37,7 @@ def companion_args(monkeypatch):
     control law's first call stubbed (these tests end before it flies)."""
     import signal
 
-    from companion import jitcache
+    from amruntime import jitcache
 
     handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     monkeypatch.setattr(jitcache, "warm", lambda first_call: jitcache.CompileReport(compiled=0, seconds=0.0))
@@ -49,7 +49,7 @@ def companion_args(monkeypatch):
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs Linux /proc")
 @pytest.mark.parametrize("flag, path", [("--outcome", f"{UNCREATABLE}/am4.json"), ("--tlog", f"{UNCREATABLE}/c.tlog")])
 def test_an_output_file_that_cannot_be_written_exits_2_before_flying(companion_args, capsys, monkeypatch, flag, path):
-    from companion import jitcache
+    from amruntime import jitcache
 
     monkeypatch.setattr(jitcache, "warm", lambda first_call: pytest.fail("got past the argument checks"))
     # past the parse's own check (tests/amcore/test_cliargs.py), as a folder that goes away after it is
@@ -68,7 +68,7 @@ def test_an_sim_endpoint_that_cannot_be_opened_says_so_without_the_heartbeat_or_
 
 def test_an_outcome_that_cannot_be_written_at_the_end_is_an_error_not_a_traceback(companion_args, tmp_path, capsys,
                                                                                    monkeypatch):
-    from companion import jitcache
+    from amruntime import jitcache
 
     folder = tmp_path / "run"
     outcome = folder / "am4.json"

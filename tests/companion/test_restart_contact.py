@@ -13,7 +13,7 @@ import pytest
 from amcore.config import read_scenario, scenario_from_dict
 from companion.pilot import Pilot
 from simulator.core import SitlCore
-from simulator.inprocess import as_on_the_wire
+from sitl.inprocess import as_on_the_wire
 
 SHORT = Path(__file__).resolve().parents[2] / "configs" / "scenarios" / "two_am_short.toml"
 

@@ -9,7 +9,7 @@ from simulator import commands
 from simulator.core import SitlCore
 from simulator.fcstate import FcMode
 from simulator.gcs_link import GcsCommand
-from simulator.inprocess import as_on_the_wire
+from sitl.inprocess import as_on_the_wire
 
 
 class Fleet:

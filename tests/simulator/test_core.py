@@ -7,7 +7,7 @@ import pytest
 
 from amcore.config import load_scenario
 from simulator.core import TRUTH_PERIOD_S, truth_every
-from simulator.inprocess import run
+from sitl.inprocess import run
 
 from ..conftest import SCENARIO
 

@@ -140,7 +140,7 @@ def test_a_run_with_compiled_devices_is_the_run_with_the_python_devices(monkeypa
 
     from amcore.config import load_scenario
     from simulator import devices
-    from simulator.inprocess import run
+    from sitl.inprocess import run
 
     spec = load_scenario(Path(__file__).resolve().parents[2] / "configs" / "scenarios" / "two_am_comp_attitude.toml")
     spec = dataclasses.replace(spec, devices=FULL)

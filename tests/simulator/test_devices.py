@@ -208,7 +208,7 @@ def test_closed_loop_estimate_tracks_the_truth_up_to_the_motion_capture_bias():
     from amcore.config import read_scenario, scenario_from_dict
     from companion.pilot import Pilot
     from simulator.core import SitlCore
-    from simulator.inprocess import as_on_the_wire, setpoint_as_on_the_wire
+    from sitl.inprocess import as_on_the_wire, setpoint_as_on_the_wire
     from trials.randomize import load_randomize
 
     from ..conftest import SCENARIO
@@ -277,7 +277,7 @@ def test_attitude_mode_with_devices_flies_its_rate_loop_without_saturating():
     ground, rotors near idle, before the estimator has the turn-on gyro bias). Fed the odometry's
     low-passed rate, which it filtered a second time, the rate loop oscillated: 552 of 1500."""
     from amcore.config import read_scenario, scenario_from_dict
-    from simulator import inprocess
+    from sitl import inprocess
     from trials.randomize import load_randomize
     from pathlib import Path
 

@@ -94,7 +94,7 @@ def test_the_warm_up_compiles_what_a_run_calls(name):
     from amcore.jit import kernels
     from simulator import device_kernels
     from simulator.core import warm_up_kernels
-    from simulator.inprocess import run
+    from sitl.inprocess import run
 
     spec = load_scenario(Path(__file__).resolve().parents[2] / "configs" / "scenarios" / f"{name}.toml")
     spec = dataclasses.replace(spec, devices=dataclasses.replace(spec.devices, enabled=True))

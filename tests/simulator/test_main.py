@@ -23,11 +23,11 @@ def test_other_failures_are_named_by_their_class():
 
 def test_the_simulator_warms_its_kernels_under_their_lock_before_it_listens(tmp_path, monkeypatch, capsys):
     """The standalone simulator makes its kernels' first calls (`simulator.core.kernel_group`)
-    through `companion.jitcache.warm_groups`, under the simulator group's lock, before it binds
+    through `amruntime.jitcache.warm_groups`, under the simulator group's lock, before it binds
     its endpoint: here the bind fails (the port is taken), after the warm-up."""
     import socket
 
-    from companion import jitcache
+    from amruntime import jitcache
     from simulator import main as sim_main
 
     events = []

@@ -11,8 +11,8 @@ import pytest
 
 from amcore.config import SCENARIOS_DIR, SuccessCriteria, load_scenario
 from simulator import runfolder
-from simulator.launch import _fresh_key, _gcs_key, _telemetry_keys, main
 from simulator.verdict import criteria_rows, format_criteria
+from sitl.launch import _fresh_key, _gcs_key, _telemetry_keys, main
 
 SHORT = SCENARIOS_DIR / "two_am_short.toml"
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from amcore.config import read_scenario, scenario_from_dict
-from simulator.inprocess import run
+from sitl.inprocess import run
 
 SHORT = Path(__file__).resolve().parents[2] / "configs" / "scenarios" / "two_am_short.toml"
 

@@ -12,8 +12,8 @@ import pytest
 
 from amcore.config import PadSpec, read_scenario, scenario_from_dict
 from amcore.so3 import Rz, quat_wxyz_to_R
-from simulator.inprocess import run
 from simulator.scene import table_geometry
+from sitl.inprocess import run
 
 from .sim_testing import (RING_GAP_M, RING_Q, at_rest, facing_object, far_apart, hold_arm, hold_base, p_BE, push_link,
                           push_object, ring_placement, ten_am_spec)

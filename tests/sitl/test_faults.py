@@ -3,7 +3,7 @@
 Ten AMs hold the 5 kg cylinder; sysid 2's companion falls silent in the hover phase, its
 flight controller goes to failsafe and lets go (`simulator.failsafe`), and the nine left,
 each still under its own decentralized law, must carry the object between them. Runs the
-whole ten_am_robust mission (canted hexarotors) in-process (`simulator.inprocess`, the SITL
+whole ten_am_robust mission (canted hexarotors) in-process (`sitl.inprocess`, the SITL
 minus sockets); a few minutes. With the wrench filter at 8 Hz (the earlier default) the ring collapsed within
 ~2.5 s of the loss (docs/physics.md, "Measured").
 """
@@ -12,7 +12,7 @@ from __future__ import annotations
 import pytest
 
 from amcore.config import load_scenario
-from simulator.inprocess import run
+from sitl.inprocess import run
 
 from .runner import SCENARIOS
 

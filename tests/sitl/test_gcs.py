@@ -18,7 +18,7 @@ from pymavlink import mavutil
 from amcore.config import load_scenario
 from amlink.codec import mav
 from amlink.signing import gcs_key_from_passphrase
-from simulator.inprocess import run as run_in_process
+from sitl.inprocess import run as run_in_process
 from tests.amlink.ptys import pty_pair
 
 from .runner import SCENARIOS, Sim, am_run, companion, script

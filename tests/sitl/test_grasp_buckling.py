@@ -18,7 +18,7 @@ import pytest
 
 from amcore.config import read_scenario, scenario_from_dict
 from amcore.so3 import quat_wxyz_to_R
-from simulator.inprocess import run
+from sitl.inprocess import run
 
 pytestmark = pytest.mark.sitl
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import pytest
 
 from amcore.config import load_scenario
-from simulator.inprocess import run
+from sitl.inprocess import run
 
 from .runner import SCENARIOS
 

@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from companion import procstats
+from amruntime import procstats
 
 from .runner import SCENARIOS, Sim, am_run, companion, script
 
@@ -23,7 +23,7 @@ def test_same_scenario_gives_a_bit_identical_run(tmp_path):
     assert a.code == 0 and b.code == 0, a.stderr + b.stderr
     assert a.outcome["steps"] == b.outcome["steps"] == 400
     assert a.outcome["state_digest"] == b.outcome["state_digest"]
-    # the outcome files say how each process's main thread spent the run (companion.procstats)
+    # the outcome files say how each process's main thread spent the run (amruntime.procstats)
     if procstats.thread_schedstat() is not None:
         for proc in [a.outcome["process"], *(c["process"] for c in a.companions.values())]:
             t = proc["main_thread"]

@@ -12,7 +12,7 @@ import pytest
 from amcore.config import read_scenario, scenario_from_dict
 from amcore.mission import am_mission
 from amcore.model import build_model
-from simulator.inprocess import run
+from sitl.inprocess import run
 
 ROOT = Path(__file__).resolve().parents[2]
 VEHICLES = sorted((ROOT / "configs" / "vehicles").glob("*.toml"))

@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 from amcore.config import load_scenario, read_scenario, scenario_from_dict
-from simulator.inprocess import run
 from simulator.verdict import FAILURE_CLASSES
+from sitl.inprocess import run
 from trials import cli
 from trials.report import read_csv, wilson_interval
 from trials.runner import run_all

@@ -1,4 +1,4 @@
-"""Drawing trials (trials.randomize) and writing them as scenarios (trials.toml_write):
+"""Drawing trials (trials.randomize) and writing them as scenarios (amcore.toml_write):
 reproducible per trial, inside the stated ranges, valid scenarios, replayable bit for bit."""
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from amcore.config import ConfigError, read_scenario, scenario_from_dict
 from trials.randomize import draw_trial, load_randomize, randomize_from_table, relocate
-from trials.toml_write import dumps
+from amcore.toml_write import dumps
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "configs" / "scenarios" / "two_am_comp.toml"

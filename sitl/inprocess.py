@@ -6,7 +6,7 @@ checking that the multi-process SITL adds nothing but transport: frames are roun
 wire rounds them (ODOMETRY carries the base state as float32, time in microseconds;
 everything else is float64), so with an ideal link both produce the same `state_digest`.
 
-    python -m simulator.inprocess configs/scenarios/two_am_comp.toml [--duration S]
+    python -m sitl.inprocess configs/scenarios/two_am_comp.toml [--duration S]
 
 Exit codes: 0 mission success, 4 mission failed (the verdict on stderr), 2 bad configuration.
 """
@@ -25,11 +25,10 @@ from amlink import fastcodec
 from amlink.limits import SetpointLimits
 from amlink.types import (AttitudeSetpoint, SensorFrame, TorqueSetpoint, frame_values, sensor_frame_of_array,
                           with_autopilot_reports)
-from companion import jitcache
+from amruntime import jitcache
 from companion.pilot import Pilot
-
-from .core import SitlCore, kernel_group
-from .verdict import MISSION_FAILED
+from simulator.core import SitlCore, kernel_group
+from simulator.verdict import MISSION_FAILED
 
 
 def as_on_the_wire(f: SensorFrame) -> SensorFrame:
@@ -152,7 +151,7 @@ def run(spec: ScenarioSpec, duration_s: float | None = None,
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = cliargs.ArgumentParser(prog="python -m simulator.inprocess", description=" ".join(__doc__.split("\n\n")[0].split()))
+    ap = cliargs.ArgumentParser(prog="python -m sitl.inprocess", description=" ".join(__doc__.split("\n\n")[0].split()))
     ap.add_argument("scenario")
     ap.add_argument("--duration", type=cliargs.seconds, default=None)
     ap.add_argument("--failsafe-after-rejected", type=cliargs.count, default=None, metavar="K",

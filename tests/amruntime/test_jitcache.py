@@ -1,5 +1,5 @@
 """The compiled law is compiled once per machine: processes starting together share one
-compile through the lock (companion.jitcache), and a run after the warm-up compiles nothing."""
+compile through the lock (amruntime.jitcache), and a run after the warm-up compiles nothing."""
 from __future__ import annotations
 
 import json
@@ -14,9 +14,9 @@ import pytest
 from amcore import law
 from amcore.config import load_scenario
 from amcore.jit import kernels
-from companion import jitcache
+from amruntime import jitcache
 from companion.pilot import Pilot
-from simulator.inprocess import run
+from sitl.inprocess import run
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "configs" / "scenarios" / "two_am_comp.toml"
@@ -24,7 +24,7 @@ SCENARIO = ROOT / "configs" / "scenarios" / "two_am_comp.toml"
 _WARM = textwrap.dedent("""
     import json, sys
     from amcore.config import load_scenario
-    from companion import jitcache
+    from amruntime import jitcache
     from companion.pilot import Pilot
     spec = load_scenario(sys.argv[1])
     report = jitcache.warm(Pilot(spec, spec.ams[0].sysid).warm_up)
@@ -94,7 +94,7 @@ def test_warm_up_covers_the_robust_options_once_they_act():
 _GROUPS = textwrap.dedent("""
     import json, os, sys, time
     from pathlib import Path
-    from companion import jitcache
+    from amruntime import jitcache
     log, go = sys.argv[1], Path(sys.argv[2])
     def first_call(name):
         def call():
@@ -155,7 +155,7 @@ def test_am_run_compiles_the_simulators_kernels_beside_the_law(first_run, capsys
     simulator's kernels before it compiles the law, and waits for it before going on."""
     import multiprocessing
 
-    from simulator import launch
+    from sitl import launch
 
     launch._warm_kernels(load_scenario(SCENARIO), SCENARIO)
     # the law and the simulator's group here, one child beside
@@ -165,7 +165,7 @@ def test_am_run_compiles_the_simulators_kernels_beside_the_law(first_run, capsys
 
 
 def test_am_run_warms_the_simulators_kernels_itself_if_the_second_process_fails(first_run, tmp_path, capfd):
-    from simulator import launch
+    from sitl import launch
 
     launch._warm_kernels(load_scenario(SCENARIO), tmp_path / "gone.toml")  # the child cannot read it: it fails
     assert [locks for locks, _ in first_run] == [[jitcache.LAW_LOCK, jitcache.SIMULATOR_LOCK]]

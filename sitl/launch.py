@@ -40,10 +40,9 @@ from amcore.config import DEFAULT_SCENARIO, ConfigError, check_duration, load_sc
 from amlink.endpoint import DEFAULT_GCS, EndpointError, parse_endpoint
 from amlink.signing import SigningKeyError, read_gcs_key_file
 from telemetry.keyfiles import write_run_keys, write_secret
-
-from . import runfolder
-from .progress import SimBar
-from .verdict import MISSION_FAILED, criteria_rows, format_criteria
+from simulator import runfolder
+from simulator.progress import SimBar
+from simulator.verdict import MISSION_FAILED, criteria_rows, format_criteria
 
 INTERRUPTED = 130  # exit code, as every process of the stack exits when interrupted
 REALTIME_TELEMETRY_HZ = 50.0  # --realtime: each companion publishes its controller's state at this rate
@@ -112,18 +111,18 @@ def _command(name: str) -> list[str]:
 
 def _warm_kernels(spec, scenario: Path) -> None:
     """Compile the control law (amcore.law) before any companion starts, so that they load
-    it from the cache instead of compiling side by side (companion.jitcache). On a machine
+    it from the cache instead of compiling side by side (amruntime.jitcache). On a machine
     that has not compiled it yet (the first run), also the simulator's kernels, before the
     simulator starts: a child process compiles them under their own lock while this one
     compiles the law, on the other core (`jitcache.warm_groups`); should the child fail, this
     process compiles them after the law."""
-    from companion import jitcache
+    from amruntime import jitcache
     from companion.pilot import Pilot
 
     groups = [jitcache.law_group(Pilot(spec, spec.ams[0].sysid).warm_up)]
     child = None
     if not jitcache.looks_cached():
-        from .core import kernel_group
+        from simulator.core import kernel_group
         print("am-run: compiling the control law and the simulator's kernels (once per machine; later runs "
               "load them from the cache)", file=sys.stderr, flush=True)
         groups.append(kernel_group(spec))
@@ -142,9 +141,8 @@ def _warm_kernels(spec, scenario: Path) -> None:
 
 def _warm_simulator_kernels(scenario: str) -> None:
     """The simulator's kernels compiled (or loaded) under their lock: `_warm_kernels`'s child."""
-    from companion import jitcache
-
-    from .core import kernel_group
+    from amruntime import jitcache
+    from simulator.core import kernel_group
     jitcache.warm_groups([kernel_group(load_scenario(scenario))])
 
 

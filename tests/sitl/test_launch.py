@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 from amcore.config import load_scenario
-from simulator.launch import _gcs_key, main
+from sitl.launch import _gcs_key, main
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "configs" / "scenarios"
 

@@ -1,4 +1,4 @@
-"""companion.procstats: how a thread's wall time splits between running, waiting for a core and
+"""amruntime.procstats: how a thread's wall time splits between running, waiting for a core and
 being blocked, as the outcome files and benchmarks/bench_sitl.py report it."""
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from companion import procstats
+from amruntime import procstats
 
 linux_schedstat = pytest.mark.skipif(procstats.thread_schedstat() is None,
                                      reason="no Linux scheduler statistics (/proc/thread-self/schedstat)")

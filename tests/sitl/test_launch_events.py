@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from simulator import launch
+from sitl import launch
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "configs" / "scenarios"
 
