@@ -28,6 +28,8 @@ import sys
 import time
 from pathlib import Path
 
+from .runner import error_row, row_head
+
 # am-run --realtime's boot-time start of the mission [s] (its --mission-start default)
 MISSION_START_S = 10.0
 # a trial's wall-time limit: this many times its simulated time at --speed, plus start-up [s]
@@ -48,8 +50,7 @@ def run_trial(task, speed: float, instance: int, runs: Path) -> dict:
     from amcore.preflight import refusal
 
     spec = scenario_from_dict(task.data, Path(task.path))
-    controller = getattr(spec.vehicle.options, "controller", "passivity")
-    head = {"trial": task.index, "scenario_file": task.path, "controller": controller, **task.params}
+    head = row_head(task, spec)
     t0 = time.perf_counter()
     why = refusal(spec)
     if why is not None:
@@ -111,17 +112,19 @@ def timing_figures(outcome: dict, run_dir: Path, sysids: list[int]) -> dict:
         if loop:
             loops.append(loop)
 
-    def worst(get):
-        vals = [v for v in (get(lp) for lp in loops) if v is not None]
-        return max(vals) if vals else None
-
     row.update({
-        "companion_period_p99_ms": worst(lambda lp: lp.get("period_ms", {}).get("p99")),
-        "companion_period_max_ms": worst(lambda lp: lp.get("period_ms", {}).get("max")),
-        "companion_deadline_misses": worst(lambda lp: lp.get("deadline_misses")),
-        "sample_to_setpoint_p99_ms": worst(lambda lp: lp.get("sample_to_setpoint_ms", {}).get("p99")),
+        "companion_period_p99_ms": _largest(lp.get("period_ms", {}).get("p99") for lp in loops),
+        "companion_period_max_ms": _largest(lp.get("period_ms", {}).get("max") for lp in loops),
+        "companion_deadline_misses": _largest(lp.get("deadline_misses") for lp in loops),
+        "sample_to_setpoint_p99_ms": _largest(lp.get("sample_to_setpoint_ms", {}).get("p99") for lp in loops),
     })
     return row
+
+
+def _largest(values):
+    """The largest of `values` that is not None; None if there is none."""
+    vals = [v for v in values if v is not None]
+    return max(vals) if vals else None
 
 
 def timing_summary(rows: list[dict]) -> dict:
@@ -133,8 +136,7 @@ def timing_summary(rows: list[dict]) -> dict:
     rtf = sorted(r["real_time_factor"] for r in flown)
 
     def worst(k):
-        vals = [r[k] for r in flown if r.get(k) is not None]
-        return max(vals) if vals else None
+        return _largest(r.get(k) for r in flown)
 
     return {"real_time_factor_median": rtf[len(rtf) // 2], "real_time_factor_min": rtf[0],
             "physics_miss_share_max": worst("physics_miss_share"),
@@ -151,8 +153,7 @@ def run_serial(tasks, speed: float, instance: int, runs: Path, on_result=lambda 
         try:
             row = run_trial(t, speed, instance, runs)
         except Exception as exc:  # noqa: BLE001 - recorded, and the campaign goes on
-            row = {"trial": t.index, "scenario_file": t.path, **t.params, "verdict": "error",
-                   "failure_class": "", "reason": f"{type(exc).__name__}: {exc}"}
+            row = error_row(t, exc)
         rows.append(row)
         on_result(row)
     return rows

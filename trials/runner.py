@@ -156,9 +156,8 @@ def _run_trial(task: TrialTask, spec, refusal, run, summary_figures) -> dict:
     t0 = time.perf_counter()
     why = refusal(spec)
     if why is not None:
-        return {"trial": task.index, "scenario_file": task.path,
-                "controller": getattr(spec.vehicle.options, "controller", "passivity"), **task.params,
-                "verdict": "refused", "failure_class": "", "reason": why, "wall_s": time.perf_counter() - t0}
+        return {**row_head(task, spec), "verdict": "refused", "failure_class": "", "reason": why,
+                "wall_s": time.perf_counter() - t0}
     result = run(spec)
     wall = time.perf_counter() - t0
     v = result["verdict"]
@@ -169,6 +168,18 @@ def _run_trial(task: TrialTask, spec, refusal, run, summary_figures) -> dict:
             "reason": v["text"], **summary_figures(result, share), **peaks,
             "rejected_setpoints": result["rejected_setpoints"], "state_digest": result["state_digest"],
             "wall_s": wall}
+
+
+def row_head(task: TrialTask, spec) -> dict:
+    """The first columns of a trial's row: its index, file, control law and drawn values."""
+    return {"trial": task.index, "scenario_file": task.path,
+            "controller": getattr(spec.vehicle.options, "controller", "passivity"), **task.params}
+
+
+def error_row(task: TrialTask, exc: BaseException) -> dict:
+    """The row of a trial that raised (a bug, not a failed mission): verdict "error"."""
+    return {"trial": task.index, "scenario_file": task.path, **task.params, "verdict": "error",
+            "failure_class": "", "reason": f"{type(exc).__name__}: {exc}"}
 
 
 def _peak_errors(companions: dict) -> dict:
@@ -246,8 +257,7 @@ def run_all(tasks: list[TrialTask], ex: cf.Executor,
         try:
             row = f.result()
         except Exception as exc:  # noqa: BLE001 - recorded, and the campaign goes on
-            row = {"trial": t.index, "scenario_file": t.path, **t.params, "verdict": "error",
-                   "failure_class": "", "reason": f"{type(exc).__name__}: {exc}"}
+            row = error_row(t, exc)
         rows.append(row)
         on_result(row)
     return sorted(rows, key=lambda r: r["trial"])
