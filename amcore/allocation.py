@@ -1,16 +1,9 @@
 """Control allocation from the rotors' effectiveness matrix, as PX4's control_allocator does
 (pure: numpy for set-up, Python floats per step).
 
-The rotor table (`amcore.config.RotorParams`, PX4's CA_ROTORn_*) gives each rotor i a position
-p_i, a unit thrust axis a_i and a signed moment ratio KM_i (> 0 for a ccw rotor). One newton of
-its thrust makes the wrench about the base's origin, in the base frame B (x forward, y left,
-z up), as ActuatorEffectivenessRotors::computeEffectivenessMatrix builds it:
-
-    F_i   = a_i
-    tau_i = p_i x a_i - KM_i a_i
-
-so B = [F_i; tau_i] (6 x n) maps rotor thrusts f [N] to the base wrench (F, tau). PX4's FRD
-frame and this FLU frame describe the same vectors; the formula holds in either.
+The rotor table (`amcore.rotors.RotorParams`, PX4's CA_ROTORn_*) and its effectiveness matrix
+B (6 x n: the base wrench per newton of each rotor's thrust, `amcore.rotors.effectiveness`, as
+ActuatorEffectivenessRotors builds it) are the geometry this module allocates over.
 
 What the paper's law asks for is the thrust T along z_B and the body torque tau_B (eq. u3 and
 eq. ori_controller give them); the lateral force is held at zero. The allocation follows
@@ -37,12 +30,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:  # config imports this module to check rotor tables
-    from amcore.config import RotorParams
+from .rotors import RotorParams, effectiveness
 
 _YAW_MARGIN = 0.15  # ControlAllocationSequentialDesaturation: yaw's room above full output
 _WEAK_EFFECTIVENESS = 0.2  # computeDesaturationGain ignores actuators weaker than this
@@ -53,18 +44,6 @@ SATURATION_TOL = 1e-3
 AXES = ("roll", "pitch", "yaw", "thrust")
 _NO_AXES = (False, False, False, False)  # saturated_axes of an allocation that met every axis
 _NONE_UNALLOCATED = (0.0, 0.0, 0.0, 0.0)
-
-
-def effectiveness(rotors: "RotorParams") -> np.ndarray:
-    """(6, n) wrench (F_x, F_y, F_z [N], tau_x, tau_y, tau_z [N m]) in B per newton of each
-    rotor's thrust (see the module docstring)."""
-    cols = []
-    for r in rotors.rotor:
-        a = np.asarray(r.axis, dtype=float)
-        a = a / np.linalg.norm(a)
-        p = np.asarray(r.position_m, dtype=float)
-        cols.append(np.concatenate([a, np.cross(p, a) - r.km * a]))
-    return np.array(cols).T
 
 
 def frozen_instance(cls, **fields):
@@ -113,7 +92,7 @@ class Allocation:
     """PX4's pseudo-inverse allocation with sequential desaturation, airmode off, for any
     rotor table (see the module docstring)."""
 
-    def __init__(self, rotors: "RotorParams", compiled: bool = False) -> None:
+    def __init__(self, rotors: RotorParams, compiled: bool = False) -> None:
         """compiled: `allocate` runs as `amcore.allocation_kernels.allocate` (numba; the same
         numbers bit for bit), else as the Python below (the form the tests compare it with)."""
         self.rotors = rotors

@@ -18,6 +18,9 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
+from .allocation import Allocation
+from .rotors import Rotor, RotorParams, table_problem
+
 
 class ConfigError(ValueError):
     """A configuration file is malformed; the message names the file and the key."""
@@ -58,81 +61,6 @@ DEFAULT_SCENARIO = SCENARIOS_DIR / "two_am_comp_attitude.toml"
 
 
 # ----------------------------------------------------------------------------- vehicle
-ROTOR_SPINS = ("ccw", "cw")  # seen from above the rotor, looking down its thrust axis
-
-
-@dataclass(frozen=True)
-class Rotor:
-    """One rotor as PX4's control allocation describes it (CA_ROTORn_PX/PY/PZ, AX/AY/AZ, KM),
-    in the base frame B (x forward, y left, z up; origin at the base link's origin, which is
-    its centre of mass in the shipped URDFs).
-
-    position_m: where its thrust acts [m] (PX4 PX/PY/PZ, which are FRD); axis: the direction of
-    its thrust, normalized when loaded (PX4 AX/AY/AZ); spin: "ccw" or "cw" seen from the side
-    the thrust points to; moment_ratio_m: its drag torque per newton of thrust [N m / N] (|KM|;
-    PX4's KM is +moment_ratio_m for ccw, - for cw). The drag torque on the base is
-    -KM f axis: a ccw rotor yaws the base clockwise. thrust_min_n, thrust_max_n and
-    time_constant_s override the [rotors] table's values for this rotor (None: the table's).
-    """
-
-    position_m: tuple[float, float, float]
-    axis: tuple[float, float, float]
-    spin: str
-    moment_ratio_m: float
-    thrust_min_n: float | None = None
-    thrust_max_n: float | None = None
-    time_constant_s: float | None = None
-
-    @property
-    def km(self) -> float:
-        """PX4's CA_ROTORn_KM: signed moment ratio, > 0 for a ccw rotor [m]."""
-        return self.moment_ratio_m if self.spin == "ccw" else -self.moment_ratio_m
-
-
-@dataclass(frozen=True)
-class RotorParams:
-    """The multirotor's rotors: one `Rotor` row each ([[rotors.rotor]] in a vehicle file),
-    with the thrust range and lag every row takes unless it gives its own. The allocation
-    (amcore.allocation) and the simulator's rotor forces are built from these rows alone."""
-
-    rotor: tuple[Rotor, ...]
-    thrust_max_n: float  # per rotor [N]
-    thrust_min_n: float = 0.0
-    # First-order lag of each rotor's thrust behind its command [s]; 0 is an ideal actuator.
-    # The vehicle file gives the physical value and its source (configs/vehicles/am3dof.toml).
-    time_constant_s: float = 0.0
-
-    @property
-    def count(self) -> int:
-        return len(self.rotor)
-
-    def thrust_min(self) -> tuple[float, ...]:
-        """Per rotor, its least thrust [N]."""
-        return tuple(self.thrust_min_n if r.thrust_min_n is None else r.thrust_min_n for r in self.rotor)
-
-    def thrust_max(self) -> tuple[float, ...]:
-        """Per rotor, its greatest thrust [N]."""
-        return tuple(self.thrust_max_n if r.thrust_max_n is None else r.thrust_max_n for r in self.rotor)
-
-    def time_constants(self) -> tuple[float, ...]:
-        """Per rotor, its thrust lag [s] (0: ideal)."""
-        return tuple(self.time_constant_s if r.time_constant_s is None else r.time_constant_s for r in self.rotor)
-
-    @property
-    def lagging(self) -> bool:
-        return any(t > 0.0 for t in self.time_constants())
-
-    @property
-    def thrust_max_total_n(self) -> float:
-        """Sum of the rotors' greatest thrusts [N] (along their own axes)."""
-        return float(sum(self.thrust_max()))
-
-    @property
-    def thrust_max_z_n(self) -> float:
-        """Greatest thrust along z_B [N]: every rotor at its maximum, the cant's share lost."""
-        return float(sum(f * r.axis[2] / math.hypot(*r.axis) for f, r in zip(self.thrust_max(), self.rotor)))
-
-
 @dataclass(frozen=True)
 class TaskSpec:
     """Components of the task variable y, in the AM's task frame (eq. jacobian_xi).
@@ -927,8 +855,6 @@ OBJECT_BOTTOM_MAX_M = 5.0
 MISSION_DISTANCE_MAX_M = 2.0
 OBJECT_POSE_SOURCES = ("config", "mocap")  # [mission].object_pose
 MASS_TOLERANCE_MAX = 0.5  # a mass known to worse than +/-50 % is not a plan: weigh the object
-ROTOR_COUNT_RANGE = (4, 16)  # PX4's CA_ROTOR_COUNT allows up to 12; 16 leaves room for coaxial octos
-ROTOR_SPACING_MIN_M = 0.01  # two rotors closer than this are one rotor entered twice
 
 
 def _is_key_hex(text: str) -> bool:
@@ -1071,7 +997,6 @@ def px4_units(v: VehicleParams) -> tuple[tuple[float, float, float], tuple[float
     """(J, S): the whole AM's rotational inertia about the base's origin, body axes, arm at
     q_nominal_rad (roll, pitch, yaw) [kg m^2], and PX4's torque units on those axes [N m per unit
     of normalized torque] (amcore.px4_gains)."""
-    from .allocation import Allocation
     from .vehicle_checks import whole_am_inertia
 
     J = whole_am_inertia(v.urdf, v.q_nominal_rad)
@@ -1103,52 +1028,10 @@ def _rotors(table, where: str) -> RotorParams:
 
 
 def _check_rotors(r: RotorParams, where: str) -> None:
-    """A rotor table the allocation can use: finite rows, unit-able axes, known spins, sane
-    ranges, no rotor entered twice, and a layout that makes thrust along +z_B and torque about
-    every body axis (the effectiveness matrix's [F_z, tau] rows have full rank 4)."""
-    import numpy as np
-
-    from amcore.allocation import effectiveness  # imports this module
-
-    lo_n, hi_n = ROTOR_COUNT_RANGE
-    if not lo_n <= r.count <= hi_n:
-        raise ConfigError(f"{where}.rotor: expected {lo_n} to {hi_n} rotors, got {r.count}")
-    for i, row in enumerate(r.rotor):
-        w = f"{where}.rotor[{i}]"
-        if not all(math.isfinite(x) and abs(x) <= 5.0 for x in row.position_m):
-            raise ConfigError(f"{w}.position_m: must be finite and within 5 m of the base, got {list(row.position_m)}")
-        if not all(math.isfinite(x) for x in row.axis) or math.hypot(*row.axis) < 1e-6:
-            raise ConfigError(f"{w}.axis: must be a nonzero finite direction, got {list(row.axis)}")
-        if row.spin not in ROTOR_SPINS:
-            raise ConfigError(f"{w}.spin: expected one of {', '.join(ROTOR_SPINS)}, got '{row.spin}'")
-        if not 0.0 < row.moment_ratio_m <= 1.0:
-            raise ConfigError(f"{w}.moment_ratio_m: must be in (0, 1] m (PX4's default |KM| is 0.05), "
-                              f"got {row.moment_ratio_m!r}")
-    for i, (f_min, f_max, tau) in enumerate(zip(r.thrust_min(), r.thrust_max(), r.time_constants())):
-        w = f"{where}.rotor[{i}]" if any(getattr(r.rotor[i], k) is not None for k in
-                                          ("thrust_min_n", "thrust_max_n", "time_constant_s")) else where
-        if not (math.isfinite(f_max) and 0.0 <= f_min < f_max <= 1000.0):
-            raise ConfigError(f"{w}: need 0 <= thrust_min_n < thrust_max_n <= 1000 N, got {f_min!r} and {f_max!r}")
-        if not 0.0 <= tau <= 1.0:
-            raise ConfigError(f"{w}.time_constant_s: must be in [0, 1] s (0: ideal), got {tau!r}")
-    for i in range(r.count):
-        for j in range(i):
-            d = math.dist(r.rotor[i].position_m, r.rotor[j].position_m)
-            if d < ROTOR_SPACING_MIN_M:
-                raise ConfigError(f"{where}.rotor[{i}].position_m: {d * 1e3:.1f} mm from rotor[{j}]: the same rotor "
-                                  f"entered twice? (rotors at least {ROTOR_SPACING_MIN_M * 1e3:g} mm apart)")
-    B = effectiveness(r)
-    if not np.all(B[2] > 0.0):
-        k = int(np.argmin(B[2]))
-        raise ConfigError(f"{where}.rotor[{k}].axis: every rotor must thrust upward (axis z > 0), got "
-                          f"{list(r.rotor[k].axis)}")
-    s = np.linalg.svd(B[2:6], compute_uv=False)
-    if s[-1] < 1e-6 * s[0]:
-        _, _, vt = np.linalg.svd(B[2:6].T)
-        names = ("thrust along z", "roll torque", "pitch torque", "yaw torque")
-        weak = names[int(np.argmax(np.abs(vt[-1])))]
-        raise ConfigError(f"{where}.rotor: this layout cannot make {weak} independently of the other axes "
-                          f"(the effectiveness matrix's [F_z, tau] rows have rank < 4)")
+    """amcore.rotors.table_problem, as a ConfigError naming the file, table and key."""
+    problem = table_problem(r)
+    if problem is not None:
+        raise ConfigError(f"{where}{problem[0]}: {problem[1]}")
 
 
 def _urdf_tree(urdf: Path, where: str) -> ET.Element:

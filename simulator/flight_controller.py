@@ -47,7 +47,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from amcore.allocation import Allocation, AllocationResult, frozen_instance
-from amcore.config import FlightControllerParams, RotorParams
+from amcore.config import FlightControllerParams
+from amcore.rotors import RotorParams
 
 from . import fc_kernels
 

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from amcore.allocation import AXES, Allocation, effectiveness
+from amcore.allocation import AXES, Allocation
+from amcore.rotors import effectiveness
 from amcore.authority import vehicle_authority
 from amcore.config import load_vehicle
 
