@@ -23,8 +23,10 @@ ControlAllocationPseudoInverse and ControlAllocationSequentialDesaturation (MC_A
 
 Torque mode (the companion's thrust and body torque) and the emulated PX4 (attitude mode)
 both call `Allocation.allocate`; torque mode converts its physical request with the scales.
-`Allocation(rotors, compiled=True)` (the simulator's) runs `allocate` as
-`amcore.allocation_kernels.allocate` (numba), bit for bit the Python method's result.
+Steps 1 and 2 are set-up (numpy, here); step 3, per command, is `amcore.allocation_kernels`
+(numba), loaded at the first allocation, so that the modules that only read the scales (the
+config loader's PX4 gains, the envelope's set-up) do not load numba. Its readable reference,
+the steps above in plain Python, is tests/amcore/reference_allocation.py.
 """
 from __future__ import annotations
 
@@ -35,8 +37,8 @@ import numpy as np
 
 from .rotors import RotorParams, effectiveness
 
-_YAW_MARGIN = 0.15  # ControlAllocationSequentialDesaturation: yaw's room above full output
-_WEAK_EFFECTIVENESS = 0.2  # computeDesaturationGain ignores actuators weaker than this
+YAW_MARGIN = 0.15  # ControlAllocationSequentialDesaturation: yaw's room above full output
+WEAK_EFFECTIVENESS = 0.2  # computeDesaturationGain ignores actuators weaker than this
 _SMALL_MIX = 1e-3  # normalizeControlAllocationMatrix: entries counted as nonzero for roll/pitch
 # an axis counts as saturated when its unallocated normalized command exceeds this: PX4's
 # ControlAllocator reports a setpoint achieved while |unallocated|^2 < 1e-6 (7 mN m of roll here)
@@ -92,9 +94,7 @@ class Allocation:
     """PX4's pseudo-inverse allocation with sequential desaturation, airmode off, for any
     rotor table (see the module docstring)."""
 
-    def __init__(self, rotors: RotorParams, compiled: bool = False) -> None:
-        """compiled: `allocate` runs as `amcore.allocation_kernels.allocate` (numba; the same
-        numbers bit for bit), else as the Python below (the form the tests compare it with)."""
+    def __init__(self, rotors: RotorParams) -> None:
         self.rotors = rotors
         self.count = rotors.count
         self.B = effectiveness(rotors)  # (6, n) per newton
@@ -121,75 +121,30 @@ class Allocation:
         self.thrust_scale_n = float(1.0 / scale[5])  # physical thrust per unit normalized thrust
         self.out_min = tuple((self.f_min / self.f_max).tolist())
         self.out_max = 1.0
-        self._roll, self._pitch, self._yaw, self._thrust = (tuple(c) for c in self.mix.T.tolist())
-        self._eff = tuple(map(tuple, self.effectiveness_normalized.tolist()))
-        self._f_max = self.rotor_thrust_max_n = tuple(self.f_max.tolist())  # per rotor [N]
+        self.rotor_thrust_max_n = tuple(self.f_max.tolist())  # per rotor [N]
         self._inv_scale = (scale[0], scale[1], scale[2], scale[5])
-        self.compiled = compiled
-        if compiled:
-            from . import allocation_kernels
-            self._kernel = allocation_kernels.allocate
-            self._c = allocation_kernels.constants((self._roll, self._pitch, self._yaw, self._thrust), self.out_min,
-                                                   self._eff, self._f_max)
-            self._result = np.zeros(2 * self.count + 9)
+        self._kernel = None  # amcore.allocation_kernels.allocate and its constants, at the first allocation
+        self._result = np.zeros(2 * self.count + 9)
 
-    # ------------------------------------------------------------------ desaturation
-    def _gain(self, v, out, hi: float) -> float:
-        """computeDesaturationGain: k_min + k_max over the outputs outside [min, hi]."""
-        k_min = k_max = 0.0
-        for vi, x, lo in zip(v, out, self.out_min):
-            if abs(vi) < _WEAK_EFFECTIVENESS:
-                continue
-            if x < lo:
-                k = (lo - x) / vi
-                k_min, k_max = min(k_min, k), max(k_max, k)
-            if x > hi:
-                k = (hi - x) / vi
-                k_min, k_max = min(k_min, k), max(k_max, k)
-        return k_min + k_max
+    def _load_kernel(self) -> None:
+        from . import allocation_kernels
 
-    def _desaturate(self, out: list, v, hi: float, thrust_down_only: bool = False) -> list:
-        """desaturateActuators along v; with thrust_down_only, a move that would raise the
-        thrust (v is the thrust column, positive here in FLU) is not made."""
-        g = self._gain(v, out, hi)
-        if thrust_down_only and g > 0.0:
-            return out
-        out = [x + g * vi for x, vi in zip(out, v)]
-        g = 0.5 * self._gain(v, out, hi)
-        return [x + g * vi for x, vi in zip(out, v)]
+        self._c = allocation_kernels.constants(tuple(map(tuple, self.mix.T.tolist())), self.out_min,
+                                               tuple(map(tuple, self.effectiveness_normalized.tolist())),
+                                               self.rotor_thrust_max_n)
+        self._kernel = allocation_kernels.allocate
 
     def allocate(self, roll: float, pitch: float, yaw: float, thrust: float) -> AllocationResult:
         """Outputs for normalized (roll, pitch, yaw) torque and thrust (mixAirmodeDisabled)."""
-        if self.compiled:
-            return self.allocate_thrusts(roll, pitch, yaw, thrust)[0]
-        r, p, y, t = self._roll, self._pitch, self._yaw, self._thrust
-        lo, hi = self.out_min, self.out_max
-        out = [roll * a + pitch * b + thrust * c for a, b, c in zip(r, p, t)]
-        full = [x + yaw * a for x, a in zip(out, y)]
-        if all(x >= m for x, m in zip(out, lo)) and max(out) <= hi and all(x >= m for x, m in zip(full, lo)) \
-                and max(full) <= hi:
-            # inside the limits with and without yaw: every desaturation gain below is zero
-            return AllocationResult(tuple(full), (roll, pitch, yaw, thrust), (0.0, 0.0, 0.0, 0.0), False)
-        out = self._desaturate(out, t, hi, thrust_down_only=True)
-        out = self._desaturate(out, r, hi)
-        out = self._desaturate(out, p, hi)
-        out = [x + yaw * a for x, a in zip(out, y)]  # mixYaw
-        out = self._desaturate(out, y, hi + (hi - min(lo)) * _YAW_MARGIN)
-        out = self._desaturate(out, t, hi, thrust_down_only=True)
-        out = tuple(min(max(x, m), hi) for x, m in zip(out, lo))
-        allocated = tuple(sum(e * x for e, x in zip(row, out)) for row in self._eff)
-        unallocated = (roll - allocated[0], pitch - allocated[1], yaw - allocated[2], thrust - allocated[3])
-        axes = tuple(bool(abs(u) > SATURATION_TOL) for u in unallocated)
-        return AllocationResult(out, allocated, unallocated, any(axes), axes)
+        return self.allocate_thrusts(roll, pitch, yaw, thrust)[0]
 
     def allocate_thrusts(self, roll: float, pitch: float, yaw: float,
                          thrust: float) -> tuple[AllocationResult, tuple[float, ...]]:
         """`allocate`, and the rotor thrusts [N] its outputs command (each output times its
-        rotor's most thrust); compiled: by `amcore.allocation_kernels.allocate`."""
-        if not self.compiled:
-            a = self.allocate(roll, pitch, yaw, thrust)
-            return a, tuple([u * m for u, m in zip(a.outputs, self._f_max)])
-        self._kernel(self._c, roll, pitch, yaw, thrust, self.out_max, _WEAK_EFFECTIVENESS, _YAW_MARGIN, self._result)
+        rotor's most thrust)."""
+        if self._kernel is None:
+            self._load_kernel()
+        self._kernel(self._c, roll, pitch, yaw, thrust, self.out_max, WEAK_EFFECTIVENESS, YAW_MARGIN, self._result)
         v, n = self._result.tolist(), self.count
         thrusts = tuple(v[n + 9:])
         if v[n + 8] == 0.0:

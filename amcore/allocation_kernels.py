@@ -1,16 +1,16 @@
-"""`amcore.allocation.Allocation.allocate` compiled (numba, as amcore.law): PX4's
-pseudo-inverse allocation with sequential desaturation, the same steps as the Python
-method, one small kernel each, in the same order on IEEE doubles, so that the compiled
-allocation gives bit for bit what the Python one gives (tests/amcore/test_allocation_kernels.py).
+"""`amcore.allocation.Allocation.allocate`'s per-command steps (numba, as amcore.law): PX4's
+pseudo-inverse allocation with sequential desaturation, one small kernel per step of
+ControlAllocationSequentialDesaturation (amcore.allocation's docstring lists them). Its
+readable reference is tests/amcore/reference_allocation.py; tests/amcore/test_allocation_kernels.py
+compares the two.
 
 The rotor table's constants travel in one array (`constants`: the mix's roll, pitch, yaw and
 thrust columns, each rotor's least output, the normalized effectiveness rows, each rotor's
 most thrust); `allocate` writes the outputs, the allocated and the unallocated control,
-whether it desaturated and the rotor thrusts into one array. Python's `min` and `max` keep
-their first argument on ties (`_min`, `_max`). Imported only by an
-`Allocation(compiled=True)` (the simulator's): the pure modules that check rotor tables do
-not load numba. Kernels here call only kernels of this file (numba's cache is keyed per
-source file; see amcore.jit).
+whether it desaturated and the rotor thrusts into one array. `_min` and `_max` keep their
+first argument on ties, as Python's min and max do. Imported at an `Allocation`'s first
+allocation: the pure modules that only read its scales do not load numba. Kernels here call
+only kernels of this file (numba's cache is keyed per source file; see amcore.jit).
 """
 from __future__ import annotations
 

@@ -5,7 +5,7 @@ adds around it, per AM and physics step (median and p95), and the companion's ex
 
 Rows, each timed in interleaved rounds so that a change in machine load hits all alike:
 - the flight controller's loop (simulator.flight_controller.FlightController.step at 1 kHz,
-  the loop running every call), and its allocation alone (Px4Allocation.allocate);
+  the loop running every call), and its allocation alone (Allocation.allocate);
 - the simulator's attitude-mode path for one AM and step: read attitude and rate, the
   autopilot, command the rotors (World.attitude_and_rate + step + World.apply_rotors), next
   to torque mode's (World.apply: the allocation), on a connected world;
@@ -28,7 +28,8 @@ from amcore.model import build_model, create_data
 from amcore.offboard import OffboardMemory, offboard_step
 from amcore.so3 import R_to_quat_wxyz, exp_so3
 from amlink.types import AttitudeTarget
-from simulator.flight_controller import FlightController, Px4Allocation
+from amcore.allocation import Allocation
+from simulator.flight_controller import FlightController
 from simulator.rotors import RotorLag
 from simulator.world import World
 
@@ -52,7 +53,7 @@ def main() -> None:
     hover = 0.4
     target = AttitudeTarget(0, np.array(quats[0]), [0.01, -0.02, 0.0], hover)
     fc = FlightController(v.flight_controller, v.rotors, spec.dt_s)
-    alloc = Px4Allocation(v.rotors)
+    alloc = Allocation(v.rotors)
     lag = RotorLag(v.rotors.time_constant_s, spec.dt_s)
 
     model = build_model(v)
@@ -96,7 +97,7 @@ def main() -> None:
         mem_o[0] = offboard_step(model, data, params, x, ref, F, mem_o[0], 1e-3 * k).memory
 
     rows = {"flight controller loop (FlightController.step)": fc_step,
-            "  of which the allocation (Px4Allocation.allocate)": allocation,
+            "  of which the allocation (Allocation.allocate)": allocation,
             "simulator, attitude mode: read + autopilot + apply_rotors": attitude_path,
             "simulator, torque mode: World.apply (allocation)": torque_path,
             "rotor lag (RotorLag.step)": rotor_lag,

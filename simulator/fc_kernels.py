@@ -1,16 +1,17 @@
-"""The emulated autopilot's attitude and rate loops compiled (numba, as amcore.law): the same
-equations as the Python functions of `simulator.flight_controller`, one small kernel each,
-evaluated in the same order on IEEE doubles, so that the compiled loops give bit for bit what
-the Python ones give (tests/simulator/test_fc_kernels.py checks it against them).
+"""The emulated autopilot's attitude and rate loops (numba, as amcore.law), one small kernel
+per step of `simulator.flight_controller`'s module doc. Their readable reference, the same
+equations in plain Python, is tests/simulator/reference_flight_controller.py, which
+tests/simulator/test_fc_kernels.py compares them with.
 
 `FlightController` keeps its loops' state in one array (`S_*` offsets) and its constants in
 another (`P_*`); `rate_loops` runs steps 1 and 2 of the module doc of
 `simulator.flight_controller` (attitude P loop, rate PID with the gyro filters); the
 allocation (step 3) stays in `amcore.allocation`, shared with torque mode.
 
-Python's `min` and `max` keep their first argument on ties and NaNs (`_min`, `_max` do the
-same), and `x ** 2` of a Python float is C's pow(x, 2.0) (`_square`), not x * x. Kernels here call only
-kernels of this file (numba's cache is keyed per source file; see amcore.jit).
+`_min` and `_max` keep their first argument on ties and NaNs, as Python's min and max do, and
+`_square` is C's pow(x, 2.0), as Python's `x ** 2`: the reference and the kernels take the same
+steps. Kernels here call only kernels of this file (numba's cache is keyed per source file;
+see amcore.jit).
 """
 from __future__ import annotations
 
@@ -196,18 +197,11 @@ def rate_loops(p, s, quat_WB, w, quat_d, ff, thrust, unallocated, saturated, out
             s[S_RATE_INT + ax] = _min(_max(r_i, -lim), lim)
 
 
-def filter_constants(f) -> tuple[float, ...]:
-    """(active, b0, b1, b2, a1, a2) of a `simulator.flight_controller.LowPass2p`."""
-    if not f.active:
-        return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    return (1.0, f.b0, f.b1, f.b2, f.a1, f.a2)
-
-
 def constants(fc) -> np.ndarray:
     """The P_* array of a `simulator.flight_controller.FlightController`."""
     p = np.zeros(N_P)
-    p[P_GYRO:P_GYRO + 6] = filter_constants(fc._gyro[0])
-    p[P_DGYRO:P_DGYRO + 6] = filter_constants(fc._dgyro[0])
+    p[P_GYRO:P_GYRO + 6] = fc.gyro_filter
+    p[P_DGYRO:P_DGYRO + 6] = fc.dgyro_filter
     for at, v in ((P_ATT_P, fc.att_p), (P_RATE_MAX, fc.rate_max), (P_GAIN_P, fc.gain_p), (P_GAIN_I, fc.gain_i),
                   (P_GAIN_D, fc.gain_d), (P_GAIN_FF, fc.gain_ff), (P_INT_LIM, fc.int_lim)):
         p[at:at + 3] = v

@@ -161,7 +161,7 @@ class World:
         # (dt_s): times the substeps, they are that substep's forces
         self._contact_scale = float(spec.physics_substeps)
         self._initial = dict(initial)
-        self._alloc = Allocation(spec.vehicle.rotors, compiled=True)
+        self._alloc = Allocation(spec.vehicle.rotors)
         # each rotor's least thrust and range [N], for the busiest/idlest rotor's share in the truth
         self._rotor_ranges = tuple(zip(spec.vehicle.rotors.thrust_min(),
                                        (hi - lo for lo, hi in zip(spec.vehicle.rotors.thrust_min(),

@@ -10,7 +10,11 @@ import pytest
 
 from amcore.so3 import R_to_quat_wxyz, exp_so3, quat_wxyz_to_R
 from amlink.types import AttitudeTarget
-from simulator.flight_controller import FlightController, LowPass2p, Px4Allocation, attitude_error
+from amcore.allocation import Allocation
+from simulator.fc_kernels import attitude_error
+from simulator.flight_controller import FlightController, lowpass2p
+
+from .reference_flight_controller import LowPass2p
 from simulator.rotors import RotorLag
 
 
@@ -21,7 +25,7 @@ def fc_params(spec):
 
 @pytest.fixture(scope="module")
 def alloc(spec):
-    return Px4Allocation(spec.vehicle.rotors)
+    return Allocation(spec.vehicle.rotors)
 
 
 def q_of(rotvec) -> tuple:
@@ -83,12 +87,12 @@ def test_desaturation_keeps_roll_and_pitch_and_never_raises_thrust(alloc):
 
 # ----------------------------------------------------------------------------- rate loop, filters
 def test_low_pass_has_unit_dc_gain_and_minus_3_db_at_its_cutoff():
-    f = LowPass2p(1000.0, 40.0)
+    f = LowPass2p(lowpass2p(1000.0, 40.0))
     assert all(f.apply(2.5) == pytest.approx(2.5) for _ in range(100))
-    f = LowPass2p(1000.0, 40.0)
+    f = LowPass2p(lowpass2p(1000.0, 40.0))
     y = [f.apply(math.sin(2.0 * math.pi * 40.0 * k / 1000.0)) for k in range(4000)]
     assert max(y[2000:]) == pytest.approx(math.sqrt(0.5), abs=0.01)
-    assert LowPass2p(1000.0, 0.0).apply(3.0) == 3.0
+    assert LowPass2p(lowpass2p(1000.0, 0.0)).apply(3.0) == 3.0
 
 
 def test_integral_stops_growing_into_a_saturated_axis_and_stays_within_its_limit(fc_params, spec):
@@ -120,7 +124,7 @@ def test_loop_runs_at_its_own_rate_and_holds_between(fc_params, spec):
 def _fly(fc, rotors, q_d, steps, disturbance_nm=(0.0, 0.0, 0.0), tau_s=0.025, dt=1e-3):
     """A rigid quadrotor (the vehicle's base and arm at its nominal inertia) with lagging rotors."""
     J = np.diag([0.04, 0.04, 0.065])
-    alloc, lag = Px4Allocation(rotors), RotorLag(tau_s, dt)
+    alloc, lag = Allocation(rotors), RotorLag(tau_s, dt)
     R, w = np.eye(3), np.zeros(3)
     target = AttitudeTarget(0, q_d, [0.0, 0.0, 0.0], 0.4)
     errors = []

@@ -3,8 +3,10 @@ from __future__ import annotations
 
 import json
 import shutil
+import signal
 import subprocess
 import sys
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -65,3 +67,48 @@ def companion(sysid: int, sim: str, scenario: str = "two_am_comp.toml", *extra: 
     return subprocess.Popen([script("companion"), "--sysid", str(sysid), "--sim", sim, "--config",
                              str(SCENARIOS / scenario), "--insecure", *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
+
+
+def scenario_copy(tmp_path: Path) -> Path:
+    path = tmp_path / "two_am_comp_attitude.toml"
+    path.write_text(f'base = "{SCENARIOS / "two_am_comp_attitude.toml"}"\n')
+    return path
+
+
+class FreeSim:
+    """`simulator --realtime` sending vehicle i's PX4 port to ports[i]; returns once it says its
+    ports are open (its kernels may compile first, once per machine)."""
+
+    def __init__(self, tmp_path: Path, ports: list[int], duration_s: float = 60.0, gcs: tuple = ("--gcs", "none")) -> None:
+        self.run_dir = tmp_path / "run"
+        onboard = [a for p in ports for a in ("--onboard", f"udpout:127.0.0.1:{p}")]
+        self.proc = subprocess.Popen([script("simulator"), "--config", str(scenario_copy(tmp_path)), "--realtime",
+                                      "--duration", str(duration_s), "--run-dir", str(self.run_dir), "--no-telemetry", *onboard, *gcs],
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        self.lines: list[str] = []
+        ready = threading.Event()
+
+        def read() -> None:  # keep the pipe drained; note when the ports are up
+            for line in self.proc.stderr:
+                self.lines.append(line)
+                if "PX4 onboard ports" in line:
+                    ready.set()
+            ready.set()
+
+        self._reader = threading.Thread(target=read, daemon=True)
+        self._reader.start()
+        if not ready.wait(180.0) or self.proc.poll() is not None:
+            self.proc.kill()
+            raise RuntimeError("the simulator did not open its ports:\n" + "".join(self.lines))
+
+    def stop(self) -> tuple[int, str, dict]:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+        try:
+            self.proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        self._reader.join(5.0)
+        path = self.run_dir / "outcome.json"
+        return self.proc.returncode, "".join(self.lines), json.loads(path.read_text()) if path.is_file() else {}

@@ -1,6 +1,8 @@
 """MAVProxy, the real GCS, against `am-run`, as docs/mavlink.md shows it: the amstack dialect by
 name, the run's GCS signing key kept in a file (`am-run --gcs-key-file`), MAVProxy started
 with `--non-interactive` and its commands repeated by its own `repeat` (it reads no prompt).
+And against the free-running simulator's GCS port (`simulator --realtime`, PX4 SITL's), as a
+PX4 user runs it: MAVProxy's own default dialect, signed with the port's key file.
 
 MAVProxy comes with the test extra (pip install -e '.[test]'; it brings opencv-python and vtk,
 ~245 MB; the mavproxy extra has it alone). In this environment the dialect is amstack's own. With
@@ -22,7 +24,9 @@ from pathlib import Path
 
 import pytest
 
-from .runner import SCENARIOS, script
+from tests.ports import free_udp_ports
+
+from .runner import SCENARIOS, FreeSim, script
 
 pytestmark = pytest.mark.sitl
 
@@ -132,3 +136,50 @@ def test_mavproxy_sees_both_vehicles_arms_signed_survives_unsigned_frames_and_ab
     assert o["verdict"]["failures"][0]["reason"].startswith("aborted by the GCS at t = ")
     assert o["gcs"]["commands"] > 0 and o["gcs"]["link"]["unsigned"] == 0  # every command it sent was signed
     assert not (run_dir / "keys" / "gcs.key").exists()  # the kept key, not a new one
+
+
+@pytest.mark.skipif(FOUND is None, reason="MAVProxy is not installed: pip install -e '.[test]' (or set "
+                                          "AMSTACK_MAVPROXY_PYTHON to the python of MAVProxy's own environment)")
+def test_mavproxy_on_the_free_running_gcs_port_sees_both_px4s_and_arms_signed(tmp_path):
+    """PX4's GCS instance of each vehicle (simulator.px4.port, role gcs) to one MAVProxy: both
+    vehicles detected as PX4s, its signed arm command executed and acknowledged as PX4 does,
+    and nothing it sent arrived unsigned."""
+    python, mavproxy, _own = FOUND
+    key = tmp_path / "gcs.pass"
+    key.write_text(PASSPHRASE + "\n")
+    key.chmod(0o600)
+    p0, p1, pg = free_udp_ports(3)
+    mp = subprocess.Popen(
+        [python, mavproxy, f"--master=udpin:127.0.0.1:{pg}", "--non-interactive", "--no-state",
+         "--default-modules=link,signing,cmdlong,misc,mode,arm",
+         f"--cmd=signing key {PASSPHRASE}; repeat add 1 arm throttle"],
+        cwd=tmp_path, env={**os.environ, "HOME": str(tmp_path)}, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT, text=True)
+    out = Lines(mp.stdout)
+    out.start()
+    sim = None
+    try:
+        sim = FreeSim(tmp_path, [p0, p1], gcs=("--gcs", f"udpout:127.0.0.1:{pg}", "--gcs-key-file", str(key),
+                                               "--instance", "40"))
+        out.wait_for("Detected vehicle 4:1", 120)
+        out.wait_for("Detected vehicle 5:1", 60)
+        out.wait_for("COMPONENT_ARM_DISARM: ACCEPTED", 30)
+        alive = mp.poll() is None
+    finally:
+        code, err, outcome = sim.stop() if sim is not None else (None, "", {})
+        if mp.poll() is None:
+            mp.send_signal(signal.SIGTERM)
+        try:
+            mp.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            mp.kill()
+        out.join(5)
+    text = "\n".join(out.lines)
+    assert alive and "Traceback" not in text, text[-3000:]
+    assert outcome, f"no outcome.json; simulator stderr:\n{err}"
+    armed = [s for s in ("4", "5") if outcome["vehicles"][s]["armed_at_end"]]
+    assert armed, outcome["vehicles"]  # the vehicle MAVProxy targets was armed by its command
+    for s in ("4", "5"):
+        g = outcome["vehicles"][s]["gcs"]
+        assert g["signing"] is True and g["link"]["unsigned"] == 0, g
+    assert code == 130  # stopped by SIGINT, its outcome written

@@ -140,12 +140,11 @@ def test_flight_values_are_sensor_values_without_the_wrench(spec, make_world):
         assert w.flight_values(s) == w.sensor_values(s)[:13 + 2 * n]
 
 
-@pytest.mark.parametrize("compiled", [True, False])
-def test_the_rate_integral_can_be_kept(spec, compiled):
+def test_the_rate_integral_can_be_kept(spec):
     """FlightController.rate_int's setter (the free-running autopilot keeps it while landed)."""
     from amlink.types import AttitudeTarget
     from simulator.flight_controller import FlightController
-    fc = FlightController(spec.vehicle.flight_controller, spec.vehicle.rotors, spec.dt_s, compiled=compiled)
+    fc = FlightController(spec.vehicle.flight_controller, spec.vehicle.rotors, spec.dt_s)
     target = AttitudeTarget(0, quat_wxyz=np.array([1.0, 0.0, 0.0, 0.0]), rates_rad_s=np.zeros(3),
                             thrust_normalized=0.4)
     for _ in range(50):
