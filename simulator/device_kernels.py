@@ -1,14 +1,12 @@
-"""The devices' per-step arithmetic compiled (numba, as amcore.law): the base's truth as the
-IMU sees it, the IMU's biases and noise, the F/T sensor's drift, noise and tare, the encoders'
-quantization. The same equations as the Python classes of `simulator.devices`, element by
-element in the same order on IEEE doubles, so that `DeviceSuite(compiled=True)` reports bit
-for bit what the Python devices report (tests/simulator/test_device_kernels.py).
+"""The devices' per-step arithmetic (numba, as amcore.law): the base's truth as the IMU sees
+it, the IMU's biases and noise, the F/T sensor's drift, noise and tare, the encoders'
+quantization. Their readable reference, in plain Python and numpy, is
+tests/simulator/reference_devices.py (compared in tests/simulator/test_device_kernels.py).
 
-The truth's two 3x3 products (R_WB v_B and R_WB^T (a_W + g e_3)) are numpy's in the Python
-devices, and numpy hands them to BLAS, whose fused multiply-adds round otherwise than a plain
-loop. `mat_vec` and `mat_t_vec` make them with fused multiply-adds in the order OpenBLAS's
-dgemv kernels use (what numpy calls on this machine); `products_match_numpy` checks that
-they agree with numpy here, and `DeviceSuite` runs its Python devices where they do not.
+The truth's two 3x3 products (R_WB v_B and R_WB^T (a_W + g e_3)) are made with fused
+multiply-adds in the order OpenBLAS's dgemv kernels use (`mat_vec`, `mat_t_vec`), so that
+they round as numpy's products do on a machine whose numpy calls OpenBLAS; everywhere, the
+kernels give the same numbers, whatever BLAS numpy has.
 
 What stays in Python: the random draws (`NoiseBlock`: a block of a device's stream at once,
 the same numbers in the same order); the motion capture (one frame in ten steps) and the
@@ -20,8 +18,6 @@ and `S_*` offsets. Kernels here call only kernels of this file (numba's cache is
 source file; see amcore.jit).
 """
 from __future__ import annotations
-
-import math
 
 import numpy as np
 from llvmlite import ir
@@ -195,28 +191,3 @@ def suite_step(x, t, c, s, imu_n, ft_n, out):
                        ft_c, ft_s, t, ft_n, out)
     else:
         devices_advance(x, f_B, imu_c, b_g, b_a, imu_n, omega_m, f_m, ft_c, ft_s, ft_n)
-
-
-def products_match_numpy(cases: int = 256) -> bool:
-    """Whether `mat_vec` and `mat_t_vec` give numpy's products bit for bit (sign of zero
-    included) on rotations and vectors of every scale, zeros among them: true where numpy's
-    BLAS is the OpenBLAS whose kernels they follow."""
-    rng = np.random.default_rng(0xB1A5)
-    y = np.empty(3)
-    for i in range(cases):
-        q = rng.standard_normal(4)
-        if i % 3 == 0:
-            q[i % 4] = 0.0
-        q /= math.sqrt(float(q @ q))
-        R = rotation(q)
-        v = rng.standard_normal(3) * 10.0 ** rng.uniform(-3.0, 3.0)
-        if i % 4 == 0:
-            v[(i // 4) % 3] = 0.0
-        if i % 8 == 1:  # at rest: zero products, whose sum's sign the order decides
-            v = (-0.0 if i % 16 == 1 else 0.0) * v
-        for product, expected in ((mat_vec, R @ v), (mat_t_vec, R.T @ v)):
-            product(R, v, y)
-            if not all(a == b and math.copysign(1.0, a) == math.copysign(1.0, b) for a, b in zip(y.tolist(),
-                                                                                             expected.tolist())):
-                return False
-    return True

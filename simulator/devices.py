@@ -16,9 +16,11 @@ parameters under the names of its reference model ([devices] in a scenario,
   random walk, and a tare (the driver's bias command) at a set time.
 - `Encoders`: joint positions quantized to whole counts, velocities to the servo's unit.
 
-The per-step arithmetic of the truth, the IMU, the encoders and the F/T sensor also runs
-compiled (`simulator.device_kernels`, numba; one call a step), bit for bit as these classes
-compute it; `DeviceSuite` uses it unless built with compiled=False.
+The classes here hold each device's constants and the draws made when it is switched on (turn-on
+biases, offsets); the per-step arithmetic of the truth, the IMU, the encoders and the F/T
+sensor is `simulator.device_kernels` (numba; one call a step), the motion capture's is
+`Mocap.sample_values`. The readable reference of the compiled steps, in plain Python and
+numpy, is tests/simulator/reference_devices.py.
 
 `DeviceSuite` holds one AM's devices and its `amcore.estimator.Estimator` (it runs where PX4
 runs EKF2, in the flight controller, and its output is the frame's odometry, as PX4 streams
@@ -27,39 +29,18 @@ ODOMETRY). `step(values, k)` takes the AM's exact values (the order of
 """
 from __future__ import annotations
 
-import functools
 import math
 from collections import deque
-from typing import NamedTuple
 
 import numpy as np
 
 from amcore.config import DevicesSpec, EncoderSpec, ForceTorqueSpec, ImuSpec, MocapSpec
-from amcore.estimator import BG, N_OUT, Estimator, quat_exp, quat_mul, rotation
+from amcore.estimator import BG, N_OUT, Estimator, quat_exp, quat_mul
 
 from . import device_kernels as dk
 
 _STREAM = 0xDE71  # distinguishes the devices' streams from the other seeded streams of an AM
 IMU, MOCAP, FT = 1, 2, 3  # each device's sub-stream
-
-
-@functools.cache
-def _products_match_numpy() -> bool:
-    """Whether the compiled truth's products round as numpy's here (checked once a process;
-    `simulator.device_kernels.products_match_numpy`): else the Python devices run."""
-    return dk.products_match_numpy()
-
-
-class BodyTruth(NamedTuple):
-    """The base's exact state at one physics step: p_WB [m], quat_WB (w, x, y, z), R_WB,
-    v_W [m/s], w_B [rad/s], a_W [m/s^2] (its acceleration over the last step)."""
-
-    p_WB: np.ndarray
-    quat_WB: np.ndarray
-    R_WB: np.ndarray
-    v_W: np.ndarray
-    w_B: np.ndarray
-    a_W: np.ndarray
 
 
 def _gauss_markov(sigma_rw: float, tau_s: float, dt_s: float) -> tuple[float, float]:
@@ -72,8 +53,8 @@ def _gauss_markov(sigma_rw: float, tau_s: float, dt_s: float) -> tuple[float, fl
 
 
 class Imu:
-    """Gyroscope and accelerometer (module doc); `sample(truth, t)` -> (omega_m [rad/s], f_m
-    [m/s^2]), body frame. The bias of each is readable as `b_g`, `b_a` (for tests)."""
+    """Gyroscope and accelerometer (module doc): constants, turn-on biases, and the Gauss-Markov
+    biases' initial values `b_g`, `b_a`; its draws come from `rng`."""
 
     def __init__(self, spec: ImuSpec, scale: float, dt_s: float, g: float, rng: np.random.Generator) -> None:
         self.rng, self.g = rng, g
@@ -89,18 +70,9 @@ class Imu:
         self.b_g = np.zeros(3)  # the Gauss-Markov part
         self.b_a = np.zeros(3)
 
-    def sample(self, truth: BodyTruth, t: float) -> tuple[np.ndarray, np.ndarray]:
-        n = self.rng.standard_normal(12)
-        self.b_g = self.phi_g * self.b_g + self.sigma_bg * n[0:3]
-        self.b_a = self.phi_a * self.b_a + self.sigma_ba * n[3:6]
-        f_B = truth.R_WB.T @ (truth.a_W + np.array([0.0, 0.0, self.g]))
-        omega_m = truth.w_B + self.turn_on_g + self.b_g + self.sigma_g * n[6:9]
-        f_m = f_B + self.turn_on_a + self.b_a + self.sigma_a * n[9:12]
-        return omega_m, f_m
-
 
 class Mocap:
-    """Motion capture (module doc); `sample(truth, t)` once per physics step -> a pose
+    """Motion capture (module doc); `sample_values(x)` once per physics step -> a pose
     (p_m, q_m (w, x, y, z)) and its age in steps when a frame arrives this step, else None."""
 
     def __init__(self, spec: MocapSpec, scale: float, dt_s: float, rng: np.random.Generator) -> None:
@@ -119,12 +91,10 @@ class Mocap:
     def frame_period_steps(self) -> int:
         return self.every
 
-    def sample(self, truth: BodyTruth, t: float):
-        return self.sample_values(np.concatenate([truth.p_WB, truth.quat_WB]))
-
     def sample_values(self, x: np.ndarray):
-        """`sample` from the base's exact values x (p_WB, quat_WB first, as `World.sensor_values`:
-        all a motion capture sees), read on the steps that capture a frame."""
+        """This step's frame, if one arrives, from the base's exact values x (p_WB, quat_WB
+        first, as `World.sensor_values`: all a motion capture sees), read on the steps that
+        capture a frame."""
         self._k = k = self._k + 1
         if k % self.every == 0:
             n = self.rng.standard_normal(6)
@@ -143,7 +113,8 @@ class Mocap:
 
 
 class ForceTorque:
-    """Wrist F/T sensor (module doc); `sample(wrench_E, t)` -> the reading [f; m] in E."""
+    """Wrist F/T sensor (module doc): constants, the power-on offset, the tare window; its
+    draws come from `rng`."""
 
     def __init__(self, spec: ForceTorqueSpec, scale: float, dt_s: float, rng: np.random.Generator) -> None:
         self.rng, self.spec = rng, spec
@@ -156,36 +127,14 @@ class ForceTorque:
         self.tared = spec.tare_at_s < 0.0  # nothing to do: counts as done
         self._window = (spec.tare_at_s - spec.tare_window_s, spec.tare_at_s)
 
-    def sample(self, wrench_E, t: float) -> np.ndarray:
-        n = self.rng.standard_normal(12)
-        self.offset = self.offset + self.drift * n[0:6]
-        raw = np.asarray(wrench_E, dtype=float) + self.offset + self.sigma * n[6:12]
-        if not self.tared:
-            lo, hi = self._window
-            if lo <= t < hi:
-                self._sum += raw
-                self._count += 1
-            elif t >= hi:
-                self.tare = self._sum / self._count if self._count else raw.copy()
-                self.tared = True
-        return raw - self.tare
-
 
 class Encoders:
-    """Joint encoders (module doc); `sample(q, qdot)` -> the quantized (q, qdot). Exact where
-    a resolution is 0. Rounding to the nearest count, as an absolute magnetic encoder."""
+    """Joint encoders (module doc): the position step (one count) and the velocity quantum;
+    0 is exact. Readings round to the nearest count, as an absolute magnetic encoder's."""
 
     def __init__(self, spec: EncoderSpec) -> None:
         self.dq = 2.0 * math.pi / spec.counts_per_rev if spec.counts_per_rev > 0 else 0.0
         self.dqdot = spec.velocity_quantum_radps
-
-    @staticmethod
-    def _quantize(x: np.ndarray, step: float) -> np.ndarray:
-        return np.round(x / step) * step if step > 0.0 else x
-
-    def sample(self, q, qdot) -> tuple[np.ndarray, np.ndarray]:
-        return self._quantize(np.asarray(q, dtype=float), self.dq), self._quantize(np.asarray(qdot, dtype=float),
-                                                                                  self.dqdot)
 
 
 class DeviceSuite:
@@ -193,15 +142,12 @@ class DeviceSuite:
     device draws from its own stream, so changing one device's levels leaves the others'
     draws alone.
 
-    compiled: the truth's, the IMU's, the encoders' and the F/T sensor's per-step arithmetic
-    runs as `simulator.device_kernels.suite_step` (numba; the same numbers bit for bit, their
-    draws taken in blocks), else through the device objects' `sample` (the Python form the
-    tests compare it with; also where the kernels' products would not round as numpy's,
-    `device_kernels.products_match_numpy`). The device objects hold the draws made at
-    construction either way."""
+    The truth's, the IMU's, the encoders' and the F/T sensor's per-step arithmetic is
+    `simulator.device_kernels.suite_step` (numba; the draws taken in blocks, the same numbers
+    in the same order); the device objects hold the draws made at construction."""
 
     def __init__(self, spec: DevicesSpec, n_joints: int, dt_s: float, g: float, seed: int, sysid: int,
-                 initial_values: list[float], compiled: bool = True) -> None:
+                 initial_values: list[float]) -> None:
         rng = lambda sub: np.random.default_rng([seed, sysid, _STREAM, sub])  # noqa: E731
         self.n, self.dt = n_joints, dt_s
         self.imu = Imu(spec.imu, spec.scale, dt_s, g, rng(IMU))
@@ -213,21 +159,17 @@ class DeviceSuite:
             raise ValueError(f"[devices.mocap].latency_s is {self.mocap.lag} steps; [devices.estimator]."
                              f"history_steps ({e.history_steps}) must be longer")
         # the estimator is aligned on the ground before take-off, on a motion-capture pose
-        truth = self._truth(initial_values, None)
-        p0 = truth.p_WB + self.mocap.bias_p
-        q0 = quat_mul(truth.quat_WB, quat_exp(self.mocap.bias_R))
-        self._frame = np.empty(N_OUT + 2 * n_joints + 6)  # a frame's values (compiled: written in place)
+        p0 = np.array(initial_values[0:3]) + self.mocap.bias_p
+        q0 = quat_mul(np.array(initial_values[3:7]), quat_exp(self.mocap.bias_R))
+        self._frame = np.empty(N_OUT + 2 * n_joints + 6)  # a frame's values, written in place
         self.estimator = Estimator(p0, q0, dt_s, self.mocap.every * dt_s, g, e.attitude_bandwidth_radps,
                                    e.position_bandwidth_radps, e.gyro_cutoff_hz, e.history_steps,
                                    out=self._frame[:N_OUT])
-        self._v_W_prev: np.ndarray | None = None
         self._b_g_estimate = self.estimator.x[BG:BG + 3]  # a view: the estimator updates it in place
         self._k = -1
-        self.compiled = compiled and _products_match_numpy()
-        if self.compiled:
-            self._compiled_state()
+        self._kernel_state()
 
-    def _compiled_state(self) -> None:
+    def _kernel_state(self) -> None:
         """The device objects' constants and state as `simulator.device_kernels.suite_step`
         takes them (one array each; the parts named here are views of them)."""
         imu, ft = self.imu, self.ft
@@ -250,32 +192,6 @@ class DeviceSuite:
         self._imu_noise, self._ft_noise = dk.NoiseBlock(imu.rng, 12), dk.NoiseBlock(ft.rng, 12)
         self._tail = self._frame[N_OUT:]
 
-    def _truth(self, v: list[float], v_W_prev) -> BodyTruth:
-        p = np.array(v[0:3])
-        quat = np.array(v[3:7])
-        R = rotation(quat)
-        v_W = R @ np.array(v[7:10])
-        a_W = np.zeros(3) if v_W_prev is None else (v_W - v_W_prev) / self.dt
-        return BodyTruth(p, quat, R, v_W, np.array(v[10:13]), a_W)
-
-    def step(self, values: list[float], t: float) -> list[float]:
-        """The sensor frame's values (p_WB, quat_WB, v_B, w_B from the estimator; q, qdot from
-        the encoders; wrench_E from the F/T sensor) after this physics step's exact values."""
-        if self.compiled:
-            return self._step_compiled(values, t)
-        self._k = k = self._k + 1
-        truth = self._truth(values, self._v_W_prev)
-        self._v_W_prev = truth.v_W
-        omega_m, f_m = self.imu.sample(truth, t)
-        arrived = self.mocap.sample(truth, t)
-        pose, lag = arrived if arrived is not None else (None, 0)
-        odo = self.estimator.step(k, omega_m, f_m, pose, lag)
-        self._omega_m = omega_m  # the autopilot's rate reads it
-        n = self.n
-        q, qdot = self.encoders.sample(values[13:13 + n], values[13 + n:13 + 2 * n])
-        wrench = self.ft.sample(values[13 + 2 * n:19 + 2 * n], t)
-        return [*odo.tolist(), *q.tolist(), *qdot.tolist(), *wrench.tolist()]
-
     @property
     def autopilot_rate(self) -> np.ndarray:
         """The body rate the autopilot's rate loop takes after the last step [rad/s]: the gyro
@@ -287,16 +203,15 @@ class DeviceSuite:
     def needs_reading(self, t: float) -> bool:
         """Whether a step at t needs the arm's and the wrist's values although no frame is sent:
         the F/T tare averages its readings until it is done."""
-        if not self.compiled:
-            return True
         if self._tare_pending and self._ft_s[dk.FT_TARED] != 0.0:  # done by the last step's kernel
             self._tare_pending = False
         return self._tare_pending and t >= self._tare_from
 
-    def _step_compiled(self, values: list[float], t: float) -> list[float]:
-        """`step` with the devices' arithmetic compiled (class doc): one call of
-        `simulator.device_kernels.suite_step`, the motion capture, one of the estimator's.
-        `values` may be the base's alone (the first 13, `World.base_values`) on a step that
+    def step(self, values: list[float], t: float) -> list[float]:
+        """The sensor frame's values (p_WB, quat_WB, v_B, w_B from the estimator; q, qdot from
+        the encoders; wrench_E from the F/T sensor) after this physics step's exact values: one
+        call of `simulator.device_kernels.suite_step`, the motion capture, one of the
+        estimator's. `values` may be the base's alone (the first 13, `World.base_values`) on a step that
         sends no frame and reads no F/T (`needs_reading` False): then only the odometry (the
         first 13 of a frame) is returned, and the encoders are not read; the devices' draws
         and drift advance as on any step."""

@@ -19,7 +19,7 @@ from amcore.config import ScenarioSpec
 from amcore.mission import ObjectPose, config_object_pose
 from amcore.so3 import quat_wxyz_to_R
 
-from .devices import BodyTruth, Mocap
+from .devices import Mocap
 
 _STREAM = 0x0B1EC7  # this device's generator stream, apart from every AM's
 
@@ -35,11 +35,9 @@ def measure_object(spec: ScenarioSpec) -> ObjectPose:
     c, s = math.cos(0.5 * truth.yaw_rad), math.sin(0.5 * truth.yaw_rad)
     quat = np.array([c, 0.0, 0.0, s])
     p = np.array(truth.p_W_m, dtype=float)
-    body = BodyTruth(p_WB=p, quat_WB=quat, R_WB=quat_wxyz_to_R(quat), v_W=np.zeros(3), w_B=np.zeros(3),
-                     a_W=np.zeros(3))
-    k = 0
-    while (got := mocap.sample(body, k * spec.dt_s)) is None:
-        k += 1
+    pose = np.concatenate([p, quat])
+    while (got := mocap.sample_values(pose)) is None:
+        pass
     (p_m, q_m), _age = got
     R = quat_wxyz_to_R(np.asarray(q_m))
     return ObjectPose(tuple(float(x) for x in p_m), math.atan2(R[1, 0], R[0, 0]))

@@ -1,4 +1,6 @@
-"""Sensor devices (simulator.devices): the IMU's noise density, bias random walk and turn-on
+"""Sensor devices (simulator.devices; the IMU, F/T and encoders through their readable reference,
+tests/simulator/reference_devices.py, which tests/simulator/test_device_kernels.py holds the
+compiled devices to): the IMU's noise density, bias random walk and turn-on
 bias at their stated sizes (Allan-like scaling), specific force in the body frame, motion
 capture frames at their rate and exactly their latency old, dropped at their rate, the F/T
 tare, encoder quantization, and the same seed giving the same output."""
@@ -13,7 +15,9 @@ import pytest
 from amcore.config import (ConfigError, DevicesSpec, EncoderSpec, ForceTorqueSpec, ImuSpec, MocapSpec,
                            devices_from_table)
 from amcore.estimator import quat_exp, quat_log, quat_mul, rotation
-from simulator.devices import BodyTruth, DeviceSuite, Encoders, ForceTorque, Imu, Mocap
+from simulator.devices import DeviceSuite, Mocap
+
+from .reference_devices import BodyTruth, ReferenceEncoders, ReferenceForceTorque, ReferenceImu
 
 DT = 0.001
 G = 9.81
@@ -25,7 +29,7 @@ def at_rest(p=(0.0, 0.0, 1.0), d=(0.0, 0.0, 0.0)) -> BodyTruth:
 
 
 def gyro_samples(spec, k, seed=0):
-    imu = Imu(spec, 1.0, DT, G, np.random.default_rng(seed))
+    imu = ReferenceImu(spec, 1.0, DT, G, np.random.default_rng(seed))
     truth = at_rest()
     return np.array([imu.sample(truth, i * DT)[0] for i in range(k)])
 
@@ -45,7 +49,7 @@ def test_bias_random_walk_grows_as_sqrt_time():
     spec = ImuSpec(gyroscope_random_walk=rw, gyroscope_bias_correlation_time_s=0.0)  # 0: a pure random walk
     ends = []
     for seed in range(300):
-        imu = Imu(spec, 1.0, DT, G, np.random.default_rng(seed))
+        imu = ReferenceImu(spec, 1.0, DT, G, np.random.default_rng(seed))
         truth = at_rest()
         for i in range(400):
             w = imu.sample(truth, i * DT)[0]
@@ -54,7 +58,7 @@ def test_bias_random_walk_grows_as_sqrt_time():
 
 
 def test_gauss_markov_bias_stays_bounded_by_its_correlation_time():
-    imu = Imu(ImuSpec(accelerometer_random_walk=1.0, accelerometer_bias_correlation_time_s=0.01), 1.0, DT, G,
+    imu = ReferenceImu(ImuSpec(accelerometer_random_walk=1.0, accelerometer_bias_correlation_time_s=0.01), 1.0, DT, G,
               np.random.default_rng(2))
     xs = np.array([imu.sample(at_rest(), i * DT)[1] for i in range(20000)])
     # stationary std of the Gauss-Markov process: sigma_rw sqrt(tau / 2)
@@ -71,7 +75,7 @@ def test_turn_on_bias_is_constant_and_of_its_size():
 
 
 def test_accelerometer_measures_specific_force_in_the_body_frame():
-    imu = Imu(ImuSpec(), 1.0, DT, G, np.random.default_rng(0))
+    imu = ReferenceImu(ImuSpec(), 1.0, DT, G, np.random.default_rng(0))
     tilt = at_rest(d=(0.3, 0.0, 0.0))
     f = imu.sample(tilt, 0.0)[1]
     assert f == pytest.approx([0.0, G * math.sin(0.3), G * math.cos(0.3)], abs=1e-12)
@@ -83,7 +87,7 @@ def test_motion_capture_frames_come_at_the_rate_and_exactly_the_latency_late():
     m = Mocap(MocapSpec(rate_hz=100.0, latency_s=0.013), 1.0, DT, np.random.default_rng(0))
     arrivals = []
     for k in range(200):
-        got = m.sample(at_rest(p=(k, 0.0, 0.0)), k * DT)  # the position says when it was taken
+        got = m.sample_values(np.array([k, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]))  # the position says when it was taken
         if got is not None:
             (p, _), lag = got
             arrivals.append((k, int(p[0]), lag))
@@ -94,7 +98,7 @@ def test_motion_capture_frames_come_at_the_rate_and_exactly_the_latency_late():
 def test_motion_capture_noise_bias_and_drops_have_their_sizes():
     spec = MocapSpec(rate_hz=1000.0, position_noise_m=0.00015, attitude_bias_rad=0.005, drop_probability=0.1)
     m = Mocap(spec, 1.0, DT, np.random.default_rng(3))
-    got = [m.sample(at_rest(), k * DT) for k in range(20000)]
+    got = [m.sample_values(np.array([0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0])) for k in range(20000)]
     frames = [g[0] for g in got if g is not None]
     assert len(frames) / len(got) == pytest.approx(0.9, abs=0.01)
     assert m.dropped == len(got) - len(frames)
@@ -108,7 +112,7 @@ def test_motion_capture_noise_bias_and_drops_have_their_sizes():
 def test_force_torque_tare_removes_the_offset():
     spec = ForceTorqueSpec(force_noise_n=0.05, force_offset_n=1.0, torque_offset_nm=0.02, tare_at_s=0.5,
                            tare_window_s=0.2)
-    ft = ForceTorque(spec, 1.0, DT, np.random.default_rng(4))
+    ft = ReferenceForceTorque(spec, 1.0, DT, np.random.default_rng(4))
     offset = ft.offset.copy()
     xs = np.array([ft.sample(np.zeros(6), k * DT) for k in range(1000)])
     assert xs[:300].mean(axis=0) == pytest.approx(offset, abs=0.01)
@@ -121,7 +125,7 @@ def test_force_torque_drift_is_a_random_walk():
     spec = ForceTorqueSpec(force_drift_n_per_sqrt_s=0.1)
     ends = []
     for seed in range(200):
-        ft = ForceTorque(spec, 1.0, DT, np.random.default_rng(seed))
+        ft = ReferenceForceTorque(spec, 1.0, DT, np.random.default_rng(seed))
         for k in range(1000):
             x = ft.sample(np.zeros(6), k * DT)
         ends.append(x[0:3])
@@ -129,7 +133,7 @@ def test_force_torque_drift_is_a_random_walk():
 
 
 def test_encoders_quantize_to_whole_counts_and_velocity_units():
-    enc = Encoders(EncoderSpec(counts_per_rev=4096, velocity_quantum_radps=0.0239809))
+    enc = ReferenceEncoders(EncoderSpec(counts_per_rev=4096, velocity_quantum_radps=0.0239809))
     q = np.linspace(-3.0, 3.0, 20001)
     qm, qdm = enc.sample(q, q)
     step = 2.0 * math.pi / 4096
@@ -137,7 +141,7 @@ def test_encoders_quantize_to_whole_counts_and_velocity_units():
     assert np.allclose(qm / step, np.round(qm / step), atol=1e-9)
     assert np.abs(qdm - q).max() <= 0.0239809 / 2 + 1e-15
     assert len(np.unique(np.round(qm / step))) == pytest.approx(6.0 / step, rel=0.01)
-    exact = Encoders(EncoderSpec())
+    exact = ReferenceEncoders(EncoderSpec())
     assert np.array_equal(exact.sample(q, q)[0], q)
 
 
