@@ -21,7 +21,7 @@ stands on the table: once it hangs between the pads, two crowned pads leave it f
 turn about the vertical, and its turning would drive the heading. dpsi and its
 two derivatives enter eq. Rd as the heading's (psi_d1, psi_d2); the AM's task frame and
 CoM path turn with it about the vertical through the pad's contact point on the face
-(`turn_reference`), so that the pad stays where it touches. The CoM path's own
+(`adapted`), so that the pad stays where it touches. The CoM path's own
 derivatives are turned with it, and dpsi's rates are left out of them (dpsi moves slowly,
 omega ~ 2 rad/s; the CoM law's PD takes up the difference).
 """
@@ -34,7 +34,6 @@ from typing import NamedTuple
 import numpy as np
 
 from . import law
-from .so3 import Rz
 
 
 @dataclass(frozen=True)
@@ -73,26 +72,6 @@ def heading_update(adm: HeadingAdmittance, s: HeadingState, wrench_E, dt: float)
     if abs(dpsi) > adm.max_turn_rad:  # held at the bound, at rest there
         dpsi, rate, acc = math.copysign(adm.max_turn_rad, dpsi), 0.0, 0.0
     return HeadingState(dpsi, rate, acc, s.delta_hat if delta is None else delta)
-
-
-def turn_reference(ref, s: HeadingState, pivot_W: np.ndarray):
-    """`ref` (amcore.control.Reference) turned by the heading correction about the vertical
-    through pivot_W: CoM path and its derivatives turned, heading and its rates corrected;
-    y_d is unchanged (it lives in the task frame, which turns with it: `turn_frame`)."""
-    if s.dpsi == 0.0 and s.dpsi_d1 == 0.0:
-        return ref
-    R = Rz(s.dpsi)
-    return type(ref)(pivot_W + R @ (ref.r_c - pivot_W), R @ ref.r_c_d1, R @ ref.r_c_d2, R @ ref.r_c_d3,
-                     R @ ref.r_c_d4, ref.psi + s.dpsi, ref.psi_d1 + s.dpsi_d1, ref.psi_d2 + s.dpsi_d2,
-                     ref.y, ref.y_d1, ref.y_d2)
-
-
-def turn_frame(frame, s: HeadingState, pivot_W: np.ndarray):
-    """The task frame (amcore.task.TaskFrame) turned by the correction about pivot_W."""
-    if s.dpsi == 0.0:
-        return frame
-    R = Rz(s.dpsi)
-    return type(frame)(R_WT=R @ frame.R_WT, p_WT=pivot_W + R @ (frame.p_WT - pivot_W))
 
 
 # --- Lateral admittance -----------------------------------------------------------------
@@ -148,15 +127,6 @@ def lateral_update(adm: LateralAdmittance, s: LateralState, wrench_E, dt: float)
     return LateralState(dy, rate, acc, push if in_contact else s.push_n)
 
 
-def shift_reference(ref, s: LateralState, axis_W: np.ndarray):
-    """`ref` with its CoM path moved by dy along axis_W (unit, horizontal), dy's two rates
-    added to the path's; the higher derivatives are left as they are (dy moves slowly)."""
-    if s.dy == 0.0 and s.dy_d1 == 0.0:
-        return ref
-    return ref._replace(r_c=ref.r_c + s.dy * axis_W, r_c_d1=ref.r_c_d1 + s.dy_d1 * axis_W,
-                        r_c_d2=ref.r_c_d2 + s.dy_d2 * axis_W)
-
-
 # ----------------------------------------------------------------------------- hover trim
 # Beyond the paper (option [options].trim_hz): the motion capture's fixed attitude bias tilts
 # the thrust the AM believes level, so in free flight a steady horizontal force of about
@@ -199,27 +169,19 @@ def trim_reference(ref, dr: np.ndarray):
 
 # ------------------------------------------------------------------ the three together
 def adapted(ref, frame, dr: np.ndarray, heading: HeadingState | None, pivot_W: np.ndarray,
-            lateral: LateralState | None, compiled: bool = True):
+            lateral: LateralState | None):
     """(ref, task_frame): the mission's reference `ref` and task frame `frame` (amcore.task.TaskFrame)
     with the options applied in the companion's order: the trim's shift dr (`trim_reference`),
-    the heading's turn about the vertical through pivot_W (`turn_reference`, `turn_frame`;
-    heading: its state, None: the admittance is off) and the lateral shift along the turned
-    frame's y axis (`shift_reference`; lateral: None: off). task_frame is None with the heading
+    the heading's turn about the vertical through pivot_W (the CoM path and its derivatives
+    turned, the heading and its rates corrected, y_d unchanged since it lives in the task
+    frame, which turns with it; heading: its state, None: the admittance is off) and the
+    lateral shift by dy along the turned frame's y axis, dy's two rates added to the path's
+    (lateral: None: off). task_frame is None with the heading
     off (the law then takes the mission's frame).
 
-    compiled: the arithmetic in one call of `amcore.law.adapted_reference`, the same numbers to
-    rounding (its 3 x 3 products are loops, numpy's go to BLAS), else the functions above
-    (the form the tests compare it with). With every option acting, ~8 us a step against
-    ~25 us for the functions' small numpy operations (benchmarks/bench_controller.py)."""
-    if not compiled:
-        ref = trim_reference(ref, dr)
-        task_frame = None
-        if heading is not None:
-            ref = turn_reference(ref, heading, pivot_W)
-            task_frame = turn_frame(frame, heading, pivot_W)
-        if lateral is not None:
-            ref = shift_reference(ref, lateral, (frame if task_frame is None else task_frame).R_WT[:, 1])
-        return ref, task_frame
+    The arithmetic is one call of `amcore.law.adapted_reference` (with every option acting,
+    ~8 us a step against ~25 us for numpy's small operations, benchmarks/bench_controller.py).
+    Its readable reference, each step in numpy, is tests/amcore/reference_adapt.py."""
     turn, shift = heading is not None, lateral is not None
     h = heading if turn else _AT_REST
     s = lateral if shift else _NOT_SHIFTED
@@ -228,12 +190,12 @@ def adapted(ref, frame, dr: np.ndarray, heading: HeadingState | None, pivot_W: n
     r, R_WT, p_WT, H_TW, e_y_W = law.adapted_reference(
         np.array(ref[:5]), dr, turn, h.dpsi, h.dpsi_d1, pivot_W, shift, s.dy, s.dy_d1, s.dy_d2, frame.R_WT, frame.p_WT)
     psi = ref[5:8]
-    if turn and not (h.dpsi == 0.0 and h.dpsi_d1 == 0.0):  # as turn_reference
+    if turn and not (h.dpsi == 0.0 and h.dpsi_d1 == 0.0):  # the heading and its rates corrected
         psi = (ref.psi + h.dpsi, ref.psi_d1 + h.dpsi_d1, ref.psi_d2 + h.dpsi_d2)
     ref = type(ref)(r[0], r[1], r[2], r[3], r[4], *psi, ref.y, ref.y_d1, ref.y_d2)
     if not turn:
         return ref, None
-    if h.dpsi == 0.0:  # as turn_frame: the mission's frame itself
+    if h.dpsi == 0.0:  # not turned: the mission's frame itself
         return ref, frame
     return ref, type(frame).with_transform(R_WT, p_WT, H_TW, e_y_W)
 

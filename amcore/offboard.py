@@ -81,7 +81,7 @@ from typing import NamedTuple
 import numpy as np
 import pinocchio as pin
 
-from . import law, linalg3
+from . import law
 from .config import VehicleParams
 from .control import Command, ControllerMemory, ControllerParams, Reference, StepResult, packed_offsets, step
 from .filters import FilterState, LowPass2, lowpass_update
@@ -145,7 +145,7 @@ class OffboardResult:
     tau_b_hat: np.ndarray | None
 
 
-def _last_inputs(memory: OffboardMemory, applied: Applied | None) -> tuple[float, np.ndarray]:
+def last_inputs(memory: OffboardMemory, applied: Applied | None) -> tuple[float, np.ndarray]:
     """(f^-, tau_q^-): the reported ones where given, else what the companion sent."""
     thrust, tau_q = memory.thrust_n, memory.tau_q_nm
     if applied is not None:
@@ -154,67 +154,6 @@ def _last_inputs(memory: OffboardMemory, applied: Applied | None) -> tuple[float
         if applied.tau_q_nm is not None:
             tau_q = np.asarray(applied.tau_q_nm)
     return thrust, tau_q
-
-
-def body_torque_estimate(params: ControllerParams, res: StepResult, memory: OffboardMemory, state: AmState,
-                         t_s: float, applied: Applied | None = None) -> np.ndarray | None:
-    """tau_b^ [N m]: the body torque of the last control period, from row 2 of eq. new_dynamics
-    with the measured angular acceleration (module doc). None if nothing was measured yet.
-    `applied`: the reported thrust and joint torques (offboard_inputs = "reported")."""
-    if memory.t_s is None or memory.w_B is None or memory.tau_q_nm is None or not t_s > memory.t_s:
-        return None
-    d = res.diagnostics
-    tm = d.terms
-    wdot = (state.w_B - np.asarray(memory.w_B)) / (t_s - memory.t_s)
-    u2 = tm.Lambda_w.dot(wdot) + tm.Gamma_xi_xi[3:6]
-    if params.force_compensation:  # F_wb from the filtered F/T reading (F_xi = (J_e T^-1)^T F_e)
-        u2 = u2 - d.wrench_E_filtered.dot(tm.J_e_xi[:, 3:6])
-    K = tm.T_inv[:, 3:6].T  # T^-T's middle block row: u_2 = K tau
-    thrust, tau_q = _last_inputs(memory, applied)
-    return u2 - K[:, 2] * thrust - K[:, 6:].dot(tau_q)
-
-
-def _rest(params: ControllerParams, res: StepResult, memory: OffboardMemory, applied: Applied | None) -> np.ndarray:
-    """r = Gamma_wb w_b + Gamma_wb,rho rho - s F_wb^ - K_f f^- - K_q tau_q^- (module doc)."""
-    d = res.diagnostics
-    tm = d.terms
-    r = tm.Gamma_xi_xi[3:6]
-    if params.force_compensation:  # F_wb from the filtered F/T reading (F_xi = (J_e T^-1)^T F_e)
-        r = r - d.wrench_E_filtered.dot(tm.J_e_xi[:, 3:6])
-    K = tm.T_inv[:, 3:6].T  # T^-T's middle block row: u_2 = K tau
-    thrust, tau_q = _last_inputs(memory, applied)
-    return r - K[:, 2] * thrust - K[:, 6:].dot(tau_q)
-
-
-def filtered_body_torque_estimate(params: ControllerParams, oparams: OffboardParams, res: StepResult,
-                                  memory: OffboardMemory, state: AmState, t_s: float,
-                                  applied: Applied | None = None
-                                  ) -> tuple[np.ndarray | None, FilterState, FilterState | None]:
-    """tau_b^ = Lambda_wb (LP(w_b)_k - LP(w_b)_k-1) / dt + LP(r) [N m], LP the Butterworth of
-    `oparams` (module doc),
-    and the filters' new states. None (and the filters started) while nothing was measured."""
-    f = oparams.torque_filter
-    if memory.t_s is None or memory.w_filter is None or memory.tau_q_nm is None or not t_s > memory.t_s:
-        return None, lowpass_update(f, None, state.w_B, 0.0), None
-    dt = t_s - memory.t_s
-    w_f = lowpass_update(f, memory.w_filter, state.w_B, dt)
-    r_f = lowpass_update(f, memory.r_filter, _rest(params, res, memory, applied), dt)
-    wdot = (w_f.x - memory.w_filter.x) / dt
-    return res.diagnostics.terms.Lambda_w.dot(wdot) + r_f.x, w_f, r_f
-
-
-def joint_torques_for_body_torque(res: StepResult, tau_b: np.ndarray) -> np.ndarray:
-    """tau_q [N m] solving eq. u_bar with the body torque tau_b in place of torque mode's
-    (module doc): tau_q^p - (J_y M^-1)_q^-1 (J_y M^-1)_w (tau_b - tau_b^p), damped like eq. u3
-    where the controller damped it."""
-    d, c = res.diagnostics, res.command
-    JyMi = d.terms.J_y.dot(d.terms.M_inv)
-    A, B = JyMi[:, 6:], JyMi[:, 3:6]
-    rhs = B.dot(tau_b - c.tau_B_nm)
-    if d.damping > 0.0:  # near the arm's singularity: the same damped least squares, in Lambda_y's metric
-        A, rhs = d.Lambda_y.dot(A), d.Lambda_y.dot(rhs)
-        return c.tau_q_nm - A.T.dot(np.linalg.solve(A.dot(A.T) + d.damping * np.eye(A.shape[0]), rhs))
-    return c.tau_q_nm - linalg3.solve(A, rhs)
 
 
 def predicted_task_error(y_err: np.ndarray, ydot_err: np.ndarray, pending, t_s: float, latency_s: float
@@ -252,45 +191,45 @@ def commanded_task_acceleration(params: ControllerParams, res: StepResult, ydot_
 def offboard_step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmState, ref: Reference,
                   wrench_E: np.ndarray, memory: OffboardMemory, t_s: float,
                   task_frame: TaskFrame | None = None, oparams: OffboardParams = OffboardParams(),
-                  applied: Applied | None = None, compiled: bool = True) -> OffboardResult:
+                  applied: Applied | None = None) -> OffboardResult:
     """One attitude-mode control step: torque mode's step (with `task_frame` as there), then
-    the joint torques for the estimated body torque (module doc). The command's thrust, R_d and w_b,d (diagnostics)
+    the joint torques for the estimated body torque (module doc), both in one compiled call
+    (`amcore.law.attitude_mode_torques`). The command's thrust, R_d and w_b,d (diagnostics)
     go to the autopilot, its joint torques to the arm. `oparams` and `applied`: the options
-    and, with offboard_inputs = "reported", what the vehicle reports it applied.
-
-    compiled: the estimate and the joint torques as `amcore.law.attitude_mode_torques` (one
-    compiled call), else as the numpy functions above (the form the tests compare it with;
-    the two agree to rounding)."""
-    res = step(model, data, params, state, ref, wrench_E, memory.controller, t_s, task_frame)
-    pending = ()
-    if oparams.latency_s > 0.0:  # eq. u3 at the error predicted for when this command acts
-        d0 = res.diagnostics
-        y_d, y_err, ydot_err = ref.y, d0.y_err.copy(), d0.ydot - ref.y_d1
-        y_p, v_p = predicted_task_error(y_err, ydot_err, memory.pending, t_s, oparams.latency_s)
-        res = step(model, data, params, state, ref._replace(y=y_d - (y_p - y_err), y_d1=ref.y_d1 - (v_p - ydot_err)),
-                   wrench_E, memory.controller, t_s, task_frame)
-        acting = [p for p in memory.pending if p[0] + oparams.latency_s <= t_s][-1:]  # the one acting at t_s
-        coming = [p for p in memory.pending if p[0] + oparams.latency_s > t_s]
-        pending = tuple(acting + coming + [(t_s, commanded_task_acceleration(params, res, v_p))])
-        res.diagnostics.y_d, res.diagnostics.y_err = y_d, y_err  # the reports keep the measured error
-    c, d = res.command, res.diagnostics
+    and, with offboard_inputs = "reported", what the vehicle reports it applied. The readable
+    reference of the estimate, in numpy, is tests/amcore/reference_offboard.py."""
+    res, pending = predicted_step(model, data, params, state, ref, wrench_E, memory, t_s, task_frame, oparams)
     reported = applied if oparams.inputs == "reported" else None
-    if compiled:
-        tau, d.u, w_f, r_f, estimated = _estimate_compiled(params, oparams, res, memory, state, t_s, reported)
-    else:
-        w_f = r_f = None
-        if oparams.torque_cutoff_hz > 0.0:
-            tau_b, w_f, r_f = filtered_body_torque_estimate(params, oparams, res, memory, state, t_s, reported)
-        else:
-            tau_b = body_torque_estimate(params, res, memory, state, t_s, reported)
-        estimated = tau_b is not None
-        if tau_b is None:
-            tau_b, tau_q = c.tau_B_nm, c.tau_q_nm
-        else:
-            tau_q = joint_torques_for_body_torque(res, tau_b)
-        tau = np.concatenate(([0.0, 0.0, c.thrust_n], tau_b, tau_q))
-        d.u = d.terms.T_inv.T.dot(tau)
-    d.tau = tau  # the bookkeeping: what the vehicle received (u = T^-T tau above)
+    tau, u, w_f, r_f, estimated = _estimate(params, oparams, res, memory, state, t_s, reported)
+    return offboard_result(res, state, t_s, tau, u, w_f, r_f, estimated, pending)
+
+
+def predicted_step(model: AmModel, data: pin.Data, params: ControllerParams, state: AmState, ref: Reference,
+                   wrench_E: np.ndarray, memory: OffboardMemory, t_s: float, task_frame: TaskFrame | None,
+                   oparams: OffboardParams) -> tuple[StepResult, tuple]:
+    """Torque mode's step, at the task error predicted for when the command acts where
+    offboard_latency_s > 0 (module doc), and the commands still pending then."""
+    res = step(model, data, params, state, ref, wrench_E, memory.controller, t_s, task_frame)
+    if not oparams.latency_s > 0.0:
+        return res, ()
+    d0 = res.diagnostics  # eq. u3 at the error predicted for when this command acts
+    y_d, y_err, ydot_err = ref.y, d0.y_err.copy(), d0.ydot - ref.y_d1
+    y_p, v_p = predicted_task_error(y_err, ydot_err, memory.pending, t_s, oparams.latency_s)
+    res = step(model, data, params, state, ref._replace(y=y_d - (y_p - y_err), y_d1=ref.y_d1 - (v_p - ydot_err)),
+               wrench_E, memory.controller, t_s, task_frame)
+    acting = [p for p in memory.pending if p[0] + oparams.latency_s <= t_s][-1:]  # the one acting at t_s
+    coming = [p for p in memory.pending if p[0] + oparams.latency_s > t_s]
+    pending = tuple(acting + coming + [(t_s, commanded_task_acceleration(params, res, v_p))])
+    res.diagnostics.y_d, res.diagnostics.y_err = y_d, y_err  # the reports keep the measured error
+    return res, pending
+
+
+def offboard_result(res: StepResult, state: AmState, t_s: float, tau: np.ndarray, u: np.ndarray, w_f, r_f,
+                    estimated: bool, pending: tuple) -> OffboardResult:
+    """The step's result with tau = [0, 0, f, tau_b^, tau_q] and u = T^-T tau in its diagnostics
+    (what the vehicle received, module doc), and the memory for the next step."""
+    c, d = res.command, res.diagnostics
+    d.tau, d.u = tau, u
     cmd = Command(c.thrust_n, tau[3:6], tau[6:])
     mem = OffboardMemory(res.memory, t_s, tuple(state.w_B.tolist()), c.thrust_n, cmd.tau_q_nm, w_f, r_f, pending)
     return OffboardResult(StepResult(cmd, d, res.memory), mem, cmd.tau_B_nm if estimated else None)
@@ -302,7 +241,7 @@ _NO_PHI = np.zeros((0, 0))  # no filter: the plain backward difference
 _TERMS_READ = ("Lambda_w", "Gamma_xi_xi", "T_inv", "J_e_xi", "wrench_E_filtered", "J_y", "M_inv", "Lambda_y", "guard")
 
 
-def _estimate_compiled(params: ControllerParams, oparams: OffboardParams, res: StepResult, memory: OffboardMemory,
+def _estimate(params: ControllerParams, oparams: OffboardParams, res: StepResult, memory: OffboardMemory,
                        state: AmState, t_s: float, applied: Applied | None):
     """(tau, u = T^-T tau, LP(w_b)'s state, LP(r)'s state, whether tau_b^ was estimated) of
     `offboard_step` by amcore.law.attitude_mode_torques; on the first step (nothing measured
@@ -321,7 +260,7 @@ def _estimate_compiled(params: ControllerParams, oparams: OffboardParams, res: S
         r_filter = _NO_ROWS if memory.r_filter is None else np.array(memory.r_filter)
     else:
         Phi, w_prev, w_filter, r_filter = _NO_PHI, np.array(memory.w_B), _NO_ROWS, _NO_ROWS
-    thrust, tau_q = _last_inputs(memory, applied)
+    thrust, tau_q = last_inputs(memory, applied)
     n = c.tau_q_nm.shape[0]
     tau, u, w_filter, r_filter = law.attitude_mode_torques_of_packed(  # the step's terms read in the kernel
         d.packed, packed_offsets(n, _TERMS_READ), n, 1.0 if params.force_compensation else 0.0, c.thrust_n,

@@ -15,10 +15,11 @@ rate), the compiled law (amcore.law.control_law, called alone on the same inputs
 rest of `step` (argument passing, naming the results). The companion calls, every step
 besides, mission.reference and the wire conversions of companion/adapter.py; each has its
 own line. In attitude mode the companion calls amcore.offboard.offboard_step instead of
-`step` (every 4 ms): its row, and the same with the numpy functions that the compiled
-estimate is tested against, show what the body torque estimate and the arm's torques add.
-With the robust options (amcore.adapt: the trim, the heading turn, the lateral shift) the
-companion shapes the reference first: one compiled call, and beside it the numpy functions.
+`step` (every 4 ms): its row, and the same with the numpy reference the compiled estimate
+is tested against (tests/amcore/reference_offboard.py), show what the body torque estimate
+and the arm's torques add. With the robust options (amcore.adapt: the trim, the heading
+turn, the lateral shift) the companion shapes the reference first: one compiled call, and
+beside it its numpy reference (tests/amcore/reference_adapt.py).
 Rows are timed in interleaved rounds so that a change in machine load hits all
 of them alike. The literal transcription (finite differences, generic inverses) is timed
 on fewer calls: it takes milliseconds.
@@ -44,6 +45,7 @@ from amcore.model import AmState, build_model, create_data, pin_configuration
 from amcore.so3 import R_to_quat_wxyz, exp_so3
 from amlink.types import SensorFrame
 from companion.adapter import setpoint_from_result, state_from_frame
+from tests.amcore import reference_adapt, reference_offboard
 from tests.amcore.literal import controller_literal
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -98,8 +100,9 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
 
     def run_offboard(i, compiled):
         c = int(not compiled)
-        off_mem[c] = offboard_step(model, data, params, sts[i % 64], refs[i % 64], F, off_mem[c], 4e-3 * i,
-                                   oparams=oparams, applied=applied, compiled=compiled).memory
+        f = offboard_step if compiled else reference_offboard.offboard_step
+        off_mem[c] = f(model, data, params, sts[i % 64], refs[i % 64], F, off_mem[c], 4e-3 * i, oparams=oparams,
+                       applied=applied).memory
 
     # the robust options' shaping of the reference (amcore.adapt.adapted): trim, heading turn and
     # lateral shift all acting, the turned frame's H_TW and e_y_W read as the step reads them
@@ -108,8 +111,8 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     trim_dr = np.array([0.004, -0.002, 0.0])
 
     def run_adapted(i, compiled):
-        _, frame = adapted(refs[i % 64], mission.frame, trim_dr, headings[i % 64], mission.contact_point_W,
-                           laterals[i % 64], compiled)
+        f = adapted if compiled else reference_adapt.adapted
+        _, frame = f(refs[i % 64], mission.frame, trim_dr, headings[i % 64], mission.contact_point_W, laterals[i % 64])
         return frame.H_TW, frame.e_y_W
 
     def run_companion(i):  # companion.pilot's per-frame work, without its outcome bookkeeping
@@ -181,10 +184,10 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     row("companion step: frame -> state, reference, step, setpoint", samples["companion"], "companion")
     print(f"  attitude mode (amcore.offboard, inputs {oparams.inputs!r}, torque cutoff {oparams.torque_cutoff_hz:g} Hz):")
     row("    offboard_step: step, then tau_b^ and the arm's torques", samples["offboard"], "offboard")
-    row("    the same with the numpy functions (compiled=False)", samples["offboard_numpy"], "offboard_numpy")
+    row("    the same with its numpy reference (tests/amcore)", samples["offboard_numpy"], "offboard_numpy")
     print("  the robust options (amcore.adapt: trim, heading turn, lateral shift, all acting):")
     row("    adapted: one compiled call (amcore.law.adapted_reference)", samples["adapted"], "adapted")
-    row("    the same with the functions (compiled=False)", samples["adapted_numpy"], "adapted_numpy")
+    row("    the same with its numpy reference (tests/amcore)", samples["adapted_numpy"], "adapted_numpy")
     step_us, comp_us, ratio = med(samples["step"]), med(samples["companion"]), med(samples["step"]) / med(literal)
     print(f"step / literal transcription, same run: {ratio:.4f}x")
     print(f"controller step, CPU time: {med(cpu['step']):.1f} us per call (median of {len(cpu['step'])} rounds)")

@@ -8,8 +8,10 @@ import numpy as np
 import pytest
 
 from amcore.adapt import (Trim, adapted, trim_reference, trim_update, HeadingAdmittance, HeadingState, LateralAdmittance,
-                          LateralState, heading_update, lateral_update, misalignment, shift_reference, turn_frame,
-                          turn_reference)
+                          LateralState, heading_update, lateral_update, misalignment)
+
+from . import reference_adapt
+from .reference_adapt import shift_reference, turn_frame, turn_reference
 from amcore.config import load_scenario
 from amcore.control import Reference
 from amcore.mission import am_mission, squeeze_plan
@@ -244,15 +246,16 @@ def _random_case(rng, heading_on, lateral_on, trim_on, at_rest):
 @pytest.mark.parametrize("heading_on", [False, True])
 @pytest.mark.parametrize("lateral_on", [False, True])
 @pytest.mark.parametrize("trim_on", [False, True])
-def test_the_compiled_shaping_gives_the_functions_numbers_to_rounding(heading_on, lateral_on, trim_on):
-    """amcore.law.adapted_reference against trim_reference, turn_reference, turn_frame and
-    shift_reference applied in turn: every reference field and the task frame (with its H_TW
+def test_the_compiled_shaping_gives_its_references_numbers_to_rounding(heading_on, lateral_on, trim_on):
+    """amcore.adapt.adapted (amcore.law.adapted_reference) against its reference
+    (tests/amcore/reference_adapt.py: trim_reference, turn_reference, turn_frame and
+    shift_reference applied in turn): every reference field and the task frame (with its H_TW
     and e_y_W) within 1e-15 of the path's scale, on 40 random cases each."""
     rng = np.random.default_rng(2831)
     for k in range(40):
         case = _random_case(rng, heading_on, lateral_on, trim_on, at_rest=False)
         fast, fast_frame = adapted(*case)
-        slow, slow_frame = adapted(*case, compiled=False)
+        slow, slow_frame = reference_adapt.adapted(*case)
         for a, b in zip(fast, slow):
             np.testing.assert_allclose(a, b, rtol=0.0, atol=1e-15 * 10)
         if not heading_on:

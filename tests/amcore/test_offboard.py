@@ -12,10 +12,11 @@ import pytest
 from amcore.control import step
 from amcore.ideal import forward_dynamics
 from amcore.model import AmState, create_data, decoupled_terms
-from amcore.offboard import (Applied, OffboardMemory, OffboardParams, body_torque_estimate,
-                             filtered_body_torque_estimate, joint_torques_for_body_torque, offboard_step)
+from amcore.offboard import Applied, OffboardMemory, OffboardParams, offboard_step
 from amcore.task import task_terms
 
+from . import reference_offboard
+from .reference_offboard import body_torque_estimate, filtered_body_torque_estimate, joint_torques_for_body_torque
 from .test_control import near_reference, steady_memory
 
 
@@ -194,9 +195,9 @@ def test_the_filtered_estimate_attenuates_gyro_noise_as_its_bandwidth_says(model
 
 @pytest.mark.parametrize("inputs,cutoff_hz", [("sent", 0.0), ("reported", 0.0), ("sent", 40.0), ("reported", 40.0)])
 @pytest.mark.parametrize("comp,damped", [(True, False), (False, False), (True, True)])
-def test_the_compiled_step_is_the_numpy_functions_to_rounding(model, mission, params, inputs, cutoff_hz, comp, damped):
-    """offboard_step through amcore.law.attitude_mode_torques and through the numpy functions
-    of amcore.offboard, fed the same sequence (reports missing on some steps, the arm's
+def test_the_compiled_step_is_its_numpy_reference_to_rounding(model, mission, params, inputs, cutoff_hz, comp, damped):
+    """offboard_step (amcore.law.attitude_mode_torques) and its numpy reference
+    (tests/amcore/reference_offboard.py), fed the same sequence (reports missing on some steps, the arm's
     inversion damped or not): the same tau, u = T^-T tau, estimate and filter states."""
     params = dataclasses.replace(params, force_compensation=comp, **({"sigma_damping": 1e3} if damped else {}))
     oparams = OffboardParams(inputs, cutoff_hz)
@@ -206,8 +207,8 @@ def test_the_compiled_step_is_the_numpy_functions_to_rounding(model, mission, pa
         t = 4.0 + 4e-3 * k
         st, F_e = near_reference(mission, model, t, rng, scale=0.5), _wrench(rng)
         applied = Applied(20.0 + rng.normal(), rng.normal(size=model.n)) if k % 3 else Applied()
-        out = [offboard_step(model, create_data(model), params, st, mission.reference(t), F_e, mem, t,
-                             oparams=oparams, applied=applied, compiled=c) for mem, c in zip(mems, (True, False))]
+        out = [f(model, create_data(model), params, st, mission.reference(t), F_e, mem, t, oparams=oparams,
+                 applied=applied) for mem, f in zip(mems, (offboard_step, reference_offboard.offboard_step))]
         fast, slow = (o.result.diagnostics for o in out)
         assert (fast.damping > 0.0) == damped
         assert (out[0].tau_b_hat is None) == (out[1].tau_b_hat is None) == (k == 0)
