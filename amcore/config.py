@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .allocation import Allocation
+from .declare import at_least, bounds_problem, enum_of, one_of, within
 from .rotors import Rotor, RotorParams, table_problem
 
 
@@ -150,7 +151,7 @@ class BaselineGains:
     # "cartesian", an impedance at the pad through the arm's Jacobian, tau_q = J^T (K_y e - D_y edot)
     # + g_q, e the pad's (x, z, pitch) error in the task frame from the measured state, K_y
     # [N/m, N/m, N m/rad] and D_y [N s/m, N s/m, N m s/rad] (needed only then).
-    arm: str = "joint"
+    arm: one_of(BASELINE_ARMS) = "joint"
     K_y: tuple[float, ...] = ()
     D_y: tuple[float, ...] = ()
     # true (arm = "cartesian" only): the base feeds forward the reaction of the pad wrench the arm
@@ -200,7 +201,7 @@ class ControllerOptions:
     # as first written); "reported": what the autopilot reports it flies (ATTITUDE_TARGET's
     # thrust) and what the servos measured (AM_JOINT_STATE's effort), right when a setpoint
     # was lost on the link.
-    offboard_inputs: str = "sent"
+    offboard_inputs: one_of(OFFBOARD_INPUTS) = "sent"
     # Attitude mode only: bandwidth [Hz] of the body-torque estimate. 0: the gyro's backward
     # difference over one control period (as first written); > 0: that estimate through a
     # 2nd-order Butterworth low-pass at this cutoff (amcore.offboard); attitude mode's 40 Hz is
@@ -233,7 +234,7 @@ class PadSpec:
       soft contact on the pad); both 0: rigid.
     """
 
-    shape: str = "flat"
+    shape: one_of(PAD_SHAPES) = "flat"
     crown_radius_m: float = 0.1
     contact_stiffness_n_per_m: float = 0.0
     contact_damping_n_s_per_m: float = 0.0
@@ -275,7 +276,7 @@ class FlightControllerParams:
     (COM_OF_LOSS_T: PX4's default); the defaults below are PX4's, for this class built directly.
     """
 
-    mode: str = "torque"
+    mode: one_of(FC_MODES) = "torque"
     rate_hz: float = 1000.0
     body_rate_feedforward: bool = True
     failsafe_after_rejected: int = 10  # K refused setpoints in a row -> failsafe [control periods]
@@ -352,7 +353,7 @@ class VehicleParams:
 # ----------------------------------------------------------------------------- scenario
 @dataclass(frozen=True)
 class ObjectSpec:
-    shape: str  # "box" or "cylinder"
+    shape: one_of(OBJECT_SHAPES)
     mass_kg: float
     position_m: tuple[float, float, float]  # centre at rest, world frame
     size_m: tuple[float, float, float] = (0.2, 0.2, 0.2)  # box edge lengths
@@ -433,7 +434,7 @@ class MissionSpec:
     # the object before flight (simulator.object_mocap: [devices.mocap]'s noise and biases when
     # [devices] is on, exact otherwise), one measurement shared by the team. With "mocap", or a box
     # turned by a yaw, each AM approaches the face whose normal is nearest its azimuth.
-    object_pose: str = "config"
+    object_pose: one_of(OBJECT_POSE_SOURCES) = "config"
 
 
 LINK_JOINT_PATHS = ("servo_bus", "link")  # [link].joints
@@ -457,12 +458,12 @@ class LinkSpec:
 
     signing: bool = True
     key_file: str = ""
-    loss: float = 0.0
-    delay_s: float = 0.0
-    jitter_s: float = 0.0
-    reorder: float = 0.0
-    duplicate: float = 0.0
-    joints: str = "servo_bus"
+    loss: within(0.0, 1.0) = 0.0
+    delay_s: at_least(0.0) = 0.0
+    jitter_s: at_least(0.0) = 0.0
+    reorder: within(0.0, 1.0) = 0.0
+    duplicate: within(0.0, 1.0) = 0.0
+    joints: one_of(LINK_JOINT_PATHS) = "servo_bus"
 
     def key_path(self, scenario_path: Path | None) -> Path | None:
         if not self.key_file:
@@ -536,14 +537,14 @@ class ImuSpec:
     in m/s^2/sqrt(Hz), m/s^3/sqrt(Hz), s, m/s^2. Values and sources:
     configs/randomize/default.toml."""
 
-    gyroscope_noise_density: float = 0.0
-    gyroscope_random_walk: float = 0.0
-    gyroscope_bias_correlation_time_s: float = 1000.0
-    gyroscope_turn_on_bias_sigma: float = 0.0
-    accelerometer_noise_density: float = 0.0
-    accelerometer_random_walk: float = 0.0
-    accelerometer_bias_correlation_time_s: float = 300.0
-    accelerometer_turn_on_bias_sigma: float = 0.0
+    gyroscope_noise_density: at_least(0.0) = 0.0
+    gyroscope_random_walk: at_least(0.0) = 0.0
+    gyroscope_bias_correlation_time_s: at_least(0.0) = 1000.0
+    gyroscope_turn_on_bias_sigma: at_least(0.0) = 0.0
+    accelerometer_noise_density: at_least(0.0) = 0.0
+    accelerometer_random_walk: at_least(0.0) = 0.0
+    accelerometer_bias_correlation_time_s: at_least(0.0) = 300.0
+    accelerometer_turn_on_bias_sigma: at_least(0.0) = 0.0
 
 
 @dataclass(frozen=True)
@@ -554,13 +555,13 @@ class MocapSpec:
     body-frame attitude bias and a fixed position bias drawn once per AM (standard
     deviations), and each frame lost with probability drop_probability."""
 
-    rate_hz: float = 100.0
-    latency_s: float = 0.0
-    position_noise_m: float = 0.0
-    attitude_noise_rad: float = 0.0
-    position_bias_m: float = 0.0
-    attitude_bias_rad: float = 0.0
-    drop_probability: float = 0.0
+    rate_hz: at_least(0.0) = 100.0
+    latency_s: at_least(0.0) = 0.0
+    position_noise_m: at_least(0.0) = 0.0
+    attitude_noise_rad: at_least(0.0) = 0.0
+    position_bias_m: at_least(0.0) = 0.0
+    attitude_bias_rad: at_least(0.0) = 0.0
+    drop_probability: at_least(0.0) = 0.0
 
 
 @dataclass(frozen=True)
@@ -571,14 +572,14 @@ class ForceTorqueSpec:
     the readings over the tare_window_s before it is subtracted from then on (tare_at_s < 0:
     never tared)."""
 
-    force_noise_n: float = 0.0
-    torque_noise_nm: float = 0.0
-    force_offset_n: float = 0.0
-    torque_offset_nm: float = 0.0
-    force_drift_n_per_sqrt_s: float = 0.0
-    torque_drift_nm_per_sqrt_s: float = 0.0
+    force_noise_n: at_least(0.0) = 0.0
+    torque_noise_nm: at_least(0.0) = 0.0
+    force_offset_n: at_least(0.0) = 0.0
+    torque_offset_nm: at_least(0.0) = 0.0
+    force_drift_n_per_sqrt_s: at_least(0.0) = 0.0
+    torque_drift_nm_per_sqrt_s: at_least(0.0) = 0.0
     tare_at_s: float = -1.0
-    tare_window_s: float = 0.2
+    tare_window_s: at_least(0.0) = 0.2
 
 
 @dataclass(frozen=True)
@@ -587,8 +588,8 @@ class EncoderSpec:
     counts per revolution (0: exact), velocity as the servo reports it, quantized to
     velocity_quantum_radps (0: exact)."""
 
-    counts_per_rev: int = 0
-    velocity_quantum_radps: float = 0.0
+    counts_per_rev: at_least(0) = 0
+    velocity_quantum_radps: at_least(0.0) = 0.0
 
 
 @dataclass(frozen=True)
@@ -598,9 +599,9 @@ class JointEffortSpec:
     first-order lag of lag_s [s] behind the applied torque, white noise of noise_nm [N m] per
     sample and quantization to resolution_nm [N m] (one current unit; 0: exact)."""
 
-    lag_s: float = 0.0
-    noise_nm: float = 0.0
-    resolution_nm: float = 0.0
+    lag_s: at_least(0.0) = 0.0
+    noise_nm: at_least(0.0) = 0.0
+    resolution_nm: at_least(0.0) = 0.0
 
 
 @dataclass(frozen=True)
@@ -610,10 +611,10 @@ class EstimatorSpec:
     body-rate output (PX4's IMU_GYRO_CUTOFF, Hz; 0: none), and its history length
     (physics steps; at least the motion capture's latency)."""
 
-    attitude_bandwidth_radps: float = 4.0
-    position_bandwidth_radps: float = 8.0
-    gyro_cutoff_hz: float = 0.0
-    history_steps: int = 64
+    attitude_bandwidth_radps: at_least(0.0) = 4.0
+    position_bandwidth_radps: at_least(0.0) = 8.0
+    gyro_cutoff_hz: at_least(0.0) = 0.0
+    history_steps: at_least(0) = 64
 
 
 @dataclass(frozen=True)
@@ -624,7 +625,7 @@ class DevicesSpec:
     as a stress option). scale multiplies every noise, random walk, bias, offset and drift."""
 
     enabled: bool = False
-    scale: float = 1.0
+    scale: at_least(0.0) = 1.0
     imu: ImuSpec = ImuSpec()
     mocap: MocapSpec = MocapSpec()
     ft: ForceTorqueSpec = ForceTorqueSpec()
@@ -644,16 +645,8 @@ def devices_from_table(table: dict, where: str) -> DevicesSpec:
         if not isinstance(sub, dict):
             raise ConfigError(f"{where}: [devices.{name}] must be a table")
         kw[name] = cls(**_build(cls, sub, f"{where}: [devices.{name}]"))
-    spec = DevicesSpec(**kw)
-    for part in parts:
-        sub = getattr(spec, part)
-        for f in dataclasses.fields(sub):
-            v = getattr(sub, f.name)
-            if f.name != "tare_at_s" and v < 0:
-                raise ConfigError(f"{where}: [devices.{part}].{f.name}: must be >= 0, got {v!r}")
+    spec = DevicesSpec(**kw)  # every level >= 0 (tare_at_s: < 0 is never) and scale >= 0: declared
     m, e = spec.mocap, spec.estimator
-    if spec.scale < 0.0:
-        raise ConfigError(f"{where}: [devices].scale: must be >= 0, got {spec.scale!r}")
     if not 1.0 <= m.rate_hz <= 1000.0:
         raise ConfigError(f"{where}: [devices.mocap].rate_hz: must be in 1..1000 Hz, got {m.rate_hz!r}")
     if m.drop_probability >= 1.0:
@@ -780,6 +773,7 @@ def _check_type(value, tp, where: str):
 def _build(cls, table: dict, where: str, skip: tuple[str, ...] = ()):
     """Construct dataclass `cls` from a TOML table, rejecting unknown and missing keys."""
     hints = typing.get_type_hints(cls)
+    declared = typing.get_type_hints(cls, include_extras=True)  # with the fields' declarations (amcore.declare)
     names = {f.name for f in dataclasses.fields(cls) if f.init}
     for key in table:
         if key not in names or key in skip:
@@ -789,7 +783,13 @@ def _build(cls, table: dict, where: str, skip: tuple[str, ...] = ()):
         if f.name in skip or not f.init:
             continue
         if f.name in table:
-            kwargs[f.name] = _check_type(table[f.name], hints[f.name], f"{where}.{f.name}")
+            kwargs[f.name] = value = _check_type(table[f.name], hints[f.name], f"{where}.{f.name}")
+            values = enum_of(declared[f.name])
+            if values is not None and value not in values:
+                raise ConfigError(f"{where}.{f.name}: expected one of {', '.join(map(str, values))}, got {value!r}")
+            why = bounds_problem(declared[f.name], value)
+            if why is not None:
+                raise ConfigError(f"{where}.{f.name}: {why}")
         elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
             raise ConfigError(f"{where}: missing key '{f.name}'")
     return kwargs
@@ -854,6 +854,8 @@ OBJECT_XY_MAX_M = 10.0
 OBJECT_BOTTOM_MAX_M = 5.0
 MISSION_DISTANCE_MAX_M = 2.0
 OBJECT_POSE_SOURCES = ("config", "mocap")  # [mission].object_pose
+OBJECT_SHAPES = ("box", "cylinder")  # [object].shape
+PAD_SHAPES = ("flat", "crowned")  # [pad].shape
 MASS_TOLERANCE_MAX = 0.5  # a mass known to worse than +/-50 % is not a plan: weigh the object
 
 
@@ -944,8 +946,6 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     if v.options.heading_admittance_hz > 0.0 and v.pad.shape != "crowned":
         raise ConfigError(f"{where}: [options].heading_admittance_hz needs [pad].shape = 'crowned' (it reads the "
                           f"misalignment off the crown)")
-    if v.pad.shape not in ("flat", "crowned"):
-        raise ConfigError(f"{where}: [pad].shape: expected 'flat' or 'crowned', got '{v.pad.shape}'")
     _positive(f"{where}: [pad].crown_radius_m", v.pad.crown_radius_m)
     for key in ("contact_stiffness_n_per_m", "contact_damping_n_s_per_m", "rolling_friction_m"):
         if getattr(v.pad, key) < 0.0:
@@ -953,9 +953,6 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     if (v.pad.contact_stiffness_n_per_m > 0.0) != (v.pad.contact_damping_n_s_per_m > 0.0):
         raise ConfigError(f"{where}: [pad]: contact_stiffness_n_per_m and contact_damping_n_s_per_m go together "
                           f"(both 0: rigid)")
-    if v.options.offboard_inputs not in OFFBOARD_INPUTS:
-        raise ConfigError(f"{where}: [options].offboard_inputs: expected one of {', '.join(OFFBOARD_INPUTS)}, "
-                          f"got '{v.options.offboard_inputs}'")
     if not v.options.offboard_torque_cutoff_hz >= 0.0:
         raise ConfigError(f"{where}: [options].offboard_torque_cutoff_hz: must be >= 0 (0: backward difference), "
                           f"got {v.options.offboard_torque_cutoff_hz!r}")
@@ -1137,8 +1134,6 @@ def _check_baseline(b: BaselineGains, n: int, where: str) -> None:
         raise ConfigError(f"{where}.ik_iterations: must be >= 1, got {b.ik_iterations}")
     if b.ik_damping < 0.0:
         raise ConfigError(f"{where}.ik_damping: must be >= 0, got {b.ik_damping!r}")
-    if b.arm not in BASELINE_ARMS:
-        raise ConfigError(f"{where}.arm: expected one of {', '.join(BASELINE_ARMS)}, got '{b.arm}'")
     if b.arm == "cartesian":
         for key in ("K_y", "D_y"):
             if len(getattr(b, key)) != n:
@@ -1151,8 +1146,6 @@ def _check_baseline(b: BaselineGains, n: int, where: str) -> None:
 
 
 def _check_flight_controller(fc: FlightControllerParams, where: str) -> None:
-    if fc.mode not in FC_MODES:
-        raise ConfigError(f"{where}.mode: expected one of {', '.join(FC_MODES)}, got '{fc.mode}'")
     _positive(f"{where}.rate_hz", fc.rate_hz)
     if isinstance(fc.actuation_delay_steps, bool) or not isinstance(fc.actuation_delay_steps, int) \
             or fc.actuation_delay_steps < 0:
@@ -1335,8 +1328,6 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     if "object" not in data:
         raise ConfigError(f"{where}: missing table [object]")
     obj = ObjectSpec(**_build(ObjectSpec, data["object"], f"{where}: [object]"))
-    if obj.shape not in ("box", "cylinder"):
-        raise ConfigError(f"{where}: [object].shape: expected 'box' or 'cylinder', got '{obj.shape}'")
     _in_range(f"{where}: [object].mass_kg", obj.mass_kg, *OBJECT_MASS_RANGE_KG, " kg")
     _in_range(f"{where}: [object].yaw_deg", obj.yaw_deg, -360.0, 360.0, " deg")
     _positive(f"{where}: [object].lateral_friction", obj.lateral_friction)
@@ -1370,9 +1361,6 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
         _in_range(f"{where}: [mission].{key}", getattr(mission, key), 0.0, MISSION_DISTANCE_MAX_M, " m")
     if mission.thrust_fraction_max > 1.0:
         raise ConfigError(f"{where}: [mission].thrust_fraction_max: must be <= 1, got {mission.thrust_fraction_max}")
-    if mission.object_pose not in OBJECT_POSE_SOURCES:
-        raise ConfigError(f"{where}: [mission].object_pose: expected one of {', '.join(OBJECT_POSE_SOURCES)}, "
-                          f"got {mission.object_pose!r}")
     if mission.planned_mass_kg != 0.0:
         _in_range(f"{where}: [mission].planned_mass_kg", mission.planned_mass_kg, *OBJECT_MASS_RANGE_KG,
                   " kg (0: the object's mass_kg)")
@@ -1620,16 +1608,7 @@ _VEHICLE_OVERRIDES = ("options", "safety", "pad", "flight_controller", "rotors")
 
 
 def _link_spec(table: dict, where: str) -> LinkSpec:
-    link = LinkSpec(**_build(LinkSpec, table, where))
-    for key in ("loss", "reorder", "duplicate"):
-        if not 0.0 <= getattr(link, key) <= 1.0:
-            raise ConfigError(f"{where}.{key}: must be a probability in [0, 1], got {getattr(link, key)!r}")
-    for key in ("delay_s", "jitter_s"):
-        if getattr(link, key) < 0.0:
-            raise ConfigError(f"{where}.{key}: must be >= 0, got {getattr(link, key)!r}")
-    if link.joints not in LINK_JOINT_PATHS:
-        raise ConfigError(f"{where}.joints: must be one of {', '.join(map(repr, LINK_JOINT_PATHS))}, got {link.joints!r}")
-    return link
+    return LinkSpec(**_build(LinkSpec, table, where))  # probabilities in [0, 1], times >= 0: declared
 
 
 def scenario_id(spec: ScenarioSpec) -> int:

@@ -13,8 +13,10 @@ import dataclasses
 import inspect
 import re
 import sys
+import typing
 
 from . import config
+from .declare import enum_of
 
 # (table as written in a scenario, its dataclass, keys the table does not take as plain keys)
 SCENARIO_TABLES = (
@@ -48,6 +50,12 @@ Besides these tables a scenario may set `[options]`, `[safety]`, `[pad]`,
 of that name, so a scenario can turn a controller option on without copying the vehicle. Their
 keys are the vehicle's: see [the vehicle TOML reference](../vehicle_toml.md). A `[randomize]`
 table says what `am-trials` varies ([campaigns](../guides/campaigns.md)).
+
+Editors check a scenario as it is typed against `configs/schema/scenario.schema.json`, a JSON
+Schema generated from the same declarations as this page (`python -m amcore.config_schema`):
+each shipped file starts with `#:schema ../schema/scenario.schema.json`, the line Taplo and
+VS Code's Even Better TOML read. Since a scenario may be an overlay, the schema requires no key;
+it refuses unknown tables and keys, wrong types and values outside a key's listed values.
 
 [scenario] also takes `name` (required, the run's name) and `vehicle` (required, the vehicle
 TOML's path relative to the scenario's folder). [[am]] is an array: one entry per aerial
@@ -142,9 +150,26 @@ def _default(f: dataclasses.Field) -> str:
     return str(v)
 
 
+def _declared(hint, written: str) -> str:
+    """A field's type as the reference shows it: its values, its bounds, or as written."""
+    values = enum_of(hint)
+    if values:
+        return " or ".join(f"`{v}`" for v in values)
+    if typing.get_origin(hint) is typing.Annotated:
+        base, *metas = typing.get_args(hint)
+        for m in metas:
+            if getattr(m, "ge", None) is not None and getattr(m, "le", None) is not None:
+                return f"{base.__name__} in [{m.ge:g}, {m.le:g}]"
+            if getattr(m, "ge", None) is not None:
+                return f"{base.__name__} >= {m.ge:g}"
+    return written
+
+
 def table_rows(cls, skip=()) -> list[tuple[str, str, str, str]]:
-    """(key, type, default, description) of every plain key of `cls`'s table."""
-    hints = {f.name: f.type for f in dataclasses.fields(cls)}
+    """(key, type, default, description) of every plain key of `cls`'s table; a key declared
+    `one_of(...)` (amcore.declare) shows its values."""
+    declared = typing.get_type_hints(cls, include_extras=True)
+    hints = {f.name: _declared(declared[f.name], f.type) for f in dataclasses.fields(cls)}
     notes = _comments(cls)
     return [(f.name, _type(hints[f.name]), _default(f), notes.get(f.name) or NOTES.get((cls, f.name), ""))
             for f in dataclasses.fields(cls) if f.name not in skip]

@@ -23,6 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .declare import one_of
+
 ROTOR_SPINS = ("ccw", "cw")  # seen from above the rotor, looking down its thrust axis
 ROTOR_COUNT_RANGE = (4, 16)  # PX4's CA_ROTOR_COUNT allows up to 12; 16 leaves room for coaxial octos
 ROTOR_SPACING_MIN_M = 0.01  # two rotors closer than this are one rotor entered twice
@@ -44,7 +46,7 @@ class Rotor:
 
     position_m: tuple[float, float, float]
     axis: tuple[float, float, float]
-    spin: str
+    spin: one_of(ROTOR_SPINS)
     moment_ratio_m: float
     thrust_min_n: float | None = None
     thrust_max_n: float | None = None
@@ -126,8 +128,6 @@ def table_problem(r: RotorParams) -> tuple[str, str] | None:
             return f"{w}.position_m", f"must be finite and within 5 m of the base, got {list(row.position_m)}"
         if not all(math.isfinite(x) for x in row.axis) or math.hypot(*row.axis) < 1e-6:
             return f"{w}.axis", f"must be a nonzero finite direction, got {list(row.axis)}"
-        if row.spin not in ROTOR_SPINS:
-            return f"{w}.spin", f"expected one of {', '.join(ROTOR_SPINS)}, got '{row.spin}'"
         if not 0.0 < row.moment_ratio_m <= 1.0:
             return f"{w}.moment_ratio_m", f"must be in (0, 1] m (PX4's default |KM| is 0.05), got {row.moment_ratio_m!r}"
     for i, (f_min, f_max, tau) in enumerate(zip(r.thrust_min(), r.thrust_max(), r.time_constants())):

@@ -48,7 +48,7 @@ def test_link_table_key_file_and_per_am_key(tmp_path):
     ("[link]\ndelay_s = -0.1\n", "delay_s"),
     ('[link]\nkey_file = "nope.key"\n', "key_file"),
     ("[link]\nsigning = 1\n", "signing"),
-    ('[link]\njoints = "can_bus"\n', r"\[link\]\.joints: must be one of 'servo_bus', 'link', got 'can_bus'"),
+    ('[link]\njoints = "can_bus"\n', r"\[link\]\.joints: expected one of servo_bus, link, got 'can_bus'"),
 ])  # fmt: skip
 def test_bad_link_tables_are_rejected_naming_the_key(tmp_path, text, match):
     with pytest.raises(ConfigError, match=match):
