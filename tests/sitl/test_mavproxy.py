@@ -79,6 +79,29 @@ def _unsigned_heartbeats(port: int, n: int = 3) -> None:
             time.sleep(0.05)
 
 
+def _start_mavproxy(python: str, mavproxy: str, port: int, cwd: Path, commands: str, *args: str):
+    """MAVProxy listening on `port`, non-interactive, signing with PASSPHRASE then running
+    `commands`; (its process, the reader of its lines)."""
+    mp = subprocess.Popen(
+        [python, mavproxy, f"--master=udpin:127.0.0.1:{port}", *args, "--non-interactive", "--no-state",
+         "--default-modules=link,signing,cmdlong,misc,mode,arm", f"--cmd=signing key {PASSPHRASE}; {commands}"],
+        cwd=cwd, env={**os.environ, "HOME": str(cwd)}, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT, text=True)
+    out = Lines(mp.stdout)
+    out.start()
+    return mp, out
+
+
+def _stop_mavproxy(mp: subprocess.Popen, out: Lines) -> None:
+    if mp.poll() is None:
+        mp.send_signal(signal.SIGTERM)
+    try:
+        mp.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        mp.kill()
+    out.join(5)
+
+
 @pytest.mark.skipif(FOUND is None, reason="MAVProxy is not installed: pip install -e '.[test]' (or set "
                                           "AMSTACK_MAVPROXY_PYTHON to the python of MAVProxy's own environment)")
 def test_mavproxy_sees_both_vehicles_arms_signed_survives_unsigned_frames_and_aborts_by_name(tmp_path):
@@ -93,14 +116,8 @@ def test_mavproxy_sees_both_vehicles_arms_signed_survives_unsigned_frames_and_ab
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    mp = subprocess.Popen(
-        [python, mavproxy, f"--master=udpin:127.0.0.1:{port}", "--dialect=amstack", "--non-interactive", "--no-state",
-         "--default-modules=link,signing,cmdlong,misc,mode,arm",
-         f"--cmd=signing key {PASSPHRASE}; repeat add 1 arm throttle; repeat add 1 long AM_ABORT_MISSION"],
-        cwd=tmp_path, env={**os.environ, "HOME": str(tmp_path)}, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT, text=True)
-    out = Lines(mp.stdout)
-    out.start()
+    mp, out = _start_mavproxy(python, mavproxy, port, tmp_path,
+                              "repeat add 1 arm throttle; repeat add 1 long AM_ABORT_MISSION", "--dialect=amstack")
     run_dir = tmp_path / "run"
     run = subprocess.Popen([script("am-run"), str(SCENARIOS / "two_am_short.toml"), "--run-dir", str(run_dir),
                             "--duration", "3", "--no-telemetry", "--gcs", f"udpout:127.0.0.1:{port}",
@@ -114,14 +131,9 @@ def test_mavproxy_sees_both_vehicles_arms_signed_survives_unsigned_frames_and_ab
         time.sleep(1.0)
         alive = mp.poll() is None
     finally:
-        for p in (run, mp):
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-        try:
-            mp.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            mp.kill()
-        out.join(5)
+        if run.poll() is None:
+            run.send_signal(signal.SIGTERM)
+        _stop_mavproxy(mp, out)
     text = "\n".join(out.lines)
     assert alive, text[-3000:]  # the unsigned frames did not stop it
     assert "Traceback" not in text and "AttributeError" not in text, text[-3000:]
@@ -149,14 +161,7 @@ def test_mavproxy_on_the_free_running_gcs_port_sees_both_px4s_and_arms_signed(tm
     key.write_text(PASSPHRASE + "\n")
     key.chmod(0o600)
     p0, p1, pg = free_udp_ports(3)
-    mp = subprocess.Popen(
-        [python, mavproxy, f"--master=udpin:127.0.0.1:{pg}", "--non-interactive", "--no-state",
-         "--default-modules=link,signing,cmdlong,misc,mode,arm",
-         f"--cmd=signing key {PASSPHRASE}; repeat add 1 arm throttle"],
-        cwd=tmp_path, env={**os.environ, "HOME": str(tmp_path)}, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT, text=True)
-    out = Lines(mp.stdout)
-    out.start()
+    mp, out = _start_mavproxy(python, mavproxy, pg, tmp_path, "repeat add 1 arm throttle")
     sim = None
     try:
         sim = FreeSim(tmp_path, [p0, p1], gcs=("--gcs", f"udpout:127.0.0.1:{pg}", "--gcs-key-file", str(key),
@@ -167,13 +172,7 @@ def test_mavproxy_on_the_free_running_gcs_port_sees_both_px4s_and_arms_signed(tm
         alive = mp.poll() is None
     finally:
         code, err, outcome = sim.stop() if sim is not None else (None, "", {})
-        if mp.poll() is None:
-            mp.send_signal(signal.SIGTERM)
-        try:
-            mp.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            mp.kill()
-        out.join(5)
+        _stop_mavproxy(mp, out)
     text = "\n".join(out.lines)
     assert alive and "Traceback" not in text, text[-3000:]
     assert outcome, f"no outcome.json; simulator stderr:\n{err}"
