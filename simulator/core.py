@@ -3,8 +3,9 @@
 `SitlCore` owns the PyBullet world, each AM's flight-controller emulation (the link as the
 flight controller sees it, `amlink.impair`; in attitude mode the emulated autopilot,
 `simulator.flight_controller`; the failsafe after companion loss, `simulator.failsafe`),
-the ground-truth outcome and a digest of every state sent. The UDP simulator main and the
-in-process runner (`sitl.inprocess`) both drive it, once per physics step k:
+the ground-truth outcome and a digest of every state sent. One schedule drives it for the UDP
+simulator main and the in-process runner (`sitl.inprocess`) alike, `simulator.lockstep`, once per
+physics step k:
 
     if core.is_control_step(k):              # every step, or every rate_hz / control_rate_hz
         frames = core.frames(k)              # sensor frames of step k, one per AM
