@@ -1,37 +1,17 @@
 """The simulator's per-step work, independent of how setpoints travel (no sockets).
 
-`SitlCore` owns the PyBullet world, each AM's flight-controller emulation (the link as the
-flight controller sees it, `amlink.impair`; in attitude mode the emulated autopilot,
-`simulator.flight_controller`; the failsafe after companion loss, `simulator.failsafe`),
-the ground-truth outcome and a digest of every state sent. One schedule drives it for the UDP
-simulator main and the in-process runner (`sitl.inprocess`) alike, `simulator.lockstep`, once per
-physics step k:
-
-    if core.is_control_step(k):              # every step, or every rate_hz / control_rate_hz
-        frames = core.frames(k)              # sensor frames of step k, one per AM
-        <send them>; core.observe()          # bookkeeping while the companions compute
-        setpoints = <the companions answer>  # dict sysid -> TorqueSetpoint (torque mode) or
-                                             # AttitudeSetpoint (attitude mode); some may miss
-                                             # (core.on_setpoint(sysid, sp) as each arrives)
-        core.actuate(k, setpoints, lost)     # flight controllers apply them (or failsafe)
-    else:
-        core.hold(k, lost)                   # flight controllers fly on what they hold
-    core.step()
-
-With [flight_controller].actuation_delay_steps = d > 0 a setpoint acts d physics steps after
-its frame (the first control step's at once), and a runner steps those d steps while the
-companions compute:
-
-    if core.is_control_step(k):
-        frames = core.frames(k)
-        if k == 0 or d == 0: <as above>
-        else:
-            core.actuate(k, <the answers to step k - d's frames if core.due(k), else {}>, lost)
-            <send frames>                      # their answers act at step k + d
-    elif core.due(k):
-        core.hold(k, lost, <the answers to step k - d's frames>)
-    else:
-        core.hold(k, lost)
+`SitlCore` owns the PyBullet world, one `simulator.vehicle.Vehicle` per AM (its flight-controller
+emulation: the link as the flight controller sees it, `amlink.impair`; in attitude mode the
+emulated autopilot, `simulator.flight_controller`; the failsafe after companion loss,
+`simulator.failsafe`; where its state machine stands), the ground-truth outcome and a digest of
+every state sent. `simulator.lockstep` drives it for the UDP simulator and the in-process runner
+(`sitl.inprocess`) alike, once per physics step k: on control steps (`is_control_step`: every
+step, or every rate_hz / control_rate_hz) `frames` / `iter_frames` read step k's sensor frames,
+`observe` keeps their digest and ground truth while the companions compute, and `actuate` has
+each flight controller apply what answered (`on_setpoint` applies one as it arrives) or fly its
+failsafe while its companion is lost; between them `hold` flies on what each holds; then `step`.
+With [flight_controller].actuation_delay_steps = d > 0 a setpoint acts d physics steps after its
+frame (the first control step's at once): `due(k)` says at which steps such answers act.
 
 A setpoint refused as implausible is answered at once, by one policy for every runner:
 the caller reports it with `core.note_rejected(sysid, why)` before `actuate`, and leaves it
