@@ -71,7 +71,7 @@ def answers(core: SitlCore, s: int, mode: str) -> list[bytes]:
     def one(k):
         if mode == "attitude":
             att = AttitudeTarget(k, quat_wxyz=np.array([1.0, 0.0, 0.0, 0.0]), rates_rad_s=np.zeros(3),
-                                 thrust_normalized=hover / core.fcs[s].allocation.thrust_scale_n)
+                                 thrust_normalized=hover / core.vehicles[s].fc.allocation.thrust_scale_n)
             sp = AttitudeSetpoint(step=k, attitude=att, tau_q_nm=np.zeros(n))
             return enc.pack_payloads(fastcodec.attitude_setpoint_payloads(sp))
         sp = TorqueSetpoint(step=k, thrust_n=hover, tau_B_nm=np.zeros(3), tau_q_nm=np.zeros(n))

@@ -46,7 +46,7 @@ WARM_S = 3.0
 def hover(core: SitlCore, s: int, k: int) -> AttitudeSetpoint:
     """A hovering attitude setpoint of AM s for step k (level, hover thrust, arm torques zero)."""
     m = core.model
-    thrust = m.mass_kg * m.gravity_mps2 / core.fcs[s].allocation.thrust_scale_n
+    thrust = m.mass_kg * m.gravity_mps2 / core.vehicles[s].fc.allocation.thrust_scale_n
     att = AttitudeTarget(k, quat_wxyz=np.array([1.0, 0.0, 0.0, 0.0]), rates_rad_s=np.zeros(3),
                          thrust_normalized=thrust)
     return AttitudeSetpoint(step=k, attitude=att, tau_q_nm=np.zeros(m.n))
@@ -86,7 +86,7 @@ def run_stripped(core: SitlCore, steps: int) -> float:
     """CPU [s] per physics step of the hold step's PyBullet calls and kernels alone (module doc)."""
     w, c = core.world, core.world._client
     thrust_n = core.model.mass_kg * core.model.gravity_mps2
-    ams = [(w._ams[s].body_id, w._arm_ids[s], core.devices[s], core.fcs[s], hover(core, s, 0).attitude)
+    ams = [(w._ams[s].body_id, w._arm_ids[s], core.vehicles[s].devices, core.vehicles[s].fc, hover(core, s, 0).attitude)
            for s in core.sysids]
     t, k0 = core.time_s, core.world.step_index
     c0 = time.process_time()

@@ -1,36 +1,17 @@
 """The simulator's per-step work, independent of how setpoints travel (no sockets).
 
-`SitlCore` owns the PyBullet world, each AM's flight-controller emulation (the link as the
-flight controller sees it, `amlink.impair`; in attitude mode the emulated autopilot,
-`simulator.flight_controller`; the failsafe after companion loss, `simulator.failsafe`),
-the ground-truth outcome and a digest of every state sent. The UDP simulator main and the
-in-process runner (`sitl.inprocess`) both drive it, once per physics step k:
-
-    if core.is_control_step(k):              # every step, or every rate_hz / control_rate_hz
-        frames = core.frames(k)              # sensor frames of step k, one per AM
-        <send them>; core.observe()          # bookkeeping while the companions compute
-        setpoints = <the companions answer>  # dict sysid -> TorqueSetpoint (torque mode) or
-                                             # AttitudeSetpoint (attitude mode); some may miss
-                                             # (core.on_setpoint(sysid, sp) as each arrives)
-        core.actuate(k, setpoints, lost)     # flight controllers apply them (or failsafe)
-    else:
-        core.hold(k, lost)                   # flight controllers fly on what they hold
-    core.step()
-
-With [flight_controller].actuation_delay_steps = d > 0 a setpoint acts d physics steps after
-its frame (the first control step's at once), and a runner steps those d steps while the
-companions compute:
-
-    if core.is_control_step(k):
-        frames = core.frames(k)
-        if k == 0 or d == 0: <as above>
-        else:
-            core.actuate(k, <the answers to step k - d's frames if core.due(k), else {}>, lost)
-            <send frames>                      # their answers act at step k + d
-    elif core.due(k):
-        core.hold(k, lost, <the answers to step k - d's frames>)
-    else:
-        core.hold(k, lost)
+`SitlCore` owns the PyBullet world, one `simulator.vehicle.Vehicle` per AM (its flight-controller
+emulation: the link as the flight controller sees it, `amlink.impair`; in attitude mode the
+emulated autopilot, `simulator.flight_controller`; the failsafe after companion loss,
+`simulator.failsafe`; where its state machine stands), the ground-truth outcome and a digest of
+every state sent. `simulator.lockstep` drives it for the UDP simulator and the in-process runner
+(`sitl.inprocess`) alike, once per physics step k: on control steps (`is_control_step`: every
+step, or every rate_hz / control_rate_hz) `frames` / `iter_frames` read step k's sensor frames,
+`observe` keeps their digest and ground truth while the companions compute, and `actuate` has
+each flight controller apply what answered (`on_setpoint` applies one as it arrives) or fly its
+failsafe while its companion is lost; between them `hold` flies on what each holds; then `step`.
+With [flight_controller].actuation_delay_steps = d > 0 a setpoint acts d physics steps after its
+frame (the first control step's at once): `due(k)` says at which steps such answers act.
 
 A setpoint refused as implausible is answered at once, by one policy for every runner:
 the caller reports it with `core.note_rejected(sysid, why)` before `actuate`, and leaves it
@@ -69,6 +50,7 @@ from .outcome import RunOutcome
 from .devices import DeviceSuite
 from .effort import JointEffortSensor
 from .sensors import SensorModel
+from .vehicle import Vehicle
 from .verdict import judge
 from .world import World
 
@@ -83,7 +65,6 @@ def truth_every(rate_hz: float) -> int:
 
 
 LAND_NOW = FailsafeGains(hold_s=0.0)  # a commanded landing: the failsafe's landing, without the hold
-_FAILSAFE_MODE = {"hold": FcMode.HOLD, "land": FcMode.LAND, "landed": FcMode.LANDED}
 
 
 def initial_state(spec: ScenarioSpec, am: AmSpec, model, object_pose: ObjectPose | None = None) -> AmState:
@@ -152,53 +133,60 @@ class SitlCore:
         ms = spec.mission
         self.outcome = RunOutcome(self.sysids, (ms.grasp_end_s + ms.lift_move_s + 1.0, ms.hover_end_s),
                                   slip_from_s=ms.grasp_end_s)
-        self.fc_links = {am.sysid: ImpairedLink(LinkImpairment.for_scenario(
-            dataclasses.replace(spec, link=am.link or spec.link)), stream=am.sysid) for am in spec.ams}
-        # [link].joints = "servo_bus": the arm's torques reach its servos on the companion's own bus,
-        # untouched by the link's impairment: the last ones computed act (zero-order hold)
-        self._joints_on_bus = {am.sysid for am in spec.ams if (am.link or spec.link).joints == "servo_bus"}
-        self._bus_torques: dict[int, np.ndarray] = {}
-        self.sensors = {} if spec.sensors.exact else {
-            am.sysid: SensorModel(spec.sensors, self.model.n, spec.control_dt_s, spec.seed, am.sysid) for am in spec.ams}
-        # [devices]: each AM's sensors and estimator, sampled every physics step (made at the first)
-        self.devices: dict[int, DeviceSuite] = {}
-        self._odometry: dict[int, list[float]] = {}  # the estimator's last values, per AM (odometry first)
-        self._reported: dict[int, list[float]] = {}  # the last frame's base state, per AM (telemetry)
-        self.failsafes: dict[int, Failsafe] = {}  # companion lost
-        self.landing: dict[int, Failsafe] = {}  # landing on a GCS command (companion ignored)
-        self.disarmed: set[int] = set()  # disarmed by a GCS command: motors off, joints limp
-        self._overridden: set[int] = set()  # landing or disarmed: setpoints are not applied
-        self.ignored_setpoints: dict[int, int] = {s: 0 for s in self.sysids}  # arrived while a GCS command ruled
-        self.commanded: list[tuple[float, int, str]] = []  # (t, sysid, what) of GCS commands that took the vehicle
         v = spec.vehicle
         self.mode = v.flight_controller.mode
         self._kind = AttitudeSetpoint if self.mode == "attitude" else TorqueSetpoint  # what the autopilot takes
-        self.fcs: dict[int, FlightController] = {}  # attitude mode: each AM's emulated autopilot
-        self.efforts: dict[int, JointEffortSensor] = {}  # attitude mode: the servos' measured joint torques
-        if self.mode == "attitude":
-            self.fcs = {s: FlightController(v.flight_controller, v.rotors, spec.dt_s) for s in self.sysids}
-            dv = spec.devices  # without [devices] the servos report the applied torques exactly
-            effort, scale = (dv.effort, dv.scale) if dv.enabled else (JointEffortSpec(), 0.0)
-            self.efforts = {s: JointEffortSensor(effort, scale, self.model.n, spec.dt_s, spec.seed, s)
-                            for s in self.sysids}
+        dv = spec.devices  # without [devices] the servos report the applied torques exactly
+        effort, scale = (dv.effort, dv.scale) if dv.enabled else (JointEffortSpec(), 0.0)
+        self.vehicles: dict[int, Vehicle] = {}  # each AM's flight controller: its link, autopilot, devices, state
+        for am in spec.ams:
+            s, link = am.sysid, am.link or spec.link
+            self.vehicles[s] = Vehicle(
+                s, ImpairedLink(LinkImpairment.for_scenario(dataclasses.replace(spec, link=link)), stream=s),
+                # [link].joints = "servo_bus": the arm's torques reach its servos on the companion's own bus,
+                # untouched by the link's impairment: the last ones computed act (zero-order hold)
+                joints_on_bus=link.joints == "servo_bus",
+                sensor=None if spec.sensors.exact else SensorModel(spec.sensors, self.model.n, spec.control_dt_s,
+                                                                    spec.seed, s),
+                fc=FlightController(v.flight_controller, v.rotors, spec.dt_s) if self.mode == "attitude" else None,
+                effort=JointEffortSensor(effort, scale, self.model.n, spec.dt_s, spec.seed, s)
+                if self.mode == "attitude" else None)
+        self.commanded: list[tuple[float, int, str]] = []  # (t, sysid, what) of GCS commands that took the vehicle
         # offboard loss (PX4's COM_OF_LOSS_T): no setpoint for more than this many physics steps
         self.offboard_loss_steps = round(v.flight_controller.COM_OF_LOSS_T * spec.rate_hz)
-        self.offboard_lost: set[int] = set()  # in failsafe after the setpoint stream stopped, for good
         self.control_every = spec.control_every
         # [flight_controller].actuation_delay_steps: the answer to step k's frames acts from step
         # k + d (the first control step's at once); the runners step physics meanwhile
         self.actuation_delay = v.flight_controller.actuation_delay_steps
-        self.wrong_kind: dict[int, int] = {s: 0 for s in self.sysids}  # setpoints of the other mode, ignored
         self.events: list[dict] = []
         self.rejected: list[tuple[float, int, str]] = []  # (t, sysid, why) of setpoints refused as implausible
-        self.rejected_in_a_row: dict[int, int] = {s: 0 for s in self.sysids}
-        self.distrusted: set[int] = set()  # in failsafe after K rejected setpoints in a row, for good
         self.controller_errors: list[tuple[float, int, str]] = []  # (t, sysid, what): controllers that raised
         self.digest = hashlib.sha256()
         self._unobserved: tuple | None = None  # (k, values, frames) of `frames` awaiting `observe`
-        self._k, self._actuated = -1, set()  # step of the last frames; AMs actuated on arrival
-        self._values: dict[int, list[float]] = {}  # the last frames' values and time (`snapshot`)
-        self._values_t = 0.0
+        self._k = -1  # step of the last frames
+        self._values_t = 0.0  # time of the last frames (`snapshot`)
+
+    # -- views of the vehicles' state, by sysid --------------------------------------------
+    @property
+    def failsafes(self) -> dict[int, Failsafe]:
+        """Vehicles in failsafe (companion lost, distrusted, offboard lost), not landing on a command."""
+        return {s: v.failsafe for s, v in self.vehicles.items() if v.failsafe is not None}
+
+    @property
+    def distrusted(self) -> set[int]:
+        return {s for s, v in self.vehicles.items() if v.distrusted}
+
+    @property
+    def offboard_lost(self) -> set[int]:
+        return {s for s, v in self.vehicles.items() if v.offboard_lost}
+
+    @property
+    def disarmed(self) -> set[int]:
+        return {s for s, v in self.vehicles.items() if v.disarmed}
+
+    @property
+    def ignored_setpoints(self) -> dict[int, int]:
+        return {s: v.ignored_setpoints for s, v in self.vehicles.items()}
 
     def connect(self) -> None:
         warm_up_kernels(self.spec)
@@ -233,45 +221,39 @@ class SitlCore:
         w, t = self.world, self.world.time_s
         n = self.model.n
         values, out = {}, {}
-        self._k, self._actuated = k, set()
-        for s in self.sysids:
+        self._k = k
+        for ve in self.vehicles.values():
+            ve.actuated = False
+        for s, ve in self.vehicles.items():
             values[s] = v = w.sensor_values(s)
             if self.spec.devices.enabled:
                 reported = self._sense(s, v, t)
-            else:
-                sensor = self.sensors.get(s)  # none: exact frames
-                reported = v if sensor is None else sensor(v)
+            else:  # no sensor: exact frames
+                reported = v if ve.sensor is None else ve.sensor(v)
             f = sensor_frame_from_wire(k, t, reported, n, 0)
-            if self.efforts:  # attitude mode: what the autopilot flies and the servos measure
-                f = with_autopilot_reports(f, self.efforts[s].last, self.flown_target(s))
+            if ve.effort is not None:  # attitude mode: what the autopilot flies and the servos measure
+                f = with_autopilot_reports(f, ve.effort.last, ve.flown_target())
             out[s] = f
-            self._reported[s] = reported
+            ve.reported = reported
             yield s, f
         self._unobserved = (k, values, out)
-        self._values, self._values_t = values, t
+        for s, v in values.items():
+            self.vehicles[s].values = v
+        self._values_t = t
 
     @property
     def exact_values(self) -> dict[int, list[float]]:
         """The exact values (`World.sensor_values`) behind the last frames, per sysid."""
-        return self._values
+        return {s: v.values for s, v in self.vehicles.items() if v.values is not None}
 
     def _sense(self, s: int, values: list[float], t: float) -> list[float]:
         """One physics step of AM s's devices and estimator ([devices]): the frame's values."""
-        dev = self.devices.get(s)
-        if dev is None:
+        ve = self.vehicles[s]
+        if ve.devices is None:
             sp = self.spec
-            dev = self.devices[s] = DeviceSuite(sp.devices, self.model.n, sp.dt_s, sp.vehicle.gravity_mps2,
-                                                sp.seed, s, values)
-        self._odometry[s] = out = dev.step(values, t)
+            ve.devices = DeviceSuite(sp.devices, self.model.n, sp.dt_s, sp.vehicle.gravity_mps2, sp.seed, s, values)
+        ve.odometry = out = ve.devices.step(values, t)
         return out
-
-    def flown_target(self, s: int):
-        """The attitude target AM s's autopilot is flying (its ATTITUDE_TARGET report), or None:
-        none yet, or its failsafe (or a GCS command) flies the vehicle."""
-        if s in self.failsafes or s in self._overridden or s in self.distrusted or s in self.offboard_lost:
-            return None
-        sp = self.fc_links[s].hold.command
-        return None if sp is None else sp.attitude
 
     def observe(self) -> None:
         """Bookkeeping of the last `frames` call (once): every frame into the state digest, and
@@ -289,9 +271,10 @@ class SitlCore:
         gt = self.world.ground_truth()
         self.outcome.add(gt, wrench_E)
         if self.on_truth is not None:
-            if self._reported:  # the reported base state beside the truth (telemetry)
-                gt = dataclasses.replace(gt, ams={s: dataclasses.replace(a, estimate=tuple(self._reported[s][:13]))
-                                                  if s in self._reported else a for s, a in gt.ams.items()})
+            reported = {s: v.reported for s, v in self.vehicles.items() if v.reported is not None}
+            if reported:  # the reported base state beside the truth (telemetry)
+                gt = dataclasses.replace(gt, ams={s: dataclasses.replace(a, estimate=tuple(reported[s][:13]))
+                                                  if s in reported else a for s, a in gt.ams.items()})
             self.on_truth(gt)
 
     def hold(self, k: int, lost: Collection[int] = (), setpoints: Mapping[int, Setpoint] | None = None) -> None:
@@ -301,8 +284,8 @@ class SitlCore:
         self.observe()
         if self.spec.devices.enabled:  # the devices and the estimator run at the IMU rate
             t, w = self.world.time_s, self.world
-            for s in self.sysids:  # no frame: the base alone, unless the F/T tare reads the wrist
-                dev = self.devices.get(s)
+            for s, ve in self.vehicles.items():  # no frame: the base alone, unless the F/T tare reads the wrist
+                dev = ve.devices
                 self._sense(s, w.sensor_values(s) if dev is None or dev.needs_reading(t) else w.base_values(s), t)
         if k % self._truth_every == 0:
             self._truth({s: self.world.wrench_ee(s) for s in self.sysids})
@@ -312,9 +295,10 @@ class SitlCore:
         """A setpoint answering the last frames, as it arrives: its flight controller applies
         it now, while the other companions still compute (`actuate` then skips this AM).
         One of a vehicle in failsafe is left to `actuate`, which ends the failsafe."""
-        if sysid in self.failsafes or sysid in self._actuated or sysid in self._overridden or sysid in self.distrusted:
+        ve = self.vehicles[sysid]
+        if ve.failsafe is not None or ve.actuated or ve.overridden or ve.distrusted:
             return
-        self._actuated.add(sysid)
+        ve.actuated = True
         self._apply(self._k, sysid, setpoint)
 
     def actuate(self, k: int, setpoints: Mapping[int, Setpoint], lost: Collection[int] = ()) -> None:
@@ -322,33 +306,34 @@ class SitlCore:
         while its companion is lost; a companion that answers again takes over again."""
         self.observe()
         w, t = self.world, self.world.time_s
-        done, self._actuated = (self._actuated if self._k == k else set()), set()
-        for s in self.sysids:
+        done = {s for s, ve in self.vehicles.items() if ve.actuated} if self._k == k else set()
+        for s, ve in self.vehicles.items():
+            ve.actuated = False
             if s in done:  # applied on arrival (on_setpoint)
                 continue
-            if s in self._overridden:  # a GCS command rules this flight controller
+            if ve.overridden:  # a GCS command rules this flight controller
                 if s in setpoints:
-                    self.ignored_setpoints[s] += 1
-                if s in self.disarmed:
+                    ve.ignored_setpoints += 1
+                if ve.disarmed:
                     w.apply(s, 0.0, np.zeros(3), np.zeros(self.model.n))
                 else:
-                    c = self.landing[s].command(t, w.state(s))
+                    c = ve.landing.command(t, w.state(s))
                     w.apply(s, c.thrust_n, c.tau_B_nm, c.tau_q_nm)
                 continue
-            if s in lost or s in self.distrusted or s in self.offboard_lost or (s in self.failsafes and s not in setpoints):
-                if s not in self.failsafes:
-                    self.failsafes[s] = Failsafe(self.model, w.state(s), t)
-                    if s not in self.distrusted:  # distrusted: said by note_rejected
+            if s in lost or ve.for_good or (ve.failsafe is not None and s not in setpoints):
+                if ve.failsafe is None:
+                    ve.failsafe = Failsafe(self.model, w.state(s), t)
+                    if not ve.distrusted:  # distrusted: said by note_rejected
                         self.events.append({"t": t, "sysid": s, "event": "lost", "failsafe": "hold, then land"})
                         self.log(f"t={t:.3f} s sysid {s}: companion silent; flight controller failsafe: hold, then land")
-                c = self.failsafes[s].command(t, w.state(s))
+                c = ve.failsafe.command(t, w.state(s))
                 w.apply(s, c.thrust_n, c.tau_B_nm, c.tau_q_nm)
                 continue
-            if s in self.failsafes:
-                del self.failsafes[s]
-                if s in self.fcs:  # the autopilot's loops start afresh from the failsafe's flight
+            if ve.failsafe is not None:
+                ve.failsafe = None
+                if ve.fc is not None:  # the autopilot's loops start afresh from the failsafe's flight
                     v = self.spec.vehicle
-                    self.fcs[s] = FlightController(v.flight_controller, v.rotors, self.spec.dt_s)
+                    ve.fc = FlightController(v.flight_controller, v.rotors, self.spec.dt_s)
                 self.events.append({"t": t, "sysid": s, "event": "rejoined"})
                 self.log(f"t={t:.3f} s sysid {s}: companion back, failsafe ended")
             self._apply(k, s, setpoints.get(s))
@@ -357,29 +342,31 @@ class SitlCore:
         """The flight controller of `s` at step k: what its link delivers (zero-order hold);
         in attitude mode the emulated autopilot flies the held target. A setpoint of the other
         mode is ignored (a stock autopilot takes no body torques), counted and logged once."""
+        ve = self.vehicles[s]
         if setpoint is not None and not isinstance(setpoint, self._kind):
-            self.wrong_kind[s] += 1
-            if self.wrong_kind[s] == 1:
+            ve.wrong_kind += 1
+            if ve.wrong_kind == 1:
                 self.log(f"t={self.world.time_s:.3f} s sysid {s}: ignored a {type(setpoint).__name__} in "
                          f"{self.mode} mode; counted in outcome.json, further ones not printed")
             setpoint = None
         if setpoint is not None:
-            self.rejected_in_a_row[s] = 0
-            if s in self._joints_on_bus:
-                self._bus_torques[s] = setpoint.tau_q_nm
-        link = self.fc_links[s]
+            ve.rejected_in_a_row = 0
+            if ve.joints_on_bus:
+                ve.bus_torques = setpoint.tau_q_nm
+        link = ve.link
         sp = link.step(k, setpoint)
         if sp is None:  # nothing has reached this flight controller yet: keep the last command
             return
-        tau_q = self._bus_torques.get(s, sp.tau_q_nm)  # the servo bus's (or, [link].joints = "link", the link's)
+        # the servo bus's (or, [link].joints = "link", the link's)
+        tau_q = sp.tau_q_nm if ve.bus_torques is None else ve.bus_torques
         if link.silent_for(k) > self.offboard_loss_steps:
             self._offboard_lost(s, link.silent_for(k))
             return
-        if self.fcs:
-            odo = self._odometry.get(s)  # [devices]: the autopilot flies on its estimator's attitude
+        if ve.fc is not None:
+            odo = ve.odometry  # [devices]: the autopilot flies on its estimator's attitude
             quat, w_B = self.world.attitude_and_rate(s) if odo is None else (odo[3:7],
-                                                                             self.devices[s].autopilot_rate.tolist())
-            out = self.fcs[s].step(quat, w_B, sp.attitude)
+                                                                             ve.devices.autopilot_rate.tolist())
+            out = ve.fc.step(quat, w_B, sp.attitude)
             axes = out.allocation.saturated_axes
             joints = self.world.apply_rotors(s, out.rotor_thrusts_n, tau_q, axes)
             rotors_saturated, joints_saturated = out.allocation.saturated, joints.saturated
@@ -397,18 +384,19 @@ class SitlCore:
         """A setpoint of `sysid` answering the current step was refused as implausible: counted;
         its flight controller holds the last valid command (the caller leaves the setpoint out
         of `actuate`), or, the K-th refusal in a row, goes to failsafe for the rest of the run."""
-        if sysid in self._overridden:  # a GCS command rules: ignored, as every setpoint now
-            self.ignored_setpoints[sysid] += 1
+        ve = self.vehicles[sysid]
+        if ve.overridden:  # a GCS command rules: ignored, as every setpoint now
+            ve.ignored_setpoints += 1
             return
         t = self.time_s
         if len(self.rejected) < 1000:
             self.rejected.append((t, sysid, why))
         else:  # keep the count, not every reason
             self.rejected.append(self.rejected[-1])
-        self.rejected_in_a_row[sysid] += 1
-        if self.rejected_in_a_row[sysid] < self.failsafe_after_rejected or sysid in self.distrusted:
+        ve.rejected_in_a_row += 1
+        if ve.rejected_in_a_row < self.failsafe_after_rejected or ve.distrusted:
             return
-        self.distrusted.add(sysid)  # `actuate` engages the failsafe (unless a GCS command rules)
+        ve.distrusted = True  # `actuate` engages the failsafe (unless a GCS command rules)
         K = self.failsafe_after_rejected
         self.events.append({"t": t, "sysid": sysid, "event": "rejected", "in_a_row": K,
                             "failsafe": "hold, then land"})
@@ -419,9 +407,10 @@ class SitlCore:
         """No setpoint reached AM s's flight controller for more than COM_OF_LOSS_T: it leaves
         offboard for its failsafe (hold, then land), as PX4 does, for the rest of the run."""
         t = self.world.time_s
-        self.offboard_lost.add(s)
-        self.failsafes[s] = Failsafe(self.model, self.world.state(s), t)
-        c = self.failsafes[s].command(t, self.world.state(s))
+        ve = self.vehicles[s]
+        ve.offboard_lost = True
+        ve.failsafe = Failsafe(self.model, self.world.state(s), t)
+        c = ve.failsafe.command(t, self.world.state(s))
         self.world.apply(s, c.thrust_n, c.tau_B_nm, c.tau_q_nm)
         self.events.append({"t": t, "sysid": s, "event": "offboard lost", "silent_s": steps * self.spec.dt_s,
                             "failsafe": "hold, then land"})
@@ -433,68 +422,65 @@ class SitlCore:
         self.controller_errors.append((self.time_s, sysid, what))
 
     def step(self) -> None:
-        for s, sensor in self.efforts.items():  # the torque acting over this step, as the servo reads it
-            sensor.advance(self.world.joint_torques(s))  # its reading formed when a frame reads it
+        for s, ve in self.vehicles.items():  # the torque acting over this step, as the servo reads it
+            if ve.effort is not None:  # its reading formed when a frame reads it
+                ve.effort.advance(self.world.joint_torques(s))
         self.world.step()
 
     # -- flight-controller commands (from the GCS) and state ---------------------------
     def land(self, s: int, by: str = "GCS") -> None:
         """Land vehicle `s` with the failsafe's landing, without its hold (arm compliant, motors
         off on the ground); its companion's setpoints are ignored from now on."""
-        if s in self.landing:
+        ve = self.vehicles[s]
+        if ve.landing is not None:
             return
         t = self.world.time_s
-        self.landing[s] = Failsafe(self.model, self.world.state(s), t, LAND_NOW)
-        self.failsafes.pop(s, None)
-        self._overridden.add(s)
+        ve.landing = Failsafe(self.model, self.world.state(s), t, LAND_NOW)
+        ve.failsafe = None
         self.commanded.append((t, s, "abort" if by == "mission abort" else "land"))
         self.events.append({"t": t, "sysid": s, "event": "land", "by": by})
         self.log(f"t={t:.3f} s sysid {s}: landing ({by} command)")
 
     def disarm(self, s: int, force: bool = False, by: str = "GCS") -> bool:
         """Motors off and joints limp; refused (False) in the air unless `force`."""
-        if s in self.disarmed:
+        ve = self.vehicles[s]
+        if ve.disarmed:
             return True
         if not force and self.fc_mode(s) != FcMode.LANDED:
             return False
         t = self.world.time_s
         if force and self.fc_mode(s) != FcMode.LANDED:
             self.commanded.append((t, s, "disarm"))
-        self.disarmed.add(s)
-        self._overridden.add(s)
+        ve.disarmed = True
         self.events.append({"t": t, "sysid": s, "event": "disarmed", "by": by, "forced": force})
         self.log(f"t={t:.3f} s sysid {s}: disarmed ({by} command{', forced' if force else ''})")
         return True
 
     def arm(self, s: int, by: str = "GCS") -> None:
         """Undo a disarm; the flight controller applies its companion's setpoints (or keeps landing)."""
-        if s not in self.disarmed:
+        ve = self.vehicles[s]
+        if not ve.disarmed:
             return
         t = self.world.time_s
-        self.disarmed.discard(s)
-        if s not in self.landing:
-            self._overridden.discard(s)
+        ve.disarmed = False  # still overridden while it lands
         self.events.append({"t": t, "sysid": s, "event": "armed", "by": by})
         self.log(f"t={t:.3f} s sysid {s}: armed ({by} command)")
 
     def fc_mode(self, s: int) -> FcMode:
-        fs = self.landing.get(s) or self.failsafes.get(s)
-        if fs is not None:
-            return _FAILSAFE_MODE[fs.mode]
-        return FcMode.OFFBOARD if self._k >= 0 else FcMode.STANDBY
+        return self.vehicles[s].mode(started=self._k >= 0)
 
     def snapshot(self, armed: Mapping[int, bool]) -> FleetSnapshot:
         """What every flight controller reports now (`armed`: who its companion has armed).
         Reads the last frames' values; before the first frame, the world's."""
-        t = self._values_t if self._values else self.world.time_s
+        t = self._values_t if any(ve.values is not None for ve in self.vehicles.values()) else self.world.time_s
         vehicles = []
-        for s in self.sysids:
-            v = self._values.get(s) or self.world.sensor_values(s)
+        for s, ve in self.vehicles.items():
+            v = ve.values or self.world.sensor_values(s)
             mode = self.fc_mode(s)
             vehicles.append(VehicleSnapshot(
                 sysid=s, p_WB=tuple(v[0:3]), quat_WB_wxyz=tuple(v[3:7]), v_B=tuple(v[7:10]), w_B=tuple(v[10:13]),
-                mode=mode, armed=armed.get(s, False) and s not in self.disarmed and mode != FcMode.LANDED,
-                failsafe=s in self.failsafes and s not in self.landing))
+                mode=mode, armed=armed.get(s, False) and not ve.disarmed and mode != FcMode.LANDED,
+                failsafe=ve.failsafe is not None and ve.landing is None))
         return FleetSnapshot(time_s=t, phase=self._phase(t) if self._k >= 0 else "", vehicles=tuple(vehicles))
 
     def finish(self) -> dict:
@@ -510,9 +496,9 @@ class SitlCore:
                 "distrusted": sorted(self.distrusted), "offboard_lost": sorted(self.offboard_lost),
                 "flight_controller": self.mode, "control_every": self.control_every,
                 "failsafe_at_end": sorted(self.failsafes),
-                "fc_link": {str(s): {**vars(link.channel.stats), "stale": link.hold.stale,
-                                     "other_mode": self.wrong_kind[s]}
-                            for s, link in self.fc_links.items()},
+                "fc_link": {str(s): {**vars(ve.link.channel.stats), "stale": ve.link.hold.stale,
+                                     "other_mode": ve.wrong_kind}
+                            for s, ve in self.vehicles.items()},
                 **self.outcome.to_dict()}
 
 

@@ -532,7 +532,7 @@ class FreeRun:
         if self.spec.devices.enabled:  # the autopilot flies on its estimator (EKF2's place)
             values = w.sensor_values(s)
             est = core._sense(s, values, t)
-            rate_B = tuple(core.devices[s].autopilot_rate.tolist())
+            rate_B = tuple(core.vehicles[s].devices.autopilot_rate.tolist())
         else:
             values = est = w.flight_values(s)
             rate_B = tuple(values[10:13])

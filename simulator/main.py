@@ -62,6 +62,7 @@ from .freerun import FreeRun, endpoints_for
 from .px4.port import PortError
 from .gcs import GcsSession, snapshot_every
 from .gcs_link import GcsLink
+from .lockstep import Lockstep, ServerTransport
 from .bullet import pb
 from .progress import SimBar
 from .verdict import MISSION_FAILED
@@ -286,7 +287,10 @@ def main(argv: list[str] | None = None) -> int:
                        limits=limits, on_heartbeat=gcs_link.forward_heartbeat,
                        object_pose=None if pose is None else (pose.p_W_m, pose.yaw_rad))
     gcs = GcsSession(core, gcs_link, server.armed, snapshot_every(spec.rate_hz))
-    status, code, k = "run complete", 0, 0
+    # every step: the GCS link's snapshot, STATUSTEXTs and GCS commands (while the companions compute)
+    lockstep = Lockstep(core, ServerTransport(server), meanwhile=gcs.tick,
+                        after_step=lambda _k: progress.update(core.time_s))
+    status, code = "run complete", 0
     completed = False  # the run reached its end (a vehicle in failsafe makes the code 1, not the run an error)
     told = status  # what the companions hear (STATUSTEXT carries 50 bytes)
     n_steps = int(round(duration * spec.rate_hz))
@@ -333,41 +337,8 @@ def main(argv: list[str] | None = None) -> int:
         cpu.start()
         sim_tele.start(core.time_s)
 
-        def bookkeeping() -> None:  # while the companions compute step k
-            core.observe()
-            gcs.tick(k)  # every few steps: the GCS link's snapshot, STATUSTEXTs, GCS commands
-
-        def collected() -> dict:  # actuation delay: the answers to the frames sent d steps ago
-            setpoints = server.collect(partial=True)
-            for sysid, why in server.last_rejected:
-                core.note_rejected(sysid, why)
-            return setpoints
-
-        late = core.actuation_delay > 0  # [flight_controller].actuation_delay_steps
-        for k in range(n_steps):
-            if core.is_control_step(k) and late and k > 0:
-                # the frames go out and physics steps on while the companions compute; their
-                # answers act d steps later (core.due)
-                frames = core.frames(k)
-                setpoints = collected() if core.due(k) else {}  # due here when d is the control period
-                core.actuate(k, setpoints, server.lost_peers)
-                server.send_frames(frames, partial=True)
-                bookkeeping()
-            elif core.is_control_step(k):
-                # each frame leaves as soon as it is read; each setpoint is applied as it arrives
-                setpoints = server.exchange(core.iter_frames(k), partial=True, while_waiting=bookkeeping,
-                                            on_setpoint=core.on_setpoint)
-                for sysid, why in server.last_rejected:  # answered at once: hold, count, failsafe after K
-                    core.note_rejected(sysid, why)
-                core.actuate(k, setpoints, server.lost_peers)
-            else:  # between the companions' control steps the flight controllers fly on their own
-                setpoints = collected() if core.due(k) else None  # (before reading who is lost)
-                core.hold(k, server.lost_peers, setpoints)
-                gcs.tick(k)
-            core.step()
-            progress.update(core.time_s)
+        lockstep.run(n_steps)  # simulator.lockstep: frames out, answers in, holds between control steps
         progress.update(core.time_s, force=True)
-        k = n_steps
         result = core.finish()
         verdict = result["verdict"]
         completed = True
@@ -402,6 +373,7 @@ def main(argv: list[str] | None = None) -> int:
         core.close()
         tele.close()
     wall = time.perf_counter() - progress.t_wall0
+    k = lockstep.k
     sim_time = k * spec.dt_s
     cpu_s, main_thread = cpu.seconds(), cpu.main_thread()
     result = {"scenario": spec.name, "scenario_id": info.scenario_id, "status": status, "exit_code": code,

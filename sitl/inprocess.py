@@ -1,5 +1,6 @@
 """The SITL without processes or sockets: the same `SitlCore` (world, flight controllers,
-failsafe, outcome) and the same `companion.pilot.Pilot` per AM, called in one loop.
+failsafe, outcome) on the same schedule (`simulator.lockstep`), and the same
+`companion.pilot.Pilot` per AM, called in-process where the UDP simulator exchanges datagrams.
 
 For experiments that need many runs (link-impairment sweeps, parameter studies) and for
 checking that the multi-process SITL adds nothing but transport: frames are rounded as the
@@ -28,6 +29,7 @@ from amlink.types import (AttitudeSetpoint, SensorFrame, TorqueSetpoint, frame_v
 from amruntime import jitcache
 from companion.pilot import Pilot
 from simulator.core import SitlCore, kernel_group
+from simulator.lockstep import Answers, Lockstep
 from simulator.verdict import MISSION_FAILED
 
 
@@ -58,13 +60,65 @@ def setpoint_as_on_the_wire(sp: TorqueSetpoint | AttitudeSetpoint) -> TorqueSetp
     return fastcodec.attitude_setpoint_from_fields(read[att_id](att, 0, len(att)), read[joint_id](joints, 0, len(joints)))
 
 
+class Companions:
+    """`simulator.lockstep.Transport` by calling each AM's `Pilot` at once: a frame as its
+    companion decodes it in, the setpoint as the simulator decodes it out, refused as the
+    UDP simulator refuses it (`amlink.limits`); a controller that raises is reported
+    (`SitlCore.note_controller_error`) and its companion counts as lost for the rest of the run.
+    `lost(t)`: sysids whose companion is silent at t, who get no frame (tests)."""
+
+    def __init__(self, core: SitlCore, pilots: dict[int, Pilot], limits: SetpointLimits,
+                 lost: Callable[[float], set[int]], on_frames: Callable[[float, dict, dict], None] | None) -> None:
+        self.core, self.pilots, self.limits, self._silent, self.on_frames = core, pilots, limits, lost, on_frames
+        self.gone: set[int] = set()  # silent at the last send (as the UDP simulator: lost until the next)
+        self.crashed: set[int] = set()
+        self._answers = Answers({})
+
+    @property
+    def lost(self) -> set[int]:
+        return self.gone | self.crashed
+
+    def exchange(self, frames, while_waiting, on_setpoint) -> Answers:
+        self.send(dict(frames))
+        while_waiting()
+        return self.collect()
+
+    def send(self, frames: dict[int, SensorFrame]) -> None:
+        """Each companion's answer to its frame, computed now and kept for `collect`."""
+        core = self.core
+        if self.on_frames is not None:
+            self.on_frames(core.time_s, core.exact_values, frames)
+        self.gone = self._silent(core.time_s) | self.crashed
+        setpoints, refused = {}, []
+        for s, f in frames.items():
+            if s in self.gone:
+                continue
+            try:
+                sp = setpoint_as_on_the_wire(self.pilots[s].step(as_on_the_wire(f))[0])
+                why = self.limits.violation(sp)
+            except (ArithmeticError, ValueError) as exc:  # LinAlgError, non-finite setpoints
+                core.note_controller_error(s, f"{type(exc).__name__}: {exc}")
+                self.crashed.add(s)
+                continue
+            if why is None:
+                setpoints[s] = sp
+            else:
+                refused.append((s, why))
+        self._answers = Answers(setpoints, tuple(refused))
+
+    def collect(self) -> Answers:
+        out, self._answers = self._answers, Answers({})
+        return out
+
+
 def run(spec: ScenarioSpec, duration_s: float | None = None,
         lost: Callable[[float], set[int]] = lambda _t: set(),
         progress: Callable[[float], None] | None = None,
         failsafe_after_rejected: int | None = None,
         on_frames: Callable[[float, dict, dict], None] | None = None,
         on_truth: Callable[[object], None] | None = None) -> dict:  # fmt: skip
-    """Run a scenario in-process; `lost(t)` -> sysids whose companion is silent at t (tests).
+    """Run a scenario in-process, on the UDP simulator's schedule (`simulator.lockstep`);
+    `lost(t)` -> sysids whose companion is silent at t (tests).
 
     As the UDP simulator does, a setpoint outside the plausibility bounds (`amlink.limits`)
     is refused at once (its flight controller holds the last command) and counted, and
@@ -86,61 +140,13 @@ def run(spec: ScenarioSpec, duration_s: float | None = None,
     limits = SetpointLimits.for_vehicle(v.rotors.thrust_max_total_n, max(v.joint_torque_max_nm), v.n_joints)
     n = int(round((spec.duration_s if duration_s is None else duration_s) * spec.rate_hz))
     every = max(1, int(round(spec.rate_hz)))
-    crashed: set[int] = set()
+    lockstep = Lockstep(core, Companions(core, pilots, limits, lost, on_frames),
+                        after_step=None if progress is None else
+                        lambda k: progress(core.time_s) if k % every == 0 else None)
     core.connect()
     t0 = time.perf_counter()
-    gone: set[int] = set()
-    late = core.actuation_delay > 0  # [flight_controller].actuation_delay_steps: answers act d steps later
-    pending: dict[int, TorqueSetpoint | AttitudeSetpoint] = {}  # such answers, not yet acting
-    refused: list[tuple[int, str]] = []  # answers refused as implausible, noted when they would act
-
-    def answer(frames: dict[int, SensorFrame]) -> dict[int, TorqueSetpoint | AttitudeSetpoint]:
-        """Each companion's setpoint for its frame; a refused one goes to `refused`."""
-        setpoints = {}
-        for s, f in frames.items():
-            if s in gone:
-                continue
-            try:
-                sp = setpoint_as_on_the_wire(pilots[s].step(as_on_the_wire(f))[0])
-                why = limits.violation(sp)
-            except (ArithmeticError, ValueError) as exc:  # LinAlgError, non-finite setpoints
-                core.note_controller_error(s, f"{type(exc).__name__}: {exc}")
-                crashed.add(s)
-                continue
-            if why is None:
-                setpoints[s] = sp
-            else:
-                refused.append((s, why))
-        return setpoints
-
-    def acting() -> dict[int, TorqueSetpoint | AttitudeSetpoint]:
-        """The answers that act now, their refusals noted (as the UDP simulator's lockstep)."""
-        nonlocal pending
-        for s, why in refused:
-            core.note_rejected(s, why)
-        refused.clear()
-        out, pending = pending, {}
-        return out
-
     try:
-        for k in range(n):
-            if core.is_control_step(k):
-                frames = core.frames(k)
-                if on_frames is not None:
-                    on_frames(core.time_s, core.exact_values, frames)
-                if late and k > 0:  # what acts now, then this step's answers, which act d steps later
-                    core.actuate(k, acting() if core.due(k) else {}, gone | crashed)
-                    gone = lost(core.time_s) | crashed
-                    pending = answer(frames)
-                else:
-                    gone = lost(core.time_s) | crashed
-                    pending = answer(frames)
-                    core.actuate(k, acting(), gone | crashed)
-            else:  # as the UDP simulator: who was lost at the last exchange stays lost until the next
-                core.hold(k, gone | crashed, acting() if core.due(k) else None)
-            core.step()
-            if progress is not None and k % every == 0:
-                progress(core.time_s)
+        lockstep.run(n)
         result = core.finish()
     finally:
         core.close()

@@ -233,7 +233,7 @@ def test_closed_loop_estimate_tracks_the_truth_up_to_the_motion_capture_bias():
             frames = core.frames(k)
             if k >= 1000:
                 for s, f in frames.items():
-                    x, dev = core.exact_values[s], core.devices[s]
+                    x, dev = core.exact_values[s], core.vehicles[s].devices
                     q_true = np.array(x[3:7])
                     d = quat_log(quat_mul(quat_mul(np.array([q_true[0], *(-q_true[1:])]), f.quat_WB_wxyz),
                                           quat_exp(-dev.mocap.bias_R)))

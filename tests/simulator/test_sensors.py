@@ -25,7 +25,7 @@ def _draws(model, k=4000, truth=TRUTH):
 
 def test_no_sensor_table_means_exact_frames_and_no_model():
     core = SitlCore(load_scenario(SCENARIO))
-    assert core.sensors == {}
+    assert all(v.sensor is None for v in core.vehicles.values())
 
 
 def test_noise_and_bias_have_the_stated_size():
