@@ -10,6 +10,7 @@ import copy
 import dataclasses
 import math
 import os
+import re
 import tomllib
 import types
 import typing
@@ -17,9 +18,20 @@ import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated, Literal
+
+import msgspec
+from msgspec import Meta
 
 from .allocation import Allocation
 from .rotors import Rotor, RotorParams, table_problem
+
+
+# Declarations beside the fields (msgspec validates them, amcore.config_schema writes them as a JSON
+# Schema): a range as Annotated[float, Meta(...)], an enum as Literal[...]; a unit ends a description
+Positive = Annotated[float, Meta(gt=0.0)]
+NonNegative = Annotated[float, Meta(ge=0.0)]
+Probability = Annotated[float, Meta(ge=0.0, le=1.0)]
 
 
 class ConfigError(ValueError):
@@ -61,6 +73,9 @@ DEFAULT_SCENARIO = SCENARIOS_DIR / "two_am_comp_attitude.toml"
 
 
 # ----------------------------------------------------------------------------- vehicle
+TaskComponent = Literal["x", "y", "z", "roll", "pitch", "yaw"]
+
+
 @dataclass(frozen=True)
 class TaskSpec:
     """Components of the task variable y, in the AM's task frame (eq. jacobian_xi).
@@ -69,7 +84,7 @@ class TaskSpec:
     planar angle of the end-effector about that task axis (see `amcore.task`).
     """
 
-    components: tuple[str, ...]
+    components: tuple[TaskComponent, ...]
 
 
 # The grasp mission (amcore.mission.am_mission) approaches and squeezes along the task's x (towards
@@ -85,13 +100,13 @@ class Gains:
     desired rotational inertia of eq. ori_controller; K_y, D_y are per task component.
     """
 
-    K_t: tuple[float, float, float]
-    D_t: tuple[float, float, float]
-    k_R: float
-    k_w: float
-    Lambda_wb_d: tuple[float, float, float]
-    K_y: tuple[float, ...]
-    D_y: tuple[float, ...]
+    K_t: tuple[Positive, Positive, Positive]
+    D_t: tuple[Positive, Positive, Positive]
+    k_R: Positive
+    k_w: Positive
+    Lambda_wb_d: tuple[Positive, Positive, Positive]
+    K_y: tuple[Positive, ...]
+    D_y: tuple[Positive, ...]
 
 
 @dataclass(frozen=True)
@@ -108,16 +123,18 @@ class Safety:
       (simulator.failsafe.joint_damping).
     """
 
-    com_err_max_m: float = 0.5
-    y_err_max: tuple[float, ...] = ()
-    sigma_damping: float = 0.02
-    damping_max: float = 0.05
-    failsafe_joint_damping: tuple[float, ...] = ()
+    com_err_max_m: Annotated[float, Meta(gt=0.0, description="saturation of the CoM error [m]")] = 0.5
+    y_err_max: tuple[Positive, ...] = ()
+    sigma_damping: Positive = 0.02
+    damping_max: Positive = 0.05
+    failsafe_joint_damping: tuple[Annotated[float, Meta(gt=0.0, description="[N m s/rad]")], ...] = ()
 
 
-CONTROLLERS = ("passivity", "baseline")  # amcore.control (the paper's law), amcore.baseline
+Controller = Literal["passivity", "baseline"]  # amcore.control (the paper's law), amcore.baseline
+CONTROLLERS = typing.get_args(Controller)
 BASELINE_COMPONENTS = ("x", "z", "pitch")  # amcore.baseline's inverse kinematics: the arm's plane in {b}
-BASELINE_ARMS = ("joint", "cartesian")  # [baseline].arm: joint PD on the IK's q_d, or impedance at the pad
+BaselineArm = Literal["joint", "cartesian"]  # [baseline].arm: joint PD on the IK's q_d, or impedance at the pad
+BASELINE_ARMS = typing.get_args(BaselineArm)
 
 
 @dataclass(frozen=True)
@@ -133,39 +150,47 @@ class BaselineGains:
     [rad-equivalent, squared into the normal equations].
     """
 
-    k_x: tuple[float, float, float]
-    k_v: tuple[float, float, float]
-    k_i: tuple[float, float, float]
-    integral_limit_n: tuple[float, float, float]
-    k_R: tuple[float, float, float]
-    k_w: tuple[float, float, float]
-    k_iR: tuple[float, float, float]
-    attitude_integral_limit_nm: tuple[float, float, float]
-    K_q: tuple[float, ...]
-    D_q: tuple[float, ...]
-    ik_iterations: int
-    ik_damping: float
+    k_x: tuple[Positive, Positive, Positive]
+    k_v: tuple[Positive, Positive, Positive]
+    k_i: tuple[NonNegative, NonNegative, NonNegative]  # 0: no integral
+    integral_limit_n: tuple[Positive, Positive, Positive]
+    k_R: tuple[Positive, Positive, Positive]
+    k_w: tuple[Positive, Positive, Positive]
+    k_iR: tuple[NonNegative, NonNegative, NonNegative]  # 0: no integral
+    attitude_integral_limit_nm: tuple[Positive, Positive, Positive]
+    K_q: tuple[Positive, ...]
+    D_q: tuple[Positive, ...]
+    ik_iterations: Annotated[int, Meta(ge=1)]
+    ik_damping: NonNegative
     # Two additions a practitioner makes next (docs/baseline.md, "On the canted hexarotor"); the
     # defaults are the first write-up's law. arm: "joint", the joint PD above on the IK's q_d;
     # "cartesian", an impedance at the pad through the arm's Jacobian, tau_q = J^T (K_y e - D_y edot)
     # + g_q, e the pad's (x, z, pitch) error in the task frame from the measured state, K_y
     # [N/m, N/m, N m/rad] and D_y [N s/m, N s/m, N m s/rad] (needed only then).
-    arm: str = "joint"
-    K_y: tuple[float, ...] = ()
-    D_y: tuple[float, ...] = ()
+    arm: BaselineArm = "joint"
+    K_y: tuple[Positive, ...] = ()
+    D_y: tuple[Positive, ...] = ()
     # true (arm = "cartesian" only): the base feeds forward the reaction of the pad wrench the arm
     # commanded at the last step (its spring part), force in F_d and moment about the base origin
     # in M: the squeeze's reaction and the load's share then need no integral to build up.
     reaction_feedforward: bool = False
 
 
+OffboardInputs = Literal["sent", "reported"]  # [options].offboard_inputs
+OFFBOARD_INPUTS = typing.get_args(OffboardInputs)
+# [options].offboard_latency_s at most [s]: half of PX4's default COM_OF_LOSS_T (1 s), after which the
+# autopilot leaves offboard; a longer delay is a lost link, not one to predict over
+OFFBOARD_LATENCY_MAX_S = 0.5
+
+
 @dataclass(frozen=True)
 class ControllerOptions:
-    controller: str = "passivity"  # which law flies the AM: one of CONTROLLERS
+    controller: Controller = "passivity"  # which law flies the AM
     force_compensation: bool = True
     compensate_Lambda_y_dot: bool = False
-    force_filter_hz: float = 3.0  # cutoff of the 2nd-order low-pass on the measured wrench (why: am3dof.toml)
-    force_filter_zeta: float = 1.0
+    # cutoff of the 2nd-order low-pass on the measured wrench (why: am3dof.toml)
+    force_filter_hz: Annotated[float, Meta(gt=0.0, description="cutoff of the wrench's low-pass [Hz]")] = 3.0
+    force_filter_zeta: Positive = 1.0
     # Feed the filtered wrench's rates into f_d's derivatives (hence Omega_d, Omegadot_d).
     # Off by default: a real wrist sensor also measures the tool's inertial force, and the
     # filter's second derivative passes the raw reading straight through (gain w^2), which
@@ -179,16 +204,16 @@ class ControllerOptions:
     compensate_along_face: bool = True
     # Beyond the paper (amcore.adapt): the heading follows the misalignment the wrist sensor
     # measures on a crowned pad, with this natural frequency [Hz]; 0: off (the paper's fixed heading).
-    heading_admittance_hz: float = 0.0
-    heading_admittance_zeta: float = 1.0
+    heading_admittance_hz: Annotated[float, Meta(ge=0.0, description="0: off [Hz]")] = 0.0
+    heading_admittance_zeta: Positive = 1.0
     # Beyond the paper (amcore.adapt.LateralAdmittance): in contact, the CoM reference gives
     # way along the face to the lateral force the wrist sensor measures, with this natural
     # frequency [Hz]; 0: off (the paper's CoM reference).
-    lateral_admittance_hz: float = 0.0
-    lateral_admittance_zeta: float = 1.0
+    lateral_admittance_hz: Annotated[float, Meta(ge=0.0, description="0: off [Hz]")] = 0.0
+    lateral_admittance_zeta: Positive = 1.0
     # Beyond the paper (amcore.adapt.Trim): in the approach's hover the CoM reference moves to
     # cancel a steady horizontal force (a tilted thrust), at this bandwidth [Hz]; held from the grasp on. 0: off.
-    trim_hz: float = 0.0
+    trim_hz: Annotated[float, Meta(ge=0.0, description="0: off [Hz]")] = 0.0
     # The next three keys sample the law for the interface: their defaults depend on
     # [flight_controller].mode (MODE_OPTION_DEFAULTS, applied by the loader to the keys the
     # vehicle and scenario files leave unset). Attitude mode: "reported", 40.0, true, what a
@@ -200,12 +225,12 @@ class ControllerOptions:
     # as first written); "reported": what the autopilot reports it flies (ATTITUDE_TARGET's
     # thrust) and what the servos measured (AM_JOINT_STATE's effort), right when a setpoint
     # was lost on the link.
-    offboard_inputs: str = "sent"
+    offboard_inputs: OffboardInputs = "sent"
     # Attitude mode only: bandwidth [Hz] of the body-torque estimate. 0: the gyro's backward
     # difference over one control period (as first written); > 0: that estimate through a
     # 2nd-order Butterworth low-pass at this cutoff (amcore.offboard); attitude mode's 40 Hz is
     # PX4's IMU_GYRO_CUTOFF default, not tuned.
-    offboard_torque_cutoff_hz: float = 0.0
+    offboard_torque_cutoff_hz: Annotated[float, Meta(ge=0.0, description="0: backward difference [Hz]")] = 0.0
     # Beyond the paper (amcore.law.discrete_damping): eq. u3's task damping D_y as the damping
     # that, held over one control period, does what the continuous damper does in that time.
     # A mode with little task inertia (the pad's pitch, Lambda_y ~2.4e-4) and Lambda_y^-1 D_y dt
@@ -217,7 +242,8 @@ class ControllerOptions:
     # a setpoint leaving the companion to the vehicle acting on it, as measured on that link; > 0:
     # eq. u3 acts on the task error predicted that far ahead from the commands in flight (a
     # Smith predictor). 0: off (the measured error).
-    offboard_latency_s: float = 0.0
+    offboard_latency_s: Annotated[float, Meta(ge=0.0, le=OFFBOARD_LATENCY_MAX_S,
+                                              description="0: no prediction [s]")] = 0.0
 
 
 @dataclass(frozen=True)
@@ -233,13 +259,17 @@ class PadSpec:
       soft contact on the pad); both 0: rigid.
     """
 
-    shape: str = "flat"
-    crown_radius_m: float = 0.1
-    contact_stiffness_n_per_m: float = 0.0
-    contact_damping_n_s_per_m: float = 0.0
+    shape: Literal["flat", "crowned"] = "flat"
+    crown_radius_m: Annotated[float, Meta(gt=0.0, description="[m]")] = 0.1
+    contact_stiffness_n_per_m: Annotated[float, Meta(ge=0.0, description="0: rigid [N/m]")] = 0.0
+    contact_damping_n_s_per_m: Annotated[float, Meta(ge=0.0, description="0: rigid [N s/m]")] = 0.0
     # rolling resistance of the facing [m]: the moment resisting rolling (the object turning
     # between crowned pads) is at most this times the normal force (Bullet's rollingFriction)
-    rolling_friction_m: float = 0.0
+    rolling_friction_m: Annotated[float, Meta(ge=0.0, description="[m]")] = 0.0
+
+
+FcMode = Literal["torque", "attitude"]
+FC_MODES = typing.get_args(FcMode)
 
 
 @dataclass(frozen=True)
@@ -275,53 +305,48 @@ class FlightControllerParams:
     (COM_OF_LOSS_T: PX4's default); the defaults below are PX4's, for this class built directly.
     """
 
-    mode: str = "torque"
-    rate_hz: float = 1000.0
+    mode: FcMode = "torque"
+    rate_hz: Annotated[float, Meta(gt=0.0, description="the autopilot's loops [Hz]")] = 1000.0
     body_rate_feedforward: bool = True
-    failsafe_after_rejected: int = 10  # K refused setpoints in a row -> failsafe [control periods]
-    actuation_delay_steps: int = 0  # d: a setpoint acts d physics steps after its frame (0: on arrival)
-    MC_ROLL_P: float = 6.5
-    MC_PITCH_P: float = 6.5
-    MC_YAW_P: float = 2.8
-    MC_YAW_WEIGHT: float = 0.4
-    MC_ROLLRATE_MAX: float = 220.0
-    MC_PITCHRATE_MAX: float = 220.0
-    MC_YAWRATE_MAX: float = 200.0
-    MC_ROLLRATE_P: float = 0.15
-    MC_ROLLRATE_I: float = 0.2
-    MC_ROLLRATE_D: float = 0.003
-    MC_ROLLRATE_FF: float = 0.0
-    MC_ROLLRATE_K: float = 1.0
-    MC_RR_INT_LIM: float = 0.30
-    MC_PITCHRATE_P: float = 0.15
-    MC_PITCHRATE_I: float = 0.2
-    MC_PITCHRATE_D: float = 0.003
-    MC_PITCHRATE_FF: float = 0.0
-    MC_PITCHRATE_K: float = 1.0
-    MC_PR_INT_LIM: float = 0.30
-    MC_YAWRATE_P: float = 0.2
-    MC_YAWRATE_I: float = 0.1
-    MC_YAWRATE_D: float = 0.0
-    MC_YAWRATE_FF: float = 0.0
-    MC_YAWRATE_K: float = 1.0
-    MC_YR_INT_LIM: float = 0.30
-    IMU_GYRO_CUTOFF: float = 40.0  # low-pass on the gyro the rate loop uses [Hz]; 0: none
-    IMU_DGYRO_CUTOFF: float = 20.0  # low-pass on the angular acceleration of the D term [Hz]; 0: none
+    failsafe_after_rejected: Annotated[int, Meta(ge=1)] = 10  # K refused setpoints in a row -> failsafe [control periods]
+    actuation_delay_steps: Annotated[int, Meta(ge=0)] = 0  # d: a setpoint acts d physics steps after its frame (0: on arrival)
+    MC_ROLL_P: Positive = 6.5
+    MC_PITCH_P: Positive = 6.5
+    MC_YAW_P: Positive = 2.8
+    MC_YAW_WEIGHT: Probability = 0.4
+    MC_ROLLRATE_MAX: Positive = 220.0
+    MC_PITCHRATE_MAX: Positive = 220.0
+    MC_YAWRATE_MAX: Positive = 200.0
+    MC_ROLLRATE_P: NonNegative = 0.15
+    MC_ROLLRATE_I: NonNegative = 0.2
+    MC_ROLLRATE_D: NonNegative = 0.003
+    MC_ROLLRATE_FF: NonNegative = 0.0
+    MC_ROLLRATE_K: NonNegative = 1.0
+    MC_RR_INT_LIM: NonNegative = 0.30
+    MC_PITCHRATE_P: NonNegative = 0.15
+    MC_PITCHRATE_I: NonNegative = 0.2
+    MC_PITCHRATE_D: NonNegative = 0.003
+    MC_PITCHRATE_FF: NonNegative = 0.0
+    MC_PITCHRATE_K: NonNegative = 1.0
+    MC_PR_INT_LIM: NonNegative = 0.30
+    MC_YAWRATE_P: NonNegative = 0.2
+    MC_YAWRATE_I: NonNegative = 0.1
+    MC_YAWRATE_D: NonNegative = 0.0
+    MC_YAWRATE_FF: NonNegative = 0.0
+    MC_YAWRATE_K: NonNegative = 1.0
+    MC_YR_INT_LIM: NonNegative = 0.30
+    IMU_GYRO_CUTOFF: NonNegative = 40.0  # low-pass on the gyro the rate loop uses [Hz]; 0: none
+    IMU_DGYRO_CUTOFF: NonNegative = 20.0  # low-pass on the angular acceleration of the D term [Hz]; 0: none
     # offboard loss: no setpoint for this long [s] and the autopilot leaves offboard for its
     # failsafe (hold, then land; PX4 v1.14 COM_OF_LOSS_T, default 1.0 s, action COM_OBL_RC_ACT)
-    COM_OF_LOSS_T: float = 1.0
+    COM_OF_LOSS_T: Positive = 1.0
 
 
-FC_MODES = ("torque", "attitude")
 # [options] defaults that follow [flight_controller].mode (see ControllerOptions): a key the
 # vehicle or scenario file sets wins; a mode not listed takes ControllerOptions' own defaults.
 MODE_OPTION_DEFAULTS: dict[str, dict[str, object]] = {
     "attitude": {"offboard_inputs": "reported", "offboard_torque_cutoff_hz": 40.0, "discrete_damping": True},
 }
-OFFBOARD_INPUTS = ("sent", "reported")  # [options].offboard_inputs
-# [options].offboard_latency_s at most [s]: half of PX4's default COM_OF_LOSS_T (1 s), after which the
-# autopilot leaves offboard; a longer delay is a lost link, not one to predict over
-OFFBOARD_LATENCY_MAX_S = 0.5
 
 
 @dataclass(frozen=True)
@@ -333,7 +358,7 @@ class VehicleParams:
     ft_frame: str
     arm_joints: tuple[str, ...]
     q_nominal_rad: tuple[float, ...]
-    joint_torque_max_nm: tuple[float, ...]
+    joint_torque_max_nm: tuple[Annotated[float, Meta(gt=0.0, description="[N m]")], ...]
     rotors: RotorParams
     task: TaskSpec
     gains: Gains
@@ -342,7 +367,7 @@ class VehicleParams:
     pad: PadSpec = PadSpec()
     flight_controller: FlightControllerParams = FlightControllerParams()
     baseline: BaselineGains | None = None  # needed when options.controller = "baseline"
-    gravity_mps2: float = 9.81
+    gravity_mps2: Annotated[float, Meta(ge=0.1, le=100.0, description="[m/s^2]")] = 9.81
 
     @property
     def n_joints(self) -> int:
@@ -735,51 +760,97 @@ class ScenarioSpec:
 
 
 # ----------------------------------------------------------------------------- loading
-def _check_type(value, tp, where: str):
-    origin = typing.get_origin(tp)
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{where}: expected a number, got {value!r}")
-        if not math.isfinite(value):
-            raise ConfigError(f"{where}: must be finite, got {value!r}")
-        return float(value)
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{where}: expected an integer, got {value!r}")
-        return value
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"{where}: expected true or false, got {value!r}")
-        return value
-    if tp is str:
-        if not isinstance(value, str):
-            raise ConfigError(f"{where}: expected a string, got {value!r}")
-        return value
-    if origin is tuple:
+# How a type reads in a message (msgspec names JSON's types; TOML has no null)
+_TYPE_WORDS = {"float": "a number", "int": "an integer", "bool": "true or false", "str": "a string",
+               "array": "a list", "object": "a table", "float | null": "a number"}
+_DECLARED = re.compile(r"^(?P<what>.*?)(?: - at `\$(?P<at>.*)`)?$")
+
+
+def _not_finite(value, where: str) -> None:
+    """TOML's nan and inf are refused everywhere: no key takes them."""
+    for i, v in enumerate(value if isinstance(value, list) else (value,)):
+        if isinstance(v, float) and not math.isfinite(v):
+            raise ConfigError(f"{where}: must be finite, got {v!r}" + (f" (entry {i})" if isinstance(value, list) else ""))
+
+
+def _meta_at(tp, index: int | None):
+    """The element type of `tp` at list `index` (None: `tp` itself), its Annotated metadata stripped,
+    and its msgspec.Meta (or None)."""
+    if index is not None and typing.get_origin(typing.get_args(tp)[0] if typing.get_origin(tp) is Annotated else tp) is tuple:
         args = typing.get_args(tp)
-        if not isinstance(value, list):
-            raise ConfigError(f"{where}: expected a list, got {value!r}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_check_type(v, args[0], f"{where}[{i}]") for i, v in enumerate(value))
-        if len(value) != len(args):
-            raise ConfigError(f"{where}: expected {len(args)} entries, got {len(value)}")
-        return tuple(_check_type(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
-    if tp is Path:
-        if not isinstance(value, str):
-            raise ConfigError(f"{where}: expected a path string, got {value!r}")
-        return value
-    if origin in (types.UnionType, typing.Union):
-        return value
+        tp = args[0] if len(args) == 2 and args[1] is Ellipsis else args[min(index, len(args) - 1)]
+    if typing.get_origin(tp) in (types.UnionType, typing.Union):
+        tp = next(a for a in typing.get_args(tp) if a is not type(None))
+    if typing.get_origin(tp) is Annotated:
+        base, *extras = typing.get_args(tp)
+        return base, next((m for m in extras if isinstance(m, msgspec.Meta)), None)
+    return tp, None
+
+
+def _bounds(meta: msgspec.Meta, integer: bool) -> str:
+    """A declared range in words: "must be > 0", "must be in [0, 1] s", "must be in 2..255"."""
+    lo, hi = (meta.ge, "[") if meta.ge is not None else (meta.gt, "("), (meta.le, "]") if meta.le is not None else (meta.lt, ")")
+    unit = re.search(r"\[([^\]]+)\]$", meta.description or "")
+    unit = f" {unit.group(1)}" if unit and unit.group(1) not in ("1", "-") else ""
+    if lo[0] is not None and hi[0] is not None:
+        if integer and lo[1] == "[" and hi[1] == "]":
+            return f"must be in {lo[0]}..{hi[0]}"
+        return f"must be in {lo[1]}{lo[0]:g}, {hi[0]:g}{hi[1]}{unit}"
+    if lo[0] is not None:
+        return f"must be {'>=' if lo[1] == '[' else '>'} {lo[0]:g}"
+    return f"must be {'<=' if hi[1] == ']' else '<'} {hi[0]:g}"
+
+
+def _declared_problem(exc: msgspec.ValidationError, value, tp) -> str:
+    """msgspec's ValidationError for `value` against the declared type `tp`, in the loader's words:
+    "must be in [0, 1] s, got 1.5 (entry 2)", "expected one of box, cylinder, got 'ball'"."""
+    m = _DECLARED.match(str(exc))
+    what, at = m.group("what"), m.group("at") or ""
+    index = int(at[1:-1]) if re.fullmatch(r"\[\d+\]", at) else None
+    bad = value[index] if index is not None and isinstance(value, list) and index < len(value) else value
+    entry = f" (entry {index})" if index is not None else ""
+    base, meta = _meta_at(tp, index)
+    if what.startswith(("Expected `float` ", "Expected `int` ")) and meta is not None:
+        return f"{_bounds(meta, base is int)}, got {bad!r}{entry}"
+    if what.startswith("Invalid enum value"):
+        return f"expected one of {', '.join(map(str, typing.get_args(base)))}, got {bad!r}{entry}"
+    n = re.fullmatch(r"Expected `array` of length (\d+), got (\d+)", what)
+    if n:
+        return f"expected {n.group(1)} entries, got {n.group(2)}"
+    t = re.fullmatch(r"Expected `([^`]+)`, got `[^`]+`", what)
+    if t:
+        return f"expected {_TYPE_WORDS.get(t.group(1), t.group(1))}, got {bad!r}{entry}"
+    return f"{what[:1].lower()}{what[1:]}{' at ' + at if at else ''}, got {bad!r}"  # pragma: no cover
+
+
+def _check_type(value, tp, where: str):
+    """`value` as the declared type `tp` (its Annotated msgspec.Meta ranges and Literal enums
+    included), validated by msgspec; errors name `where`."""
+    if typing.get_origin(tp) is Annotated and dataclasses.is_dataclass(typing.get_args(tp)[0]):
+        tp = typing.get_args(tp)[0]
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
             raise ConfigError(f"{where}: expected a table, got {value!r}")
         return _build(tp, value, where)
-    raise ConfigError(f"{where}: unsupported type {tp}")  # pragma: no cover
+    if tp is Path:
+        if not isinstance(value, str):
+            raise ConfigError(f"{where}: expected a path string, got {value!r}")
+        return value
+    _not_finite(value, where)
+    try:
+        return msgspec.convert(value, tp)
+    except msgspec.ValidationError as exc:
+        raise ConfigError(f"{where}: {_declared_problem(exc, value, tp)}") from None
+
+
+def _hints(cls) -> dict:
+    return typing.get_type_hints(cls, include_extras=True)
 
 
 def _build(cls, table: dict, where: str, skip: tuple[str, ...] = ()):
-    """Construct dataclass `cls` from a TOML table, rejecting unknown and missing keys."""
-    hints = typing.get_type_hints(cls)
+    """Keyword arguments of dataclass `cls` from a TOML table: unknown and missing keys refused
+    here (msgspec ignores unknown keys), each value checked against its declaration by msgspec."""
+    hints = _hints(cls)
     names = {f.name for f in dataclasses.fields(cls) if f.init}
     for key in table:
         if key not in names or key in skip:
@@ -896,16 +967,12 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     n = v.n_joints
     g = v.gains
     _check_urdf(v, where)
-    _in_range(f"{where}: [vehicle].gravity_mps2", v.gravity_mps2, 0.1, 100.0, " m/s^2")
     _check_rotors(v.rotors, f"{where}: [rotors]")
     for key, seq in (("q_nominal_rad", v.q_nominal_rad), ("joint_torque_max_nm", v.joint_torque_max_nm)):
         if len(seq) != n:
             raise ConfigError(f"{where}: [vehicle].{key}: expected {n} entries (one per arm joint), got {len(seq)}")
     if len(v.task.components) != n:
         raise ConfigError(f"{where}: [task].components: a non-redundant arm needs {n} task components, got {len(v.task.components)}")
-    for c in v.task.components:
-        if c not in ("x", "y", "z", "roll", "pitch", "yaw"):
-            raise ConfigError(f"{where}: [task].components: unknown component '{c}'")
     if len(set(v.task.components)) != n:
         raise ConfigError(f"{where}: [task].components: a component is named twice in {list(v.task.components)}")
     missing = [c for c in GRASP_COMPONENTS if c not in v.task.components]
@@ -916,55 +983,19 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
     for key in ("K_y", "D_y"):
         if len(getattr(g, key)) != n:
             raise ConfigError(f"{where}: [gains].{key}: expected {n} entries, got {len(getattr(g, key))}")
-    for key in ("K_t", "D_t", "k_R", "k_w", "Lambda_wb_d", "K_y", "D_y"):
-        _positive(f"{where}: [gains].{key}", getattr(g, key))
     if v.safety.y_err_max and len(v.safety.y_err_max) != n:
         raise ConfigError(f"{where}: [safety].y_err_max: expected {n} entries, got {len(v.safety.y_err_max)}")
-    _positive(f"{where}: [vehicle].joint_torque_max_nm", v.joint_torque_max_nm)
     _check_urdf_physics(v, where)
-    _positive(f"{where}: [options].force_filter_hz", v.options.force_filter_hz)
-    _positive(f"{where}: [options].force_filter_zeta", v.options.force_filter_zeta)
-    for key in ("com_err_max_m", "sigma_damping", "damping_max"):
-        _positive(f"{where}: [safety].{key}", getattr(v.safety, key))
-    if v.safety.y_err_max:
-        _positive(f"{where}: [safety].y_err_max", v.safety.y_err_max)
     if v.safety.failsafe_joint_damping:
         if len(v.safety.failsafe_joint_damping) != n:
             raise ConfigError(f"{where}: [safety].failsafe_joint_damping: expected {n} entries (one per arm joint), "
                               f"got {len(v.safety.failsafe_joint_damping)}")
-        _positive(f"{where}: [safety].failsafe_joint_damping", v.safety.failsafe_joint_damping)
-    if v.options.heading_admittance_hz < 0.0 or not v.options.heading_admittance_zeta > 0.0:
-        raise ConfigError(f"{where}: [options].heading_admittance_hz must be >= 0 (0: off) and "
-                          f"heading_admittance_zeta > 0")
-    if not v.options.trim_hz >= 0.0:
-        raise ConfigError(f"{where}: [options].trim_hz: must be >= 0 (0: off), got {v.options.trim_hz!r}")
-    if v.options.lateral_admittance_hz < 0.0 or not v.options.lateral_admittance_zeta > 0.0:
-        raise ConfigError(f"{where}: [options].lateral_admittance_hz must be >= 0 (0: off) and "
-                          f"lateral_admittance_zeta > 0")
     if v.options.heading_admittance_hz > 0.0 and v.pad.shape != "crowned":
         raise ConfigError(f"{where}: [options].heading_admittance_hz needs [pad].shape = 'crowned' (it reads the "
                           f"misalignment off the crown)")
-    if v.pad.shape not in ("flat", "crowned"):
-        raise ConfigError(f"{where}: [pad].shape: expected 'flat' or 'crowned', got '{v.pad.shape}'")
-    _positive(f"{where}: [pad].crown_radius_m", v.pad.crown_radius_m)
-    for key in ("contact_stiffness_n_per_m", "contact_damping_n_s_per_m", "rolling_friction_m"):
-        if getattr(v.pad, key) < 0.0:
-            raise ConfigError(f"{where}: [pad].{key}: must be >= 0 (0: rigid), got {getattr(v.pad, key)!r}")
     if (v.pad.contact_stiffness_n_per_m > 0.0) != (v.pad.contact_damping_n_s_per_m > 0.0):
         raise ConfigError(f"{where}: [pad]: contact_stiffness_n_per_m and contact_damping_n_s_per_m go together "
                           f"(both 0: rigid)")
-    if v.options.offboard_inputs not in OFFBOARD_INPUTS:
-        raise ConfigError(f"{where}: [options].offboard_inputs: expected one of {', '.join(OFFBOARD_INPUTS)}, "
-                          f"got '{v.options.offboard_inputs}'")
-    if not v.options.offboard_torque_cutoff_hz >= 0.0:
-        raise ConfigError(f"{where}: [options].offboard_torque_cutoff_hz: must be >= 0 (0: backward difference), "
-                          f"got {v.options.offboard_torque_cutoff_hz!r}")
-    if not 0.0 <= v.options.offboard_latency_s <= OFFBOARD_LATENCY_MAX_S:
-        raise ConfigError(f"{where}: [options].offboard_latency_s: must be in [0, {OFFBOARD_LATENCY_MAX_S:g}] s "
-                          f"(0: no prediction), got {v.options.offboard_latency_s!r}")
-    if v.options.controller not in CONTROLLERS:
-        raise ConfigError(f"{where}: [options].controller: unknown controller '{v.options.controller}' "
-                          f"(known: {', '.join(CONTROLLERS)})")
     if v.options.controller == "baseline" and v.flight_controller.mode == "attitude":
         raise ConfigError(f"{where}: [options].controller = 'baseline' flies in [flight_controller].mode = 'torque' "
                           f"only (its attitude loop is its own torque law)")
@@ -976,9 +1007,7 @@ def vehicle_from_dict(data: dict, path: Path) -> VehicleParams:
                           f"{list(v.task.components)}")
     if v.baseline is not None:
         _check_baseline(v.baseline, n, f"{where}: [baseline]")
-    v = _derive_px4_gains(v, set(data.get("flight_controller", {})))
-    _check_flight_controller(v.flight_controller, f"{where}: [flight_controller]")
-    return v
+    return _derive_px4_gains(v, set(data.get("flight_controller", {})))
 
 
 def _derive_px4_gains(v: VehicleParams, given: set[str]) -> VehicleParams:
@@ -1127,46 +1156,14 @@ def _check_baseline(b: BaselineGains, n: int, where: str) -> None:
     for key in ("K_q", "D_q"):
         if len(getattr(b, key)) != n:
             raise ConfigError(f"{where}.{key}: expected {n} entries (one per arm joint), got {len(getattr(b, key))}")
-    for key in ("k_x", "k_v", "k_R", "k_w", "K_q", "D_q", "integral_limit_n", "attitude_integral_limit_nm"):
-        _positive(f"{where}.{key}", getattr(b, key))
-    for key in ("k_i", "k_iR"):
-        for i, v in enumerate(getattr(b, key)):
-            if v < 0.0:
-                raise ConfigError(f"{where}.{key}: must be >= 0 (0: no integral), got {v!r} (entry {i})")
-    if b.ik_iterations < 1:
-        raise ConfigError(f"{where}.ik_iterations: must be >= 1, got {b.ik_iterations}")
-    if b.ik_damping < 0.0:
-        raise ConfigError(f"{where}.ik_damping: must be >= 0, got {b.ik_damping!r}")
-    if b.arm not in BASELINE_ARMS:
-        raise ConfigError(f"{where}.arm: expected one of {', '.join(BASELINE_ARMS)}, got '{b.arm}'")
-    if b.arm == "cartesian":
+    if b.arm == "cartesian":  # the task gains' count is the arm's (and needed only then)
         for key in ("K_y", "D_y"):
             if len(getattr(b, key)) != n:
                 raise ConfigError(f"{where}.{key}: arm = 'cartesian' needs {n} entries (one per task component), "
                                   f"got {len(getattr(b, key))}")
-            _positive(f"{where}.{key}", getattr(b, key))
     if b.reaction_feedforward and b.arm != "cartesian":
         raise ConfigError(f"{where}.reaction_feedforward: needs arm = 'cartesian' (fed forward, the joint PD's "
                           f"wrench closes a loop through the base's desired attitude)")
-
-
-def _check_flight_controller(fc: FlightControllerParams, where: str) -> None:
-    if fc.mode not in FC_MODES:
-        raise ConfigError(f"{where}.mode: expected one of {', '.join(FC_MODES)}, got '{fc.mode}'")
-    _positive(f"{where}.rate_hz", fc.rate_hz)
-    if isinstance(fc.actuation_delay_steps, bool) or not isinstance(fc.actuation_delay_steps, int) \
-            or fc.actuation_delay_steps < 0:
-        raise ConfigError(f"{where}.actuation_delay_steps: must be an integer >= 0, got {fc.actuation_delay_steps!r}")
-    if not fc.failsafe_after_rejected >= 1:
-        raise ConfigError(f"{where}.failsafe_after_rejected: must be >= 1, got {fc.failsafe_after_rejected!r}")
-    for f in dataclasses.fields(fc):
-        if f.name.isupper() and not getattr(fc, f.name) >= 0.0:
-            raise ConfigError(f"{where}.{f.name}: must be >= 0, got {getattr(fc, f.name)!r}")
-    for key in ("MC_ROLL_P", "MC_PITCH_P", "MC_YAW_P", "MC_ROLLRATE_MAX", "MC_PITCHRATE_MAX", "MC_YAWRATE_MAX"):
-        _positive(f"{where}.{key}", getattr(fc, key))
-    _positive(f"{where}.COM_OF_LOSS_T", fc.COM_OF_LOSS_T)
-    if not fc.MC_YAW_WEIGHT <= 1.0:
-        raise ConfigError(f"{where}.MC_YAW_WEIGHT: must be in [0, 1], got {fc.MC_YAW_WEIGHT!r}")
 
 
 def load_vehicle(path: str | Path) -> VehicleParams:

@@ -56,7 +56,7 @@ BASE = (ROOT / "configs" / "scenarios" / "two_am_comp.toml").read_text()
     ("[object]", "[flight_controller]\nMC_ROLLRATE_D = -0.1\n[object]", "MC_ROLLRATE_D: must be >= 0"),
     ("[object]", "[flight_controller]\nMC_YAW_WEIGHT = 1.5\n[object]", "MC_YAW_WEIGHT: must be in [0, 1]"),
     ("[object]", "[flight_controller]\nMC_ROLL_RATE_P = 0.1\n[object]", "unknown key 'MC_ROLL_RATE_P'"),
-    ("[object]", "[flight_controller]\nactuation_delay_steps = -1\n[object]", "actuation_delay_steps: must be an integer >= 0"),
+    ("[object]", "[flight_controller]\nactuation_delay_steps = -1\n[object]", "actuation_delay_steps: must be >= 0, got -1"),
     ("[object]", "[flight_controller]\nactuation_delay_steps = 0.5\n[object]", "actuation_delay_steps"),
     ("[object]", "[flight_controller]\nactuation_delay_steps = 2\n[object]",
      "actuation_delay_steps: at most the control period, 1 physics step here, got 2"),
@@ -74,8 +74,8 @@ BASE = (ROOT / "configs" / "scenarios" / "two_am_comp.toml").read_text()
     ("rate_hz = 1000.0", "rate_hz = 1000.0\nsolver_iterations = 1001", "[scenario].solver_iterations: must be in 10..1000"),
     ("rate_hz = 1000.0", "rate_hz = 1000.0\nsolver_iterations = 25.0", "[scenario].solver_iterations: expected an integer"),
     ("rate_hz = 1000.0", "rate_hz = 1000.0\nsolver_iterations = false", "[scenario].solver_iterations: expected an integer"),
-    ("[object]", "[options]\nlateral_admittance_hz = -0.3\n[object]", "[options].lateral_admittance_hz must be >= 0"),
-    ("[object]", "[options]\nlateral_admittance_zeta = 0.0\n[object]", "lateral_admittance_zeta > 0"),
+    ("[object]", "[options]\nlateral_admittance_hz = -0.3\n[object]", "[options].lateral_admittance_hz: must be >= 0"),
+    ("[object]", "[options]\nlateral_admittance_zeta = 0.0\n[object]", "lateral_admittance_zeta: must be > 0"),
     ("[object]", "[options]\ntrim_hz = -0.1\n[object]", "[options].trim_hz: must be >= 0"),
     ("[object]", "[options]\ntrim_hz = nan\n[object]", "[options].trim_hz: must be finite"),
 ])
@@ -141,7 +141,7 @@ def test_unknown_controller_is_rejected_naming_the_key(tmp_path):
     p = _write(tmp_path, BASE + '\n[options]\ncontroller = "pid"\n')
     with pytest.raises(ConfigError) as e:
         load_scenario(p)
-    assert "[options].controller: unknown controller 'pid' (known: passivity, baseline)" in str(e.value)
+    assert "[options].controller: expected one of passivity, baseline, got 'pid'" in str(e.value)
 
 
 def _vehicle_variant(tmp_path, old: str, new: str, options: str = "") -> Path:
