@@ -461,7 +461,8 @@ class MissionSpec:
     object_pose: str = "config"
 
 
-LINK_JOINT_PATHS = ("servo_bus", "link")  # [link].joints
+LinkJoints = Literal["servo_bus", "link"]  # [link].joints
+LINK_JOINT_PATHS = typing.get_args(LinkJoints)
 
 
 @dataclass(frozen=True)
@@ -482,12 +483,12 @@ class LinkSpec:
 
     signing: bool = True
     key_file: str = ""
-    loss: float = 0.0
-    delay_s: float = 0.0
-    jitter_s: float = 0.0
-    reorder: float = 0.0
-    duplicate: float = 0.0
-    joints: str = "servo_bus"
+    loss: Probability = 0.0
+    delay_s: Annotated[float, Meta(ge=0.0, description="[s]")] = 0.0
+    jitter_s: Annotated[float, Meta(ge=0.0, description="[s]")] = 0.0
+    reorder: Probability = 0.0
+    duplicate: Probability = 0.0
+    joints: LinkJoints = "servo_bus"
 
     def key_path(self, scenario_path: Path | None) -> Path | None:
         if not self.key_file:
@@ -508,10 +509,10 @@ class AmSpec:
       starts (world axes) and turned by this much about z; its references do not move.
     """
 
-    sysid: int
+    sysid: Annotated[int, Meta(ge=2, le=255, description="MAVLink system id; 1 is the simulator")]
     azimuth_deg: float
     signing_key_hex: str = ""  # 64 hex digits; empty: see LinkSpec
-    misalignment_deg: float = 0.0
+    misalignment_deg: Annotated[float, Meta(gt=-45.0, lt=45.0, description="[deg]")] = 0.0
     start_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     start_heading_deg: float = 0.0
     # this AM's link impairment: [link] with this [[am]]'s `link = {loss = ..., ...}` on top
@@ -531,19 +532,19 @@ class SensorSpec:
     (rounded to whole physics steps). Defaults with their sources: configs/randomize/default.toml.
     """
 
-    position_noise_m: float = 0.0
-    position_bias_m: float = 0.0
-    attitude_noise_rad: float = 0.0
-    attitude_bias_rad: float = 0.0
-    velocity_noise_mps: float = 0.0
-    velocity_bias_mps: float = 0.0
-    angular_velocity_noise_radps: float = 0.0
-    angular_velocity_bias_radps: float = 0.0
-    force_noise_n: float = 0.0
-    force_bias_n: float = 0.0
-    torque_noise_nm: float = 0.0
-    torque_bias_nm: float = 0.0
-    latency_s: float = 0.0
+    position_noise_m: NonNegative = 0.0
+    position_bias_m: NonNegative = 0.0
+    attitude_noise_rad: NonNegative = 0.0
+    attitude_bias_rad: NonNegative = 0.0
+    velocity_noise_mps: NonNegative = 0.0
+    velocity_bias_mps: NonNegative = 0.0
+    angular_velocity_noise_radps: NonNegative = 0.0
+    angular_velocity_bias_radps: NonNegative = 0.0
+    force_noise_n: NonNegative = 0.0
+    force_bias_n: NonNegative = 0.0
+    torque_noise_nm: NonNegative = 0.0
+    torque_bias_nm: NonNegative = 0.0
+    latency_s: NonNegative = 0.0
 
     @property
     def exact(self) -> bool:
@@ -561,14 +562,14 @@ class ImuSpec:
     in m/s^2/sqrt(Hz), m/s^3/sqrt(Hz), s, m/s^2. Values and sources:
     configs/randomize/default.toml."""
 
-    gyroscope_noise_density: float = 0.0
-    gyroscope_random_walk: float = 0.0
-    gyroscope_bias_correlation_time_s: float = 1000.0
-    gyroscope_turn_on_bias_sigma: float = 0.0
-    accelerometer_noise_density: float = 0.0
-    accelerometer_random_walk: float = 0.0
-    accelerometer_bias_correlation_time_s: float = 300.0
-    accelerometer_turn_on_bias_sigma: float = 0.0
+    gyroscope_noise_density: NonNegative = 0.0
+    gyroscope_random_walk: NonNegative = 0.0
+    gyroscope_bias_correlation_time_s: NonNegative = 1000.0
+    gyroscope_turn_on_bias_sigma: NonNegative = 0.0
+    accelerometer_noise_density: NonNegative = 0.0
+    accelerometer_random_walk: NonNegative = 0.0
+    accelerometer_bias_correlation_time_s: NonNegative = 300.0
+    accelerometer_turn_on_bias_sigma: NonNegative = 0.0
 
 
 @dataclass(frozen=True)
@@ -579,13 +580,13 @@ class MocapSpec:
     body-frame attitude bias and a fixed position bias drawn once per AM (standard
     deviations), and each frame lost with probability drop_probability."""
 
-    rate_hz: float = 100.0
-    latency_s: float = 0.0
-    position_noise_m: float = 0.0
-    attitude_noise_rad: float = 0.0
-    position_bias_m: float = 0.0
-    attitude_bias_rad: float = 0.0
-    drop_probability: float = 0.0
+    rate_hz: Annotated[float, Meta(ge=1.0, le=1000.0, description="[Hz]")] = 100.0
+    latency_s: NonNegative = 0.0
+    position_noise_m: NonNegative = 0.0
+    attitude_noise_rad: NonNegative = 0.0
+    position_bias_m: NonNegative = 0.0
+    attitude_bias_rad: NonNegative = 0.0
+    drop_probability: Annotated[float, Meta(ge=0.0, lt=1.0)] = 0.0
 
 
 @dataclass(frozen=True)
@@ -596,14 +597,14 @@ class ForceTorqueSpec:
     the readings over the tare_window_s before it is subtracted from then on (tare_at_s < 0:
     never tared)."""
 
-    force_noise_n: float = 0.0
-    torque_noise_nm: float = 0.0
-    force_offset_n: float = 0.0
-    torque_offset_nm: float = 0.0
-    force_drift_n_per_sqrt_s: float = 0.0
-    torque_drift_nm_per_sqrt_s: float = 0.0
+    force_noise_n: NonNegative = 0.0
+    torque_noise_nm: NonNegative = 0.0
+    force_offset_n: NonNegative = 0.0
+    torque_offset_nm: NonNegative = 0.0
+    force_drift_n_per_sqrt_s: NonNegative = 0.0
+    torque_drift_nm_per_sqrt_s: NonNegative = 0.0
     tare_at_s: float = -1.0
-    tare_window_s: float = 0.2
+    tare_window_s: Annotated[float, Meta(gt=0.0, description="[s]")] = 0.2
 
 
 @dataclass(frozen=True)
@@ -612,8 +613,8 @@ class EncoderSpec:
     counts per revolution (0: exact), velocity as the servo reports it, quantized to
     velocity_quantum_radps (0: exact)."""
 
-    counts_per_rev: int = 0
-    velocity_quantum_radps: float = 0.0
+    counts_per_rev: Annotated[int, Meta(ge=0)] = 0
+    velocity_quantum_radps: NonNegative = 0.0
 
 
 @dataclass(frozen=True)
@@ -623,9 +624,9 @@ class JointEffortSpec:
     first-order lag of lag_s [s] behind the applied torque, white noise of noise_nm [N m] per
     sample and quantization to resolution_nm [N m] (one current unit; 0: exact)."""
 
-    lag_s: float = 0.0
-    noise_nm: float = 0.0
-    resolution_nm: float = 0.0
+    lag_s: NonNegative = 0.0
+    noise_nm: NonNegative = 0.0
+    resolution_nm: NonNegative = 0.0
 
 
 @dataclass(frozen=True)
@@ -635,10 +636,10 @@ class EstimatorSpec:
     body-rate output (PX4's IMU_GYRO_CUTOFF, Hz; 0: none), and its history length
     (physics steps; at least the motion capture's latency)."""
 
-    attitude_bandwidth_radps: float = 4.0
-    position_bandwidth_radps: float = 8.0
-    gyro_cutoff_hz: float = 0.0
-    history_steps: int = 64
+    attitude_bandwidth_radps: Annotated[float, Meta(gt=0.0, description="[rad/s]")] = 4.0
+    position_bandwidth_radps: Annotated[float, Meta(gt=0.0, description="[rad/s]")] = 8.0
+    gyro_cutoff_hz: Annotated[float, Meta(ge=0.0, description="0: none [Hz]")] = 0.0
+    history_steps: Annotated[int, Meta(ge=1, description="[physics steps]")] = 64
 
 
 @dataclass(frozen=True)
@@ -649,7 +650,7 @@ class DevicesSpec:
     as a stress option). scale multiplies every noise, random walk, bias, offset and drift."""
 
     enabled: bool = False
-    scale: float = 1.0
+    scale: NonNegative = 1.0
     imu: ImuSpec = ImuSpec()
     mocap: MocapSpec = MocapSpec()
     ft: ForceTorqueSpec = ForceTorqueSpec()
@@ -669,27 +670,7 @@ def devices_from_table(table: dict, where: str) -> DevicesSpec:
         if not isinstance(sub, dict):
             raise ConfigError(f"{where}: [devices.{name}] must be a table")
         kw[name] = cls(**_build(cls, sub, f"{where}: [devices.{name}]"))
-    spec = DevicesSpec(**kw)
-    for part in parts:
-        sub = getattr(spec, part)
-        for f in dataclasses.fields(sub):
-            v = getattr(sub, f.name)
-            if f.name != "tare_at_s" and v < 0:
-                raise ConfigError(f"{where}: [devices.{part}].{f.name}: must be >= 0, got {v!r}")
-    m, e = spec.mocap, spec.estimator
-    if spec.scale < 0.0:
-        raise ConfigError(f"{where}: [devices].scale: must be >= 0, got {spec.scale!r}")
-    if not 1.0 <= m.rate_hz <= 1000.0:
-        raise ConfigError(f"{where}: [devices.mocap].rate_hz: must be in 1..1000 Hz, got {m.rate_hz!r}")
-    if m.drop_probability >= 1.0:
-        raise ConfigError(f"{where}: [devices.mocap].drop_probability: must be < 1, got {m.drop_probability!r}")
-    if e.attitude_bandwidth_radps <= 0.0 or e.position_bandwidth_radps <= 0.0:
-        raise ConfigError(f"{where}: [devices.estimator]: bandwidths must be > 0")
-    if e.history_steps < 1:
-        raise ConfigError(f"{where}: [devices.estimator].history_steps: must be >= 1, got {e.history_steps!r}")
-    if spec.ft.tare_window_s <= 0.0:
-        raise ConfigError(f"{where}: [devices.ft].tare_window_s: must be > 0, got {spec.ft.tare_window_s!r}")
-    return spec
+    return DevicesSpec(**kw)
 
 
 @dataclass(frozen=True)
@@ -708,9 +689,9 @@ class SuccessCriteria:
     """
 
     min_lift_m: float = 0.2
-    max_slip_m: float = 0.002
-    max_saturated_fraction: float = 0.05
-    max_distance_m: float = 3.0
+    max_slip_m: Annotated[float, Meta(ge=0.0, description="[m]")] = 0.002
+    max_saturated_fraction: Probability = 0.05
+    max_distance_m: Annotated[float, Meta(ge=0.0, description="[m]")] = 3.0
 
 
 @dataclass(frozen=True)
@@ -1408,8 +1389,6 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     ams = tuple(ams)
     seen = set()
     for i, a in enumerate(ams):
-        if not 1 < a.sysid < 256:
-            raise ConfigError(f"{where}: [[am]] #{i + 1}.sysid: must be in 2..255 (1 is the simulator), got {a.sysid}")
         if a.sysid in seen:
             raise ConfigError(f"{where}: [[am]] #{i + 1}.sysid: duplicate sysid {a.sysid}")
         seen.add(a.sysid)
@@ -1419,20 +1398,11 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     key_path = link.key_path(path)
     if key_path is not None and not key_path.is_file():
         raise ConfigError(f"{where}: [link].key_file: file not found: {key_path}")
-    for i, a in enumerate(ams):
-        if not abs(a.misalignment_deg) < 45.0:
-            raise ConfigError(f"{where}: [[am]] #{i + 1}.misalignment_deg: must be within +/-45, got {a.misalignment_deg}")
     sensors = SensorSpec(**_build(SensorSpec, _table(data, "sensors", where), f"{where}: [sensors]"))
-    for f in dataclasses.fields(SensorSpec):
-        if getattr(sensors, f.name) < 0.0:
-            raise ConfigError(f"{where}: [sensors].{f.name}: must be >= 0, got {getattr(sensors, f.name)!r}")
     devices = devices_from_table(_table(data, "devices", where), where)
     if devices.enabled and not sensors.exact:
         raise ConfigError(f"{where}: [devices].enabled: the device models replace [sensors]; use one or the other")
     success = SuccessCriteria(**_build(SuccessCriteria, _table(data, "success", where), f"{where}: [success]"))
-    for f in dataclasses.fields(SuccessCriteria):
-        if f.name != "min_lift_m" and not getattr(success, f.name) >= 0.0:
-            raise ConfigError(f"{where}: [success].{f.name}: must be >= 0, got {getattr(success, f.name)!r}")
     spec = ScenarioSpec(vehicle=vehicle, object=obj, mission=mission, ams=ams, path=path, link=link,
                         sensors=sensors, devices=devices, success=success, **kw)
     _check_name(spec.name, f"{where}: [scenario].name")
@@ -1617,16 +1587,7 @@ _VEHICLE_OVERRIDES = ("options", "safety", "pad", "flight_controller", "rotors")
 
 
 def _link_spec(table: dict, where: str) -> LinkSpec:
-    link = LinkSpec(**_build(LinkSpec, table, where))
-    for key in ("loss", "reorder", "duplicate"):
-        if not 0.0 <= getattr(link, key) <= 1.0:
-            raise ConfigError(f"{where}.{key}: must be a probability in [0, 1], got {getattr(link, key)!r}")
-    for key in ("delay_s", "jitter_s"):
-        if getattr(link, key) < 0.0:
-            raise ConfigError(f"{where}.{key}: must be >= 0, got {getattr(link, key)!r}")
-    if link.joints not in LINK_JOINT_PATHS:
-        raise ConfigError(f"{where}.joints: must be one of {', '.join(map(repr, LINK_JOINT_PATHS))}, got {link.joints!r}")
-    return link
+    return LinkSpec(**_build(LinkSpec, table, where))
 
 
 def scenario_id(spec: ScenarioSpec) -> int:
