@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import json
 import re
 import sys
+import typing
 
 from . import config
 
@@ -41,7 +43,9 @@ A scenario is a TOML file in `configs/scenarios/` (list them with `am-run --list
 vehicle file and sets the object, the mission, the team and the world. Every key below is
 optional unless its default says "required"; an unknown key or table is refused with exit 2,
 naming the file and the key, and so is a value outside its range (the loader,
-`amcore/config.py`, gives each range's reason).
+`amcore/config.py`, gives each range's reason). The same declarations make the JSON Schema
+`configs/schema/scenario.schema.json`, which an editor uses to check a file as it is typed
+(see [the vehicle TOML reference](../vehicle_toml.md#checking-a-file-in-the-editor)).
 
 Besides these tables a scenario may set `[options]`, `[safety]`, `[pad]`,
 `[flight_controller]` and `[rotors]`: each is merged key by key onto the vehicle file's table
@@ -118,8 +122,18 @@ def _comments(cls) -> dict[str, str]:
 
 
 def _type(tp) -> str:
-    text = tp if isinstance(tp, str) else getattr(tp, "__name__", str(tp))
-    return text.replace("typing.", "").replace("|", "or")
+    """A declared type in words: its base type, its enum's values, its range ("float >= 0")."""
+    base, meta = config._meta_at(tp, None)
+    if typing.get_origin(base) is typing.Literal:
+        return " or ".join(json.dumps(v) for v in typing.get_args(base))
+    if typing.get_origin(base) is tuple:
+        args = typing.get_args(base)
+        inner = _type(args[0])
+        return f"list of {inner}" if len(args) == 2 and args[1] is Ellipsis else f"{len(args)} x {inner}"
+    text = getattr(base, "__name__", str(base)).replace("typing.", "").replace("|", "or")
+    if meta is not None and (meta.ge, meta.gt, meta.le, meta.lt) != (None,) * 4:
+        text += ", " + config._bounds(meta, base is int).removeprefix("must be ")
+    return text
 
 
 def _default(f: dataclasses.Field) -> str:
@@ -144,7 +158,7 @@ def _default(f: dataclasses.Field) -> str:
 
 def table_rows(cls, skip=()) -> list[tuple[str, str, str, str]]:
     """(key, type, default, description) of every plain key of `cls`'s table."""
-    hints = {f.name: f.type for f in dataclasses.fields(cls)}
+    hints = config._hints(cls)
     notes = _comments(cls)
     return [(f.name, _type(hints[f.name]), _default(f), notes.get(f.name) or NOTES.get((cls, f.name), ""))
             for f in dataclasses.fields(cls) if f.name not in skip]
