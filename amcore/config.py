@@ -377,19 +377,19 @@ class VehicleParams:
 # ----------------------------------------------------------------------------- scenario
 @dataclass(frozen=True)
 class ObjectSpec:
-    shape: str  # "box" or "cylinder"
-    mass_kg: float
+    shape: Literal["box", "cylinder"]
+    mass_kg: Annotated[float, Meta(ge=OBJECT_MASS_RANGE_KG[0], le=OBJECT_MASS_RANGE_KG[1], description="the object's true mass [kg]")]
     position_m: tuple[float, float, float]  # centre at rest, world frame
     size_m: tuple[float, float, float] = (0.2, 0.2, 0.2)  # box edge lengths
     radius_m: float = 0.0  # cylinder
     height_m: float = 0.0  # cylinder
-    lateral_friction: float = 1.0  # the object's own coefficient (Bullet multiplies a pair's two)
+    lateral_friction: Positive = 1.0  # the object's own coefficient (Bullet multiplies a pair's two)
     # Coulomb coefficient of the pad-object pair itself. Bullet combines two bodies'
     # coefficients by multiplication, so the simulator sets the pad's own coefficient to
     # pad_friction / lateral_friction. 0: unset, the pad takes lateral_friction (the pair
     # then has lateral_friction ** 2).
-    pad_friction: float = 0.0
-    yaw_deg: float = 0.0  # the object's turn about the world's z axis at rest (a box's faces turn with it)
+    pad_friction: NonNegative = 0.0
+    yaw_deg: Annotated[float, Meta(ge=-360.0, le=360.0, description="[deg]")] = 0.0  # the object's turn about the world's z axis at rest (a box's faces turn with it)
 
     @property
     def pad_object_friction(self) -> float:
@@ -412,26 +412,26 @@ class MissionSpec:
     approach_end_s: float = 5.0
     grasp_end_s: float = 10.0
     hover_end_s: float = 20.0
-    approach_move_s: float = 4.0  # approach motion takes this long, then holds
-    grasp_move_s: float = 2.0
-    lift_move_s: float = 4.0
-    standoff_m: float = 0.25  # start: end-effector this far outside the surface
-    start_height_m: float = 0.2  # start: end-effector this far above grasp height
-    pre_gap_m: float = 0.02  # end of approach: pad this far from the surface
-    squeeze_m: float = 0.04  # grasp: y_x,d this deep inside the object
+    approach_move_s: Annotated[float, Meta(gt=0.0, description="[s]")] = 4.0  # approach motion takes this long, then holds
+    grasp_move_s: Annotated[float, Meta(gt=0.0, description="[s]")] = 2.0
+    lift_move_s: Annotated[float, Meta(gt=0.0, description="[s]")] = 4.0
+    standoff_m: Annotated[float, Meta(ge=0.0, le=MISSION_DISTANCE_MAX_M, description="[m]")] = 0.25  # start: end-effector this far outside the surface
+    start_height_m: Annotated[float, Meta(ge=0.0, le=MISSION_DISTANCE_MAX_M, description="[m]")] = 0.2  # start: end-effector this far above grasp height
+    pre_gap_m: Annotated[float, Meta(ge=0.0, le=MISSION_DISTANCE_MAX_M, description="[m]")] = 0.02  # end of approach: pad this far from the surface
+    squeeze_m: NonNegative = 0.04  # grasp: y_x,d this deep inside the object
     # Squeeze sizing (off: the fixed squeeze_m). On, each AM squeezes with the normal force
     # that holds its share of the planned object ([object].mass_kg) at the friction the
     # mission assumes, times a margin, within what its rotors can push (amcore.mission.squeeze_force):
     #     N = friction_margin * m_obj g / (n_AM * friction_assumed),  never below K_y,x squeeze_m
     squeeze_sizing: bool = False
-    friction_assumed: float = 0.5  # the lowest pad-object friction coefficient planned for
-    friction_margin: float = 1.5
-    thrust_fraction_max: float = 0.8  # of the rotors' total maximum, for weight, load share and squeeze
+    friction_assumed: Positive = 0.5  # the lowest pad-object friction coefficient planned for
+    friction_margin: Positive = 1.5
+    thrust_fraction_max: Annotated[float, Meta(gt=0.0, le=1.0)] = 0.8  # of the rotors' total maximum, for weight, load share and squeeze
     # the most normal force the AM may push with [N] (inf: only thrust_fraction_max bounds it): the
     # squeeze's and the load's moment on the base must leave its pitch authority room to fly
-    squeeze_max_n: float = math.inf
-    lift_m: float = 0.3
-    join_blend_s: float = 3.0  # a companion started mid-run (a restart) blends into the references over this
+    squeeze_max_n: Positive = math.inf
+    lift_m: Annotated[float, Meta(gt=0.0, le=MISSION_DISTANCE_MAX_M, description="[m]")] = 0.3
+    join_blend_s: Annotated[float, Meta(gt=0.0, description="[s]")] = 3.0  # a companion started mid-run (a restart) blends into the references over this
     # a companion started mid-run whose wrist sensor reads a push resumes it (amcore.mission.join_blend);
     # false: it starts from zero squeeze and, restarted in the hover, lets the object fall
     resume_contact_force: bool = True
@@ -441,14 +441,14 @@ class MissionSpec:
     # grasp_move_s. A pad pushing at an angle delta puts N sin(delta) sideways on the pad,
     # ~0.3 m ahead of the CoM: at 12 N and 5 deg that is 0.3 N m of yaw, this vehicle's whole
     # yaw authority (docs/robust_grasp.md).
-    touch_force_n: float = 0.0
-    touch_hold_s: float = 0.0
+    touch_force_n: NonNegative = 0.0
+    touch_hold_s: NonNegative = 0.0
     # What the team knows of the object's mass (beyond the paper): the planned mass (0: the object's
     # [object].mass_kg, exactly) and how well it is known: the planned mass is within +/-mass_tolerance
     # of the true one, so the true mass is at most planned_mass_kg / (1 - mass_tolerance), the mass the
     # squeeze sizing and the envelope check plan for (`design_mass_kg`).
     planned_mass_kg: float = 0.0
-    mass_tolerance: float = 0.0
+    mass_tolerance: Annotated[float, Meta(ge=0.0, le=MASS_TOLERANCE_MAX, description="a fraction of the planned mass")] = 0.0
     # Pre-flight envelope check (amcore.preflight): a team asked to hold what it cannot (the squeeze the
     # design mass needs at friction_assumed with friction_margin, against what each AM pushes with its
     # margins kept) refuses before anything flies: exit 2, naming the limit and the smallest team.
@@ -458,7 +458,7 @@ class MissionSpec:
     # the object before flight (simulator.object_mocap: [devices.mocap]'s noise and biases when
     # [devices] is on, exact otherwise), one measurement shared by the team. With "mocap", or a box
     # turned by a yaw, each AM approaches the face whose normal is nearest its azimuth.
-    object_pose: str = "config"
+    object_pose: ObjectPose = "config"
 
 
 LinkJoints = Literal["servo_bus", "link"]  # [link].joints
@@ -905,7 +905,8 @@ OBJECT_SIZE_RANGE_M = (0.05, 3.0)
 OBJECT_XY_MAX_M = 10.0
 OBJECT_BOTTOM_MAX_M = 5.0
 MISSION_DISTANCE_MAX_M = 2.0
-OBJECT_POSE_SOURCES = ("config", "mocap")  # [mission].object_pose
+ObjectPose = Literal["config", "mocap"]  # [mission].object_pose
+OBJECT_POSE_SOURCES = typing.get_args(ObjectPose)
 MASS_TOLERANCE_MAX = 0.5  # a mass known to worse than +/-50 % is not a plan: weigh the object
 
 
@@ -1313,13 +1314,6 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     if "object" not in data:
         raise ConfigError(f"{where}: missing table [object]")
     obj = ObjectSpec(**_build(ObjectSpec, data["object"], f"{where}: [object]"))
-    if obj.shape not in ("box", "cylinder"):
-        raise ConfigError(f"{where}: [object].shape: expected 'box' or 'cylinder', got '{obj.shape}'")
-    _in_range(f"{where}: [object].mass_kg", obj.mass_kg, *OBJECT_MASS_RANGE_KG, " kg")
-    _in_range(f"{where}: [object].yaw_deg", obj.yaw_deg, -360.0, 360.0, " deg")
-    _positive(f"{where}: [object].lateral_friction", obj.lateral_friction)
-    if obj.pad_friction < 0.0:
-        raise ConfigError(f"{where}: [object].pad_friction: must be >= 0 (0: unset), got {obj.pad_friction!r}")
     if obj.shape == "cylinder":
         _in_range(f"{where}: [object].radius_m", obj.radius_m, *OBJECT_SIZE_RANGE_M, " m")
         _in_range(f"{where}: [object].height_m", obj.height_m, *OBJECT_SIZE_RANGE_M, " m")
@@ -1338,24 +1332,9 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     mission = MissionSpec(**_build(MissionSpec, data.get("mission", {}), f"{where}: [mission]"))
     if not (0 < mission.approach_end_s < mission.grasp_end_s < mission.hover_end_s):
         raise ConfigError(f"{where}: [mission]: need 0 < approach_end_s < grasp_end_s < hover_end_s")
-    for key in ("friction_assumed", "friction_margin", "thrust_fraction_max", "squeeze_max_n", "approach_move_s",
-                "grasp_move_s", "lift_move_s", "lift_m"):
-        _positive(f"{where}: [mission].{key}", getattr(mission, key))
-    for key in ("standoff_m", "start_height_m", "pre_gap_m", "squeeze_m", "touch_force_n", "touch_hold_s"):
-        if not getattr(mission, key) >= 0.0:  # (values are finite: _check_type)
-            raise ConfigError(f"{where}: [mission].{key}: must be >= 0, got {getattr(mission, key)!r}")
-    for key in ("standoff_m", "start_height_m", "pre_gap_m", "lift_m"):
-        _in_range(f"{where}: [mission].{key}", getattr(mission, key), 0.0, MISSION_DISTANCE_MAX_M, " m")
-    if mission.thrust_fraction_max > 1.0:
-        raise ConfigError(f"{where}: [mission].thrust_fraction_max: must be <= 1, got {mission.thrust_fraction_max}")
-    if mission.object_pose not in OBJECT_POSE_SOURCES:
-        raise ConfigError(f"{where}: [mission].object_pose: expected one of {', '.join(OBJECT_POSE_SOURCES)}, "
-                          f"got {mission.object_pose!r}")
     if mission.planned_mass_kg != 0.0:
         _in_range(f"{where}: [mission].planned_mass_kg", mission.planned_mass_kg, *OBJECT_MASS_RANGE_KG,
                   " kg (0: the object's mass_kg)")
-    _in_range(f"{where}: [mission].mass_tolerance", mission.mass_tolerance, 0.0, MASS_TOLERANCE_MAX,
-              " (a fraction of the planned mass)")
     if (mission.touch_force_n > 0.0) != (mission.touch_hold_s > 0.0):
         raise ConfigError(f"{where}: [mission]: touch_force_n and touch_hold_s go together (both 0: off)")
     if mission.touch_hold_s > 0.0 and (mission.approach_end_s + 2.0 * mission.grasp_move_s + mission.touch_hold_s
@@ -1363,8 +1342,6 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
         raise ConfigError(f"{where}: [mission]: touch, hold and squeeze (2 grasp_move_s + touch_hold_s = "
                           f"{2.0 * mission.grasp_move_s + mission.touch_hold_s:g} s) must fit in the grasp phase "
                           f"({mission.grasp_end_s - mission.approach_end_s:g} s)")
-    if not mission.join_blend_s > 0:
-        raise ConfigError(f"{where}: [mission].join_blend_s must be > 0 s, got {mission.join_blend_s}")
     am_tables = data.get("am", [])
     if not isinstance(am_tables, list) or not am_tables:
         raise ConfigError(f"{where}: needs at least one [[am]] entry")

@@ -38,7 +38,7 @@ BASE = (ROOT / "configs" / "scenarios" / "two_am_comp.toml").read_text()
     ("squeeze_m = 0.03", "squeeze_m = [0.03]", "[mission].squeeze_m: expected a number"),
     ("[object]", "[objekt]", "unknown table [objekt]"),
     ("approach_end_s = 5.0", "approach_end_s = 15.0", "approach_end_s < grasp_end_s"),
-    ("squeeze_m = 0.03", "squeeze_m = 0.03\njoin_blend_s = 0.0", "[mission].join_blend_s must be > 0"),
+    ("squeeze_m = 0.03", "squeeze_m = 0.03\njoin_blend_s = 0.0", "[mission].join_blend_s: must be > 0"),
     ("mass_kg = 1.0", "mass_kg = 1.0\npad_friction = -0.5", "[object].pad_friction: must be >= 0"),
     ("[mission]", "[success]\nmin_slip = 1.0\n[mission]", "[success]: unknown key 'min_slip'"),
     ("[mission]", "[success]\nmax_slip_m = -1.0\n[mission]", "[success].max_slip_m: must be >= 0"),
