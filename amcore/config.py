@@ -702,17 +702,17 @@ class ScenarioSpec:
     mission: MissionSpec
     ams: tuple[AmSpec, ...]
     duration_s: float = 20.0
-    rate_hz: float = 1000.0  # physics: the world's step, the devices and the emulated autopilot
+    rate_hz: Annotated[float, Meta(ge=RATE_HZ_RANGE[0], le=RATE_HZ_RANGE[1], description="[Hz]")] = 1000.0  # physics: the world's step, the devices and the emulated autopilot
     # PyBullet's substeps per physics step (PHYSICS_SUBSTEPS): its contacts and joints integrate at
     # rate_hz * physics_substeps, with each step's forces held across its substeps; 1: none
-    physics_substeps: int = 1
+    physics_substeps: PhysicsSubsteps = 1
     # PyBullet's constraint solver (numSolverIterations): at most this many sweeps a step, fewer
     # once its residual is below 1e-7 (SOLVER_ITERATIONS_RANGE); 50 is PyBullet's own default
-    solver_iterations: int = 50
+    solver_iterations: Annotated[int, Meta(ge=SOLVER_ITERATIONS_RANGE[0], le=SOLVER_ITERATIONS_RANGE[1])] = 50
     # the companions' rate; the lockstep exchanges every rate_hz / control_rate_hz physics
     # steps (a whole number). None: every physics step
-    control_rate_hz: float | None = None
-    seed: int = 0
+    control_rate_hz: Annotated[float, Meta(gt=0.0, description="[Hz]")] | None = None
+    seed: Annotated[int, Meta(ge=0, le=SEED_MAX)] = 0
     link: LinkSpec = LinkSpec()
     sensors: SensorSpec = SensorSpec()
     devices: DevicesSpec = DevicesSpec()
@@ -863,12 +863,6 @@ def _read_toml(path: Path) -> dict:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
 
 
-def _positive(where: str, values) -> None:
-    for i, v in enumerate(values if isinstance(values, tuple) else (values,)):
-        if not v > 0.0:
-            raise ConfigError(f"{where}: must be > 0, got {v!r}" + (f" (entry {i})" if isinstance(values, tuple) else ""))
-
-
 def _in_range(where: str, value, lo: float, hi: float, unit: str = "") -> None:
     """lo <= value <= hi (both finite)."""
     if not lo <= value <= hi:
@@ -882,7 +876,8 @@ RATE_HZ_RANGE = (100.0, 100_000.0)
 # accumulator), and tests/simulator/test_world_sensors.py checks its contact forces. 4 is left
 # out: at 1 kHz (0.25 ms contact steps) a friction-held object read 6.7 N carried for 4 N, as a
 # world stepped at 4 kHz in one step does (docs/benchmarks.md, "A lower physics rate")
-PHYSICS_SUBSTEPS = (1, 2)
+PhysicsSubsteps = Literal[1, 2]
+PHYSICS_SUBSTEPS = typing.get_args(PhysicsSubsteps)
 # [scenario].solver_iterations. A squeezed object's contacts never reach PyBullet's residual of
 # 1e-7, so the solver sweeps the most it may every step of a grasp. Against a 1000-sweep solve
 # of the same step, 25 sweeps read the contact forces as closely as 50 do (within ~0.1 N); 10 are
@@ -1383,23 +1378,11 @@ def scenario_from_dict(data: dict, path: Path) -> ScenarioSpec:
     spec = ScenarioSpec(vehicle=vehicle, object=obj, mission=mission, ams=ams, path=path, link=link,
                         sensors=sensors, devices=devices, success=success, **kw)
     _check_name(spec.name, f"{where}: [scenario].name")
-    if not 0 <= spec.seed <= SEED_MAX:
-        raise ConfigError(f"{where}: [scenario].seed: must be in 0..{SEED_MAX} (uint32), got {spec.seed}")
-    _in_range(f"{where}: [scenario].rate_hz", spec.rate_hz, *RATE_HZ_RANGE, " Hz")
-    if spec.physics_substeps not in PHYSICS_SUBSTEPS:
-        raise ConfigError(f"{where}: [scenario].physics_substeps: must be one of "
-                          f"{', '.join(map(str, PHYSICS_SUBSTEPS))}, got {spec.physics_substeps!r}")
     if spec.rate_hz * spec.physics_substeps > RATE_HZ_RANGE[1]:
         raise ConfigError(f"{where}: [scenario].physics_substeps: rate_hz x physics_substeps = "
                           f"{spec.rate_hz * spec.physics_substeps:g} Hz, above {RATE_HZ_RANGE[1]:g} Hz")
-    lo, hi = SOLVER_ITERATIONS_RANGE
-    if not lo <= spec.solver_iterations <= hi:
-        raise ConfigError(f"{where}: [scenario].solver_iterations: must be in {lo}..{hi}, got {spec.solver_iterations!r}")
-    if spec.control_rate_hz is not None:
-        c = _check_type(spec.control_rate_hz, float, f"{where}: [scenario].control_rate_hz")
-        _positive(f"{where}: [scenario].control_rate_hz", c)
-        spec = dataclasses.replace(spec, control_rate_hz=c)
-        _check_divides(spec.rate_hz, c, f"{where}: [scenario].control_rate_hz")
+    if spec.control_rate_hz is not None:  # a whole number of physics steps per control step
+        _check_divides(spec.rate_hz, spec.control_rate_hz, f"{where}: [scenario].control_rate_hz")
     _check_divides(spec.rate_hz, vehicle.flight_controller.rate_hz, f"{where}: [flight_controller].rate_hz")
     if vehicle.flight_controller.actuation_delay_steps > spec.control_every:
         n = spec.control_every
