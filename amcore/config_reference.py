@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import json
 import re
 import sys
 import typing
 
 from . import config
-from .declare import enum_of
 
 # (table as written in a scenario, its dataclass, keys the table does not take as plain keys)
 SCENARIO_TABLES = (
@@ -43,19 +43,15 @@ A scenario is a TOML file in `configs/scenarios/` (list them with `am-run --list
 vehicle file and sets the object, the mission, the team and the world. Every key below is
 optional unless its default says "required"; an unknown key or table is refused with exit 2,
 naming the file and the key, and so is a value outside its range (the loader,
-`amcore/config.py`, gives each range's reason).
+`amcore/config.py`, gives each range's reason). The same declarations make the JSON Schema
+`configs/schema/scenario.schema.json`, which an editor uses to check a file as it is typed
+(see [the vehicle TOML reference](../vehicle_toml.md#checking-a-file-in-the-editor)).
 
 Besides these tables a scenario may set `[options]`, `[safety]`, `[pad]`,
 `[flight_controller]` and `[rotors]`: each is merged key by key onto the vehicle file's table
 of that name, so a scenario can turn a controller option on without copying the vehicle. Their
 keys are the vehicle's: see [the vehicle TOML reference](../vehicle_toml.md). A `[randomize]`
 table says what `am-trials` varies ([campaigns](../guides/campaigns.md)).
-
-Editors check a scenario as it is typed against `configs/schema/scenario.schema.json`, a JSON
-Schema generated from the same declarations as this page (`python -m amcore.config_schema`):
-each shipped file starts with `#:schema ../schema/scenario.schema.json`, the line Taplo and
-VS Code's Even Better TOML read. Since a scenario may be an overlay, the schema requires no key;
-it refuses unknown tables and keys, wrong types and values outside a key's listed values.
 
 [scenario] also takes `name` (required, the run's name) and `vehicle` (required, the vehicle
 TOML's path relative to the scenario's folder). [[am]] is an array: one entry per aerial
@@ -126,8 +122,18 @@ def _comments(cls) -> dict[str, str]:
 
 
 def _type(tp) -> str:
-    text = tp if isinstance(tp, str) else getattr(tp, "__name__", str(tp))
-    return text.replace("typing.", "").replace("|", "or")
+    """A declared type in words: its base type, its enum's values, its range ("float >= 0")."""
+    base, meta = config._meta_at(tp, None)
+    if typing.get_origin(base) is typing.Literal:
+        return " or ".join(json.dumps(v) for v in typing.get_args(base))
+    if typing.get_origin(base) is tuple:
+        args = typing.get_args(base)
+        inner = _type(args[0])
+        return f"list of {inner}" if len(args) == 2 and args[1] is Ellipsis else f"{len(args)} x {inner}"
+    text = getattr(base, "__name__", str(base)).replace("typing.", "").replace("|", "or")
+    if meta is not None and (meta.ge, meta.gt, meta.le, meta.lt) != (None,) * 4:
+        text += ", " + config._bounds(meta, base is int).removeprefix("must be ")
+    return text
 
 
 def _default(f: dataclasses.Field) -> str:
@@ -150,26 +156,9 @@ def _default(f: dataclasses.Field) -> str:
     return str(v)
 
 
-def _declared(hint, written: str) -> str:
-    """A field's type as the reference shows it: its values, its bounds, or as written."""
-    values = enum_of(hint)
-    if values:
-        return " or ".join(f"`{v}`" for v in values)
-    if typing.get_origin(hint) is typing.Annotated:
-        base, *metas = typing.get_args(hint)
-        for m in metas:
-            if getattr(m, "ge", None) is not None and getattr(m, "le", None) is not None:
-                return f"{base.__name__} in [{m.ge:g}, {m.le:g}]"
-            if getattr(m, "ge", None) is not None:
-                return f"{base.__name__} >= {m.ge:g}"
-    return written
-
-
 def table_rows(cls, skip=()) -> list[tuple[str, str, str, str]]:
-    """(key, type, default, description) of every plain key of `cls`'s table; a key declared
-    `one_of(...)` (amcore.declare) shows its values."""
-    declared = typing.get_type_hints(cls, include_extras=True)
-    hints = {f.name: _declared(declared[f.name], f.type) for f in dataclasses.fields(cls)}
+    """(key, type, default, description) of every plain key of `cls`'s table."""
+    hints = config._hints(cls)
     notes = _comments(cls)
     return [(f.name, _type(hints[f.name]), _default(f), notes.get(f.name) or NOTES.get((cls, f.name), ""))
             for f in dataclasses.fields(cls) if f.name not in skip]

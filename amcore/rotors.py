@@ -20,10 +20,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
-from .declare import one_of
 
 ROTOR_SPINS = ("ccw", "cw")  # seen from above the rotor, looking down its thrust axis
 ROTOR_COUNT_RANGE = (4, 16)  # PX4's CA_ROTOR_COUNT allows up to 12; 16 leaves room for coaxial octos
@@ -46,7 +46,7 @@ class Rotor:
 
     position_m: tuple[float, float, float]
     axis: tuple[float, float, float]
-    spin: one_of(ROTOR_SPINS)
+    spin: Literal["ccw", "cw"]  # ROTOR_SPINS
     moment_ratio_m: float
     thrust_min_n: float | None = None
     thrust_max_n: float | None = None
