@@ -189,7 +189,7 @@ def test_the_suite_estimate_at_rest_stays_near_the_truth():
 @pytest.mark.parametrize("table, words", [
     ({"imu": {"gyroscope_noise_density": -1.0}}, "[devices.imu].gyroscope_noise_density: must be >= 0"),
     ({"mocap": {"rate_hz": 0.5}}, "[devices.mocap].rate_hz"),
-    ({"mocap": {"drop_probability": 1.0}}, "drop_probability: must be < 1"),
+    ({"mocap": {"drop_probability": 1.0}}, "drop_probability: must be in [0, 1), got 1.0"),
     ({"imu": {"gyro_noise": 1.0}}, "unknown key 'gyro_noise'"),
     ({"estimator": {"history_steps": 0}}, "history_steps"),
 ])
