@@ -101,6 +101,11 @@ class Autopilot:
         return str(e) if e is not None else self.hs.yield_reason
 
     @property
+    def armed(self) -> bool | None:
+        """Whether the autopilot's last HEARTBEAT showed it armed (None before any)."""
+        return self.hs.last_armed
+
+    @property
     def engaged_fc_us(self) -> float | None:
         return self.hs.engaged_fc_us
 
@@ -145,4 +150,6 @@ class Autopilot:
                                        self.type_mask)
 
     def stream_idle(self, att) -> None:
-        self.send_setpoint(att)
+        """The priming stream's target (None: nothing to send yet)."""
+        if att is not None:
+            self.send_setpoint(att)

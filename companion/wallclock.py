@@ -43,6 +43,11 @@ from .looptimer import DeadlineTimer, LoopStats
 from .sampling import BaseEstimate, StalenessLimits, frame_values, predict_base
 
 
+# the handshake's states in which an armed vehicle is flown by the controller (`_flies`)
+_TAKEOVER_STATES = ("priming", "request_offboard", "arming", "wait_engaged")
+# PX4's COM_OF_LOSS_T default [s] (src/modules/commander/commander_params.c): the offboard
+# stream's age at which Commander fails over (offboardCheck.cpp)
+COM_OF_LOSS_T_S = 1.0
 STATS_EVERY_S = 2.0  # the loop's measurements to telemetry this often (`WallClockLoop`'s on_stats)
 
 
@@ -61,7 +66,8 @@ class WallClockLoop:
                  limits: StalenessLimits = StalenessLimits(), predict: bool = True,
                  on_step: Callable | None = None, log: Callable[[str], None] = lambda _m: None,
                  link_timeout_s: float = 5.0, mission_start_s: float | None = None,
-                 on_stats: Callable[[float, dict], None] | None = None, stats_every_s: float = STATS_EVERY_S) -> None:
+                 on_stats: Callable[[float, dict], None] | None = None, stats_every_s: float = STATS_EVERY_S,
+                 offboard_loss_s: float = COM_OF_LOSS_T_S) -> None:
         """pilot: companion.pilot.Pilot. autopilot: companion.autopilot.Autopilot (the PX4 link
         and its handshake). arm: the servo bus client (companion.devices.arm). wrench: the F/T
         client (companion.devices.netft), or None (no wrist sensor: a zero wrench).
@@ -73,7 +79,9 @@ class WallClockLoop:
         team's clock counts whenever this companion engages: engaged before it, the take-off blends
         into it; engaged after it (a companion restarted, or started late), the companion joins
         the mission in progress with the restart's blend (companion.pilot). None: the engage +
-        TAKEOFF_S."""
+        TAKEOFF_S. offboard_loss_s: the autopilot's offboard loss timeout (PX4's COM_OF_LOSS_T);
+        engaged, a loop that has sent nothing for longer (its process stalled) yields without
+        sending again: the autopilot has failed over, and a late setpoint would undo that."""
         self.pilot, self.ap, self.arm, self.wrench = pilot, autopilot, arm, wrench
         self.clock, self.limits, self.predict, self.on_step, self.log = clock, limits, predict, on_step, log
         self.link_timeout_s = link_timeout_s
@@ -87,9 +95,13 @@ class WallClockLoop:
         self.steps = 0
         self.held = 0
         self._last_sp = None
+        self._last_sent_ns: int | None = None  # the last setpoint sent while engaged
+        self.offboard_loss_s = offboard_loss_s
         self._rate = 1.0  # the autopilot's clock rate against ours
         self._takeoff_started = False
         self._psi = pilot.mission.psi
+        # SET_ATTITUDE_TARGET's thrust that carries the whole AM (m g over thrust 1's force)
+        self._hover_thrust = min(1.0, pilot.model.mass_kg * spec.vehicle.gravity_mps2 / pilot.thrust_max_n)
         self.arm_errors = 0
         self.on_stats, self._stats_every_ns = on_stats, round(stats_every_s * 1e9)
         self._next_stats_ns: int | None = None
@@ -166,7 +178,7 @@ class WallClockLoop:
             late = self.timer.fire()
             start = self.clock()
             self.stats.step_started(start, late)
-            if ap.state == "engaged":
+            if self._flies(ap.state):
                 self._request_joints()  # the servos answer while the link is served
             ap.poll(start)
             if self.wrench is not None:
@@ -183,15 +195,20 @@ class WallClockLoop:
             if state == "yielded":
                 return self._end(f"yielded: {ap.error or 'the vehicle left OFFBOARD'}", 0)
             fc_now = ap.fc_time_us(start)
-            if state != "engaged" or fc_now is None:
+            if not self._flies(state) or fc_now is None:
                 self._drop_joints()
                 ap.stream_idle(self._idle_target())  # PX4 accepts OFFBOARD only on a live stream
                 continue
             if self.t0_fc_us is None:
-                self.t0_fc_us = (ap.engaged_fc_us + TAKEOFF_S * 1e6 if self.mission_start_us is None
-                                 else self.mission_start_us)
-                self.log(f"OFFBOARD engaged at autopilot time {ap.engaged_fc_us * 1e-6:.3f} s; the mission "
-                         f"starts at {self.t0_fc_us * 1e-6:.3f} s")
+                engaged_us = ap.engaged_fc_us
+                self.t0_fc_us = ((fc_now if engaged_us is None else engaged_us) + TAKEOFF_S * 1e6
+                                 if self.mission_start_us is None else self.mission_start_us)
+                if engaged_us is not None:
+                    self.log(f"OFFBOARD engaged at autopilot time {engaged_us * 1e-6:.3f} s; the mission "
+                             f"starts at {self.t0_fc_us * 1e-6:.3f} s")
+                else:
+                    self.log(f"the vehicle is armed: flying it from autopilot time {fc_now * 1e-6:.3f} s, before "
+                             f"OFFBOARD is engaged; the mission starts at {self.t0_fc_us * 1e-6:.3f} s")
             t = (fc_now - self.t0_fc_us) * 1e-6
             values, att_report, effort, stale, rx = self._inputs(start, fc_now, t)
             if stale:
@@ -201,7 +218,10 @@ class WallClockLoop:
                     return self._end(f"handed back to the autopilot (HOLD): stale {', '.join(stale)}", 1)
                 self.held += 1
                 if self._last_sp is not None:
+                    if (why := self._stalled()) is not None:
+                        return self._end(why, 0)
                     ap.send_setpoint(self._last_sp.attitude)  # the autopilot keeps flying the last one
+                    self._last_sent_ns = self.clock()
                 else:
                     ap.stream_idle(self._idle_target())
                 continue
@@ -216,7 +236,10 @@ class WallClockLoop:
             frame = sensor_frame_from_wire(self.steps, t, values, self.n, 0)
             frame = with_autopilot_reports(frame, effort, att_report)
             sp, _, res = self.pilot.command(frame)
+            if (why := self._stalled()) is not None:
+                return self._end(why, 0)
             ap.send_setpoint(sp.attitude)
+            self._last_sent_ns = self.clock()
             self.arm.write_torques(sp.tau_q_nm)
             self.stats.sent(start, rx, self.clock())
             self._last_sp = sp
@@ -233,6 +256,20 @@ class WallClockLoop:
                     self._next_stats_ns += self._stats_every_ns
                     self.on_stats(t, self.stats.to_dict(self.timer))
         return self._end("stopped", 0)
+
+    def _stalled(self) -> str | None:
+        """Why nothing may be sent any more, checked just before each setpoint once engaged (the
+        process may have been stopped anywhere in the step, even after its inputs were read):
+        if the last setpoint went out longer ago than the autopilot's offboard loss timeout, in
+        the autopilot's time, PX4 has failed over, and a setpoint now would clear that failsafe
+        and give the vehicle back to this loop's stale state."""
+        if self._last_sent_ns is None:
+            return None
+        gap_s = (self.clock() - self._last_sent_ns) * 1e-9 * self._rate
+        if gap_s <= self.offboard_loss_s:
+            return None
+        return (f"yielded: no setpoint sent for {gap_s:.2f} s of the autopilot's clock, over its offboard loss "
+                f"timeout (COM_OF_LOSS_T {self.offboard_loss_s:g} s): the autopilot has failed over; not sending again")
 
     def _request_joints(self) -> None:
         """Send this step's servo sync read now (an arm client with `request`), to be collected
@@ -255,8 +292,31 @@ class WallClockLoop:
             except DeviceError:
                 pass
 
-    def _idle_target(self) -> AttitudeTarget:
-        """Level at the mission's heading, zero thrust: what the loop streams before OFFBOARD."""
+    def _flies(self, state: str) -> bool:
+        """Whether this step flies the controller: engaged; or, the vehicle armed (a restart, a
+        vehicle handed over in the air), from the priming on. An armed vehicle flies the stream
+        that primes OFFBOARD as soon as it is in OFFBOARD: at once if PX4's failover (its user
+        intention still OFFBOARD) clears on the stream's first setpoint, else when the mode
+        request is accepted; either comes before the HEARTBEAT that shows it (up to a second
+        later). So the priming stream is the controller's own, and the take-over is bumpless."""
+        return state == "engaged" or (bool(self.ap.armed) and state in _TAKEOVER_STATES)
+
+    def _idle_target(self) -> AttitudeTarget | None:
+        """What the loop streams before it flies (PX4 accepts OFFBOARD only on a live stream).
+
+        Before any HEARTBEAT, nothing (an armed vehicle would fly it). Disarmed: level at the
+        mission's heading, zero thrust (the motors are off). Armed, before the controller
+        flies (the streams still being asked for, or no time base yet): the attitude the
+        autopilot reports (ATTITUDE_QUATERNION) at the whole AM's hover thrust, which holds
+        the vehicle where zero thrust would drop it; with no report yet, nothing."""
+        if self.ap.armed is None:
+            return None
+        if self.ap.armed:
+            att = self.ap.attitude
+            if att is None:
+                return None
+            return AttitudeTarget(0, quat_wxyz=np.asarray(att.q_WB_wxyz, dtype=float), rates_rad_s=np.zeros(3),
+                                  thrust_normalized=self._hover_thrust)
         q = R_to_quat_wxyz(Rz(self._psi))
         return AttitudeTarget(0, quat_wxyz=q, rates_rad_s=np.zeros(3), thrust_normalized=0.0)
 

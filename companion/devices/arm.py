@@ -290,6 +290,7 @@ class ArmClient:
         try:
             result = self._sync_read.txPacket()
         except (serial.SerialException, OSError) as e:  # the bus went away (the simulator ended, a cable)
+            self._port.is_using = False  # the SDK leaves its transaction flag set on an exception
             raise ArmError(f"servo bus {self.ep}: sync read: {e}") from None
         if result != COMM_SUCCESS:
             self._count(result)
@@ -307,6 +308,7 @@ class ArmClient:
         try:
             result = self._sync_read.rxPacket()
         except (serial.SerialException, OSError) as e:
+            self._port.is_using = False  # as in `request`: the next transaction reports its own error
             raise ArmError(f"servo bus {self.ep}: sync read: {e}") from None
         t_ns = self.clock()
         self._count(result)
@@ -345,6 +347,7 @@ class ArmClient:
         try:
             result = w.txPacket()
         except (serial.SerialException, OSError) as e:
+            self._port.is_using = False
             raise ArmError(f"servo bus {self.ep}: sync write: {e}") from None
         self._count(result)
         if result != COMM_SUCCESS:
@@ -372,6 +375,8 @@ class ArmClient:
                     self._txrx("read Present Position", i, result, error)
                     self._txrx("Goal Position", i, *ph.write4ByteTxRx(port, i, dxl.ADDR_GOAL_POSITION, pos))
                     self._write1(i, dxl.ADDR_TORQUE_ENABLE, 1, "Torque Enable = 1")
+        except (serial.SerialException, OSError) as e:  # the bus went away: the hold cannot be set
+            raise ArmError(f"servo bus {self.ep}: hold on close: {e}") from None
         finally:
             self._torque_on = False
             self._port.closePort()

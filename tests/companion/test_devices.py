@@ -257,3 +257,29 @@ def test_the_arms_sync_read_split_into_request_and_collect():
         assert arm.stats.reads == 4 and arm.stats.crc_errors == arm.stats.timeouts == 0
     finally:
         bus.close()
+
+
+def test_a_bus_that_went_away_is_named_by_every_call_after_it():
+    """The servo bus closes under a sync read (the simulator ended, a cable pulled): the read
+    fails naming it, and so do the calls after it, down to the close's hold, rather than the
+    SDK's "Port is in use" that an exception mid-transaction leaves behind."""
+    bus = ServoBus(3, q0_rad=Q0, torque_max_nm=TAU_MAX, endpoint="tcpin:127.0.0.1:0")
+    bus.open()
+    arm = ArmClient("tcp:%s:%d" % bus.address, 3)
+    try:
+        with serving(bus):
+            arm.open()
+            arm.read()
+        bus.close()
+        errors = []
+        for call in (arm.read, lambda: arm.write_torques([0.0, 0.0, 0.0]), arm.read):
+            with pytest.raises(ArmError) as e:
+                call()
+            errors.append(str(e.value))
+        with pytest.raises(ArmError) as e:
+            arm.close()  # the hold on close fails as well, and the port is closed all the same
+        errors.append(str(e.value))
+        assert all("in use" not in m for m in errors), errors
+        assert "tcp:127.0.0.1" in errors[0] and arm._port is None
+    finally:
+        bus.close()

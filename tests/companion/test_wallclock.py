@@ -30,7 +30,8 @@ class FakeAutopilot:
     1 / odo_hz of the vehicle standing still at `p`."""
 
     def __init__(self, clock: Clock, pilot: Pilot, engage_s=2.0, odo_hz=30.0, rate=1.0, odo_until_s=1e9,
-                 yield_at_s=None) -> None:
+                 yield_at_s=None, armed=False) -> None:
+        self.armed = armed
         self.clock, self.rate, self.odo_hz, self.odo_until_s = clock, rate, odo_hz, odo_until_s
         self.t_start = clock.t
         self.engage_s, self.yield_at_s = engage_s, yield_at_s
@@ -40,6 +41,7 @@ class FakeAutopilot:
         self.odometry = self.attitude = self.attitude_target = None
         self.odometry_rx_ns = None
         self.sent, self.idle, self.handed_back = [], 0, None
+        self.idle_targets = []
         self.engaged_fc_us = None
         self.error = None
         self._next_odo = 0.0
@@ -83,7 +85,9 @@ class FakeAutopilot:
 
     def stream_idle(self, att):
         self.idle += 1
-        assert att.thrust_normalized == 0.0
+        self.idle_targets.append(att)
+        if not self.armed:
+            assert att.thrust_normalized == 0.0
 
     def send_setpoint(self, att):
         self.sent.append((self.clock.t, att))
@@ -122,7 +126,8 @@ def spec():
 def _loop(spec, **kw):
     clock = Clock()
     pilot = Pilot(spec, spec.ams[0].sysid)
-    ap_kw = {k: kw.pop(k) for k in list(kw) if k in ("engage_s", "odo_hz", "rate", "odo_until_s", "yield_at_s")}
+    ap_kw = {k: kw.pop(k) for k in list(kw) if k in ("engage_s", "odo_hz", "rate", "odo_until_s", "yield_at_s",
+                                                        "armed")}
     ap = FakeAutopilot(clock, pilot, **ap_kw)
     arm = FakeArm(pilot.model.n, clock, kw.pop("fail_after", None))
     loop = WallClockLoop(pilot, ap, arm, None, clock=clock, **kw)
@@ -148,6 +153,41 @@ def test_mission_clock_starts_at_the_engage_and_the_loop_keeps_its_rate(spec):
     # in the take-off, the thrust rises from the ground's towards hover
     thrusts = [a.thrust_normalized for _, a in ap.sent]
     assert 0.0 < thrusts[0] < 1.0 and all(np.isfinite(thrusts))
+
+
+def test_an_armed_vehicle_is_flown_by_the_controller_from_the_priming_on(spec):
+    """A companion started while its vehicle is armed (a restart; PX4 may be in OFFBOARD, or go
+    there when its failover clears on the first setpoint) primes OFFBOARD with the controller's
+    own setpoints, so the take-over is bumpless; its mission clock counts from the first."""
+    logs = []
+    loop, ap, arm, clock, pilot = _loop(spec, engage_s=1.0, armed=True, log=logs.append)
+    stop_at = clock.t + round(1.5 * 1e9)
+    loop.run(stop=lambda: clock.t >= stop_at)
+    before = [a for t, a in ap.sent if ap._fc_s(t) < 5.0 + 1.0]
+    assert len(before) >= 200 and arm.current  # ~1 s of the controller's setpoints before the engage
+    assert 0.0 < before[0].thrust_normalized < 1.0
+    assert ap.idle <= 2 and any("the vehicle is armed" in m for m in logs), logs
+    assert loop.t0_fc_us == pytest.approx(5.0e6 + TAKEOFF_S * 1e6, abs=1e4)
+
+
+def test_the_idle_target_before_the_controller_flies(spec):
+    """Before any HEARTBEAT: nothing. Disarmed: level, zero thrust. Armed (before the controller
+    flies): the reported attitude at the AM's hover thrust, m g over thrust 1's force; nothing
+    without a report."""
+    loop, ap, arm, clock, pilot = _loop(spec)
+    ap.attitude = Attitude(0, (0.9998477, 0.0, 0.0174524, 0.0), (0.0, 0.0, 0.0))
+    ap.armed = None
+    assert loop._idle_target() is None
+    ap.armed = False
+    idle = loop._idle_target()
+    assert idle.thrust_normalized == 0.0 and np.allclose(idle.quat_wxyz[1:3], 0.0)
+    ap.armed = True
+    hover = pilot.model.mass_kg * spec.vehicle.gravity_mps2 / pilot.thrust_max_n
+    assert 0.2 < hover < 0.9
+    idle = loop._idle_target()
+    assert idle.thrust_normalized == pytest.approx(hover) and np.allclose(idle.quat_wxyz, ap.attitude.q_WB_wxyz)
+    ap.attitude = None
+    assert loop._idle_target() is None
 
 
 def test_an_autopilot_clock_at_half_speed_halves_the_loops_wall_rate(spec):
@@ -184,6 +224,32 @@ def test_a_mode_switched_away_is_yielded_to(spec):
     res = loop.run(stop=lambda: False)
     assert res.code == 0 and res.why.startswith("yielded") and "POSCTL" in res.why
     assert ap.handed_back is None  # it does not fight back, nor ask for anything
+
+
+@pytest.mark.parametrize("stall_s, rate, yields", [(1.2, 1.0, True), (0.8, 1.0, False), (1.6, 0.5, False),
+                                                   (2.4, 0.5, True)])
+def test_a_stall_past_the_offboard_loss_timeout_yields_without_sending(spec, stall_s, rate, yields):
+    """The process stops for stall_s of wall time once engaged (SIGSTOP, a starved host). Past
+    COM_OF_LOSS_T of the autopilot's clock (1 s; at half speed, 2 s of wall time) PX4 has failed
+    over: the loop yields and sends nothing more, since a late setpoint would clear the failover.
+    Under it, the loop flies on."""
+    loop, ap, arm, clock, _ = _loop(spec, engage_s=0.5, rate=rate)
+    stalled = []
+
+    def stall(t, phase, res):
+        if not stalled and t > -TAKEOFF_S + 0.5:
+            stalled.append(len(ap.sent))
+            clock.t += round(stall_s * 1e9)
+
+    loop.on_step = stall
+    stop_at = clock.t + round(5.0 / rate * 1e9)
+    res = loop.run(stop=lambda: clock.t >= stop_at)
+    assert stalled
+    if yields:
+        assert res.code == 0 and res.why.startswith("yielded") and "COM_OF_LOSS_T" in res.why, res.why
+        assert len(ap.sent) == stalled[0] and ap.handed_back is None
+    else:
+        assert res.why == "stopped" and len(ap.sent) > stalled[0] + 100
 
 
 class SplitArm(FakeArm):

@@ -115,16 +115,19 @@ def _start_companion(run: Path, sysid: int, mission_start: float, name: str | No
 
 
 def test_a_mode_switched_away_is_yielded_to_a_stalled_companion_fails_over_and_a_restarted_one_rejoins(tmp_path):
-    """Vehicle 0: another client switches it to HOLD; its companion yields and never asks for
-    OFFBOARD again. Vehicle 1: its companion stalls (SIGSTOP) for 2 s of the autopilot's clock;
-    PX4's COM_OF_LOSS_T failover takes the vehicle to HOLD, and the companion, resumed, finds it
-    out of OFFBOARD and yields too. A new companion started for vehicle 1 engages OFFBOARD again
-    and joins the mission in progress (the team's --mission-start), flying it to the run's end.
-    (A killed companion is a stall that never resumes: the same failover.)"""
+    """Vehicle 0: another client switches it to HOLD in the take-off; its companion yields and
+    never asks for OFFBOARD again. Vehicle 1: once the mission is under way (the vehicle in the
+    air at the mission's start), its companion stalls (SIGSTOP) for 2 s of the autopilot's clock;
+    PX4's COM_OF_LOSS_T failover takes the vehicle to HOLD, and the companion, resumed, yields
+    without sending again (the stall is over COM_OF_LOSS_T), or on the HOLD it reads. A new
+    companion started for vehicle 1 engages OFFBOARD again and joins the mission in progress
+    (the team's --mission-start), flying it to the run's end. (A killed companion is a stall
+    that never resumes: the same failover.) The instants are set in the autopilot's time, from
+    the engage time the companion logs, so that a slow machine shifts none of them."""
     run = tmp_path / "run"
     run.mkdir()
-    start, speed = 8.0, 0.5
-    sim = _start_sim(run, duration=start + 8.0, mission_start=start)
+    start, speed, stall_at = 8.0, 0.5, 8.5  # the mission's start, the stall [s, autopilot time]
+    sim = _start_sim(run, duration=start + 9.0, mission_start=start)
     deadline = time.monotonic() + 120.0  # its ports and devices open (its kernels may compile first)
     while "devices:" not in (run / "simulator.log").read_text():
         assert sim.poll() is None and time.monotonic() < deadline, (run / "simulator.log").read_text()
@@ -137,11 +140,22 @@ def test_a_mode_switched_away_is_yielded_to_a_stalled_companion_fails_over_and_a
         # first partner, the companion); once both fly, it switches vehicle 0 to HOLD
         deadline = time.monotonic() + 90.0
         seen = ""
-        while time.monotonic() < deadline and seen.count("starts at") < 2:
-            time.sleep(0.5)
-            seen = (run / "companion-4.log").read_text() + (run / "companion-5.log").read_text()
+        while time.monotonic() < deadline and "starts at" not in seen:
+            time.sleep(0.05)
+            seen = (run / "companion-5.log").read_text()
             assert c4.poll() is None and c5.poll() is None, seen
-        time.sleep(3.0)  # into the take-off
+        # the wall-clock instant of an autopilot time, from companion 5's engage (logged within a
+        # step of it)
+        engaged = float(re.search(r"OFFBOARD engaged at autopilot time ([0-9.]+) s", seen).group(1))
+        wall0 = time.monotonic()
+
+        def until_fc(t_fc: float) -> None:
+            time.sleep(max(0.0, wall0 + (t_fc - engaged) / speed - time.monotonic()))
+
+        while "starts at" not in (run / "companion-4.log").read_text():
+            assert c4.poll() is None and time.monotonic() < deadline
+            time.sleep(0.05)
+        until_fc(engaged + 1.5)  # into the take-off
         port = re.search(r"sysid 4: udp 127\.0\.0\.1:(\d+) ->", (run / "simulator.log").read_text()).group(1)
         gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         enc = Encoder(250, 190)  # MAVLink 2 (pymavlink's mavutil sends MAVLink 1 unless MAVLINK20 is set)
@@ -149,6 +163,7 @@ def test_a_mode_switched_away_is_yielded_to_a_stalled_companion_fails_over_and_a
                                                 float(px4.MAIN_AUTO), float(px4.SUB_AUTO_LOITER), 0, 0, 0, 0)
         gcs.sendto(enc.pack([hold]), ("127.0.0.1", int(port)))
         c4.wait(timeout=20)  # the companion sees HOLD in the next HEARTBEATs and yields
+        until_fc(stall_at)
         c5.send_signal(signal.SIGSTOP)  # companion 5 stalls: 2 s of the autopilot's clock
         time.sleep(2.0 / speed)
         c5.send_signal(signal.SIGCONT)
@@ -178,15 +193,17 @@ def test_a_mode_switched_away_is_yielded_to_a_stalled_companion_fails_over_and_a
     ev5 = o["vehicles"]["5"]["events"]
     fs = [e for e in ev5 if e.get("event") == "failsafe" and "offboard" in e.get("cause", "")]
     assert fs and fs[0]["t_s"] - fs[0]["last_setpoint_s"] == pytest.approx(1.0, abs=0.0011), ev5
+    assert fs[0]["last_setpoint_s"] > start  # the stall came in the mission, as it was set to
     a5 = json.loads((run / "am5.json").read_text())
     assert c5.returncode == 0 and a5["ended"].startswith("yielded"), a5["ended"]
     # the restarted companion engaged again and flew the mission from where it joined, to the end
     log5b = (run / "companion-5b.log").read_text()
     a5b = json.loads((run / "am5b.json").read_text())
     # it flew to the run's end: stopped by the SIGTERM, or (the simulator's exit slower than its
-    # frame timeout, on a loaded machine) ended by the autopilot's silence once the run was over
-    assert a5b["ended"] == "stopped by SIGTERM" or a5b["ended"].startswith("the autopilot has been silent"), \
-        log5b[-2000:]
+    # frame timeout, on a loaded machine) ended by the autopilot's silence once the run was over: its
+    # samples stale, then its hand-back (which the run's end, OFFBOARD below, shows came after it)
+    assert (a5b["ended"] == "stopped by SIGTERM" or a5b["ended"].startswith("the autopilot has been silent")
+            or a5b["ended"].startswith("handed back to the autopilot (HOLD): stale odometry")), log5b[-2000:]
     assert "joining the mission" in log5b and a5b["engaged_fc_s"] > fs[0]["t_s"]
     # (the first engage comes before arming; a resumed companion's stray setpoint may add one in between)
     engages = [e for e in ev5 if e.get("event") == "mode" and e.get("to") == "OFFBOARD"]
