@@ -9,8 +9,8 @@ thrust columns, each rotor's least output, the normalized effectiveness rows, ea
 most thrust); `allocate` writes the outputs, the allocated and the unallocated control,
 whether it desaturated and the rotor thrusts into one array. `_min` and `_max` keep their
 first argument on ties, as Python's min and max do. Imported at an `Allocation`'s first
-allocation: the pure modules that only read its scales do not load numba. Kernels here call
-only kernels of this file (numba's cache is keyed per source file; see amcore.jit).
+allocation: the pure modules that only read its scales do not load numba. numba's
+cache keys each kernel on its own and its callees' files (amcore.jit).
 """
 from __future__ import annotations
 

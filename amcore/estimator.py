@@ -38,8 +38,7 @@ and a tactical-grade-or-better IMU the EKF's gains reach a steady state within a
 fixed gains of that shape give the same smooth output at a fraction of the cost (no 15x15
 covariance per step) and are set by two bandwidths a user can reason about.
 
-Kernels here call only kernels of this file (numba's cache is keyed per source file; see
-amcore.jit).
+The quaternion helpers are amcore.quat_kernels' (tuples in, tuples out).
 """
 from __future__ import annotations
 
@@ -48,66 +47,13 @@ import math
 import numpy as np
 
 from .jit import kernel
+from .quat_kernels import quat_conj, quat_exp, quat_log, quat_mul, quat_normalized, rotation
 
 # indices into the state vector x
 P, V, Q, BG, BA = 0, 3, 6, 10, 13
 N_STATE = 16
 # indices into the output (one odometry frame): p_WB, quat_WB (w, x, y, z; w >= 0), v_B, w_B
 N_OUT = 13
-
-
-# ----------------------------------------------------------------------------- quaternions
-@kernel
-def quat_mul(a, b):
-    """a (x) b, (w, x, y, z)."""
-    return np.array([a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
-                     a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
-                     a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
-                     a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]])
-
-
-@kernel
-def quat_exp(d):
-    """The unit quaternion of rotation vector d [rad]."""
-    a = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    if a < 1e-12:
-        return np.array([1.0, 0.5 * d[0], 0.5 * d[1], 0.5 * d[2]])
-    k = math.sin(0.5 * a) / a
-    return np.array([math.cos(0.5 * a), k * d[0], k * d[1], k * d[2]])
-
-
-@kernel
-def quat_log(q):
-    """The rotation vector [rad] of unit quaternion q (the shorter way round)."""
-    w = q[0]
-    s = 1.0
-    if w < 0.0:
-        s = -1.0
-        w = -w
-    n = math.sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    if n < 1e-12:
-        return np.array([2.0 * s * q[1], 2.0 * s * q[2], 2.0 * s * q[3]])
-    k = s * 2.0 * math.atan2(n, w) / n
-    return np.array([k * q[1], k * q[2], k * q[3]])
-
-
-@kernel
-def quat_conj(q):
-    return np.array([q[0], -q[1], -q[2], -q[3]])
-
-
-@kernel
-def quat_normalized(q):
-    return q / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-
-
-@kernel
-def rotation(q):
-    """R_WB of unit quaternion q_WB."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    return np.array([[1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
-                     [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
-                     [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)]])
 
 
 # ----------------------------------------------------------------------------- gyro low-pass
@@ -176,7 +122,7 @@ def fuse_pose(x, hist, k, lag, p_m, q_m, gains, dt):
     p_past = hist[j0, 0:3]
     q_past = hist[j0, 6:10]
     r = p_m - p_past
-    e = quat_log(quat_mul(quat_conj(q_past), q_m))
+    e = np.array(quat_log(quat_mul(quat_conj(q_past), q_m)))
     R_past = rotation(q_past)
     dp = gains[0] * r
     dv = gains[1] * r

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from amcore.config import read_scenario, scenario_from_dict
-from amcore.estimator import quat_log, quat_mul, rotation
+from amcore.quat_kernels import quat_log, quat_mul, rotation
 from trials.cli import apply_overrides
 from trials.randomize import _merged, load_randomize
 

@@ -98,11 +98,11 @@ def warm_up_kernels(spec: ScenarioSpec) -> None:
 def kernel_group(spec: ScenarioSpec):
     """`warm_up_kernels(spec)` as a group of `amruntime.jitcache.warm_groups`: under a lock
     of its own, so that a process can compile these while another compiles the control law."""
-    from amcore import allocation_kernels, estimator
+    from amcore import allocation_kernels, estimator, quat_kernels
     from amruntime.jitcache import SIMULATOR_LOCK, Group
 
     from . import device_kernels, fc_kernels
-    return Group(SIMULATOR_LOCK, (fc_kernels, allocation_kernels, device_kernels, estimator),
+    return Group(SIMULATOR_LOCK, (fc_kernels, allocation_kernels, device_kernels, estimator, quat_kernels),
                  lambda: warm_up_kernels(spec))
 
 

@@ -10,12 +10,10 @@ kernels give the same numbers, whatever BLAS numpy has.
 
 What stays in Python: the random draws (`NoiseBlock`: a block of a device's stream at once,
 the same numbers in the same order); the motion capture (one frame in ten steps) and the
-estimator (`amcore.estimator`, compiled there: a kernel of another file, which these may
-not call).
+estimator's call (`amcore.estimator`, compiled there).
 
 State and constants travel in small arrays, named by the `IMU_*`, `FT_*`, `TRUTH_*`, `C_*`
-and `S_*` offsets. Kernels here call only kernels of this file (numba's cache is keyed per
-source file; see amcore.jit).
+and `S_*` offsets. The quaternion helpers are amcore.quat_kernels'.
 """
 from __future__ import annotations
 
@@ -26,6 +24,7 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from amcore.jit import kernel
+from amcore.quat_kernels import rotation
 
 from .noise import NoiseBlock  # noqa: F401 (DeviceSuite's draws)
 
@@ -77,16 +76,6 @@ def mat_t_vec(R, u, out):
     dgemv_n computes it: y = 0, then y += R[j] u_j row after row by fused multiply-adds."""
     for i in range(3):
         out[i] = _fma(R[2, i], u[2], _fma(R[1, i], u[1], _fma(R[0, i], u[0], 0.0)))
-
-
-@kernel
-def rotation(q):
-    """R_WB of unit quaternion q_WB (amcore.estimator.rotation, term for term: a kernel of
-    another file, which these may not call)."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    return np.array([[1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
-                     [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
-                     [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)]])
 
 
 @kernel

@@ -35,7 +35,8 @@ from collections import deque
 import numpy as np
 
 from amcore.config import DevicesSpec, EncoderSpec, ForceTorqueSpec, ImuSpec, MocapSpec
-from amcore.estimator import BG, N_OUT, Estimator, quat_exp, quat_mul
+from amcore.estimator import BG, N_OUT, Estimator
+from amcore.quat_kernels import quat_exp, quat_mul
 
 from . import device_kernels as dk
 
@@ -104,7 +105,7 @@ class Mocap:
                 self.dropped += 1
             else:
                 p = x[0:3] + self.bias_p + self.sigma_p * n[0:3]
-                q = quat_mul(x[3:7], quat_exp(self.bias_R + self.sigma_R * n[3:6]))
+                q = np.array(quat_mul(x[3:7], quat_exp(self.bias_R + self.sigma_R * n[3:6])))
                 self._in_flight.append((k + self.lag, p, q))
         if self._in_flight and self._in_flight[0][0] == k:
             _, p, q = self._in_flight.popleft()
@@ -160,7 +161,7 @@ class DeviceSuite:
                              f"history_steps ({e.history_steps}) must be longer")
         # the estimator is aligned on the ground before take-off, on a motion-capture pose
         p0 = np.array(initial_values[0:3]) + self.mocap.bias_p
-        q0 = quat_mul(np.array(initial_values[3:7]), quat_exp(self.mocap.bias_R))
+        q0 = np.array(quat_mul(np.array(initial_values[3:7]), quat_exp(self.mocap.bias_R)))
         self._frame = np.empty(N_OUT + 2 * n_joints + 6)  # a frame's values, written in place
         self.estimator = Estimator(p0, q0, dt_s, self.mocap.every * dt_s, g, e.attitude_bandwidth_radps,
                                    e.position_bandwidth_radps, e.gyro_cutoff_hz, e.history_steps,

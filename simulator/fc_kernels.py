@@ -10,8 +10,7 @@ allocation (step 3) stays in `amcore.allocation`, shared with torque mode.
 
 `_min` and `_max` keep their first argument on ties and NaNs, as Python's min and max do, and
 `_square` is C's pow(x, 2.0), as Python's `x ** 2`: the reference and the kernels take the same
-steps. Kernels here call only kernels of this file (numba's cache is keyed per source file;
-see amcore.jit).
+steps. The quaternion helpers are amcore.quat_kernels'.
 """
 from __future__ import annotations
 
@@ -20,6 +19,7 @@ import math
 import numpy as np
 
 from amcore.jit import kernel
+from amcore.quat_kernels import quat_canonical, quat_conj, quat_mul, quat_normalized, quat_z_axis
 
 I_ATTENUATION_RAD_S = math.radians(400.0)  # RateControl::updateIntegral's i_factor scale
 
@@ -53,38 +53,6 @@ def _square(x, two):
     return math.pow(x, two)
 
 
-# ----------------------------------------------------------------------------- quaternions (w, x, y, z)
-@kernel
-def quat_mul(a, b):
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
-
-
-@kernel
-def quat_inv(q):
-    return (q[0], -q[1], -q[2], -q[3])
-
-
-@kernel
-def quat_normalized(q):
-    w, x, y, z = q
-    n = math.sqrt(w * w + x * x + y * y + z * z)
-    return (w / n, x / n, y / n, z / n)
-
-
-@kernel
-def quat_canonical(q):
-    return q if q[0] >= 0.0 else (-q[0], -q[1], -q[2], -q[3])
-
-
-@kernel
-def quat_z_axis(q):
-    w, x, y, z = q
-    return (2.0 * (w * y + x * z), 2.0 * (y * z - w * x), w * w - x * x - y * y + z * z)
-
-
 @kernel
 def quat_between(src, dst, eps=1e-5):
     """Shortest rotation taking unit vector src onto dst (matrix::Quaternion(src, dst))."""
@@ -116,10 +84,10 @@ def attitude_error(q, q_d, yaw_weight):
         q_red = q_d
     else:
         q_red = quat_mul(q_red, q)
-    w, _, _, z = quat_canonical(quat_mul(quat_inv(q_red), q_d))  # the yaw left about e_z,d
+    w, _, _, z = quat_canonical(quat_mul(quat_conj(q_red), q_d))  # the yaw left about e_z,d
     w, z = _min(_max(w, -1.0), 1.0), _min(_max(z, -1.0), 1.0)
     q_target = quat_mul(q_red, (math.cos(yaw_weight * math.acos(w)), 0.0, 0.0, math.sin(yaw_weight * math.asin(z))))
-    _, ex, ey, ez = quat_canonical(quat_mul(quat_inv(q), q_target))
+    _, ex, ey, ez = quat_canonical(quat_mul(quat_conj(q), q_target))
     return (2.0 * ex, 2.0 * ey, 2.0 * ez)
 
 

@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from amcore.estimator import (Estimator, biquad_coefficients, biquad_reset, biquad_step, quat_exp, quat_log,
-                              quat_mul, rotation)
+from amcore.estimator import Estimator, biquad_coefficients, biquad_reset, biquad_step
+from amcore.quat_kernels import quat_exp, quat_log, quat_mul, rotation
 
 DT = 0.001
 G = 9.81
@@ -19,7 +19,7 @@ A, OMEGA = np.array([0.2, -0.1, 0.15]), 2.0  # p(t) = A sin(OMEGA t)
 
 
 def truth(t):
-    q = quat_exp(W_B * t)
+    q = np.array(quat_exp(W_B * t))
     p = A * math.sin(OMEGA * t)
     v = A * OMEGA * math.cos(OMEGA * t)
     a = -A * OMEGA ** 2 * math.sin(OMEGA * t)
@@ -56,7 +56,7 @@ def test_quaternion_exp_and_log_invert_each_other():
         d = rng.uniform(-3.0, 3.0, 3)
         if np.linalg.norm(d) >= math.pi:
             continue
-        assert quat_log(quat_exp(d)) == pytest.approx(d, abs=1e-12)
+        assert np.array(quat_log(quat_exp(d))) == pytest.approx(d, abs=1e-12)
     R = rotation(quat_exp(np.array([0.0, 0.0, math.pi / 2])))
     assert R @ np.array([1.0, 0.0, 0.0]) == pytest.approx([0.0, 1.0, 0.0], abs=1e-12)
 
@@ -135,7 +135,7 @@ def test_the_step_in_place_is_the_step_returning_its_innovations():
     for k in range(600):
         p, q, v, a = truth(k * DT)
         omega, f = W_B + 0.01 * rng.normal(size=3), rotation(q).T @ (a + np.array([0.0, 0.0, G]))
-        pose = (p + 0.001 * rng.normal(size=3), quat_mul(q, quat_exp(0.002 * rng.normal(size=3)))) \
+        pose = (p + 0.001 * rng.normal(size=3), np.array(quat_mul(q, quat_exp(0.002 * rng.normal(size=3))))) \
             if k % 10 == 3 else None
         out = est.step(k, omega, f, pose, 3 if pose else 0)
         assert out.base is frame and np.array_equal(frame[:13], out)

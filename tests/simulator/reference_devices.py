@@ -11,7 +11,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from amcore.estimator import rotation
+from amcore.quat_kernels import rotation
 from simulator.devices import DeviceSuite, Encoders, ForceTorque, Imu
 
 

@@ -14,7 +14,7 @@ import pytest
 
 from amcore.config import (ConfigError, DevicesSpec, EncoderSpec, ForceTorqueSpec, ImuSpec, MocapSpec,
                            devices_from_table)
-from amcore.estimator import quat_exp, quat_log, quat_mul, rotation
+from amcore.quat_kernels import quat_exp, quat_log, quat_mul, rotation
 from simulator.devices import DeviceSuite, Mocap
 
 from .reference_devices import BodyTruth, ReferenceEncoders, ReferenceForceTorque, ReferenceImu
@@ -24,7 +24,7 @@ G = 9.81
 
 
 def at_rest(p=(0.0, 0.0, 1.0), d=(0.0, 0.0, 0.0)) -> BodyTruth:
-    q = quat_exp(np.array(d, dtype=float))
+    q = np.array(quat_exp(np.array(d, dtype=float)))
     return BodyTruth(np.array(p, dtype=float), q, rotation(q), np.zeros(3), np.zeros(3), np.zeros(3))
 
 
