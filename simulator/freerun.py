@@ -257,6 +257,29 @@ def ground_start_states(spec: ScenarioSpec, model, object_pose=None) -> dict[int
         pb.disconnect(physicsClientId=c)
 
 
+@dataclasses.dataclass(eq=False)
+class Px4Vehicle:
+    """One free-running vehicle as PX4 SITL holds it: its commander (the arming and mode state
+    machine), its onboard and GCS ports (the link state), its arm and wrist sensor, and the
+    state of its loops between physics steps."""
+
+    index: int  # its [[am]] order: PX4 SITL instance `instance` + index
+    sysid: int
+    commander: cm.Commander
+    port: Px4Port  # onboard (the companion's)
+    gcs_port: Px4Port | None
+    arm: object  # HoldJoints or a servo bus (simulator.servo_bus)
+    wrist: object | None  # its F/T server (simulator.netft), or None
+    start: AmState | None = None  # where it stands (open)
+    fc: FlightController | None = None  # the emulated autopilot's loops, made afresh at each arming or OFFBOARD
+    flying: list | None = None  # [kind, Failsafe, last command] while the autopilot flies itself (hold, land)
+    throttle: float = 0.0  # the last normalized thrust (the land detector's input)
+    was_armed: bool = False
+    last_nav: cm.NavState | None = None
+    v_prev: tuple[float, float, float] | None = None  # the last step's velocity (the IMU's specific force)
+    target: tuple | None = None  # (setpoint, its AttitudeTarget), reused while it is the same setpoint
+
+
 class FreeRun:
     """The free-running simulator of one scenario (module doc). Nothing opens before `open()`.
 
@@ -300,7 +323,7 @@ class FreeRun:
         self.thrust_scale_n = Allocation(v.rotors).thrust_scale_n
         hover = self.model.mass_kg * v.gravity_mps2 / self.thrust_scale_n
         p = params or cm.CommanderParams(COM_OF_LOSS_T=v.flight_controller.COM_OF_LOSS_T, MPC_THR_HOVER=hover)
-        self.commanders = {s: cm.Commander(p) for s in self.sysids}
+        commanders = [cm.Commander(p) for _ in self.sysids]
         # [link]: each onboard port impairs what reaches its autopilot (simulator.px4.port, Impairment);
         # the arm's torques go on its own bus here, so an impairment of them ("link") cannot be flown
         links = [am.link or spec.link for am in spec.ams]
@@ -309,45 +332,43 @@ class FreeRun:
                 raise ValueError(f"{spec.name}: [link].joints = \"link\" (sysid {am.sysid}): free-running, the arm's "
                                  f"torques go on its own servo bus, never through the autopilot's link; use "
                                  f"\"servo_bus\" (the default)")
-        self.ports = [Px4Port(i, s, self.commanders[s], endpoints[i], signing_key=onboard_key,
+        ports = [Px4Port(i, s, commanders[i], endpoints[i], signing_key=onboard_key,
                               require_signed=onboard_key is not None, rotor_count=v.rotors.count, log=log,
                               impairment=LinkImpairment.for_scenario(dataclasses.replace(spec, link=ln)))
                       for i, (s, ln) in enumerate(zip(self.sysids, links))]
         if gcs is not None and len(gcs) != n:
             raise ValueError(f"{len(gcs)} GCS endpoints for {n} vehicles (one per [[am]], in order)")
         # each vehicle's GCS instance (simulator.px4.port, role "gcs"), HEARTBEATs forwarded both ways
-        self.gcs_ports = [] if gcs is None else [
-            Px4Port(i, s, self.commanders[s], gcs[i], role="gcs", signing_key=gcs_key, require_signed=gcs_signed,
+        gcs_ports = [None] * n if gcs is None else [
+            Px4Port(i, s, commanders[i], gcs[i], role="gcs", signing_key=gcs_key, require_signed=gcs_signed,
                     local_port=px4.gcs_local_port(instance + i), rotor_count=v.rotors.count, log=log)
             for i, s in enumerate(self.sysids)]
-        for onboard, g in zip(self.ports, self.gcs_ports):
-            onboard.forward, g.forward = g.forwarded, onboard.forwarded
-        self.all_ports = [*self.ports, *self.gcs_ports]
+        for onboard, g in zip(ports, gcs_ports):
+            if g is not None:
+                onboard.forward, g.forward = g.forwarded, onboard.forwarded
         if arms is not None and len(arms) != n:
             raise ValueError(f"{len(arms)} arms for {n} vehicles (one per [[am]], in order)")
         q0 = start_joints(spec, self.model)
-        self.arms = dict(zip(self.sysids, arms)) if arms is not None else {
-            s: HoldJoints(q0[s], v.joint_torque_max_nm, joint_damping(self.model)) for s in self.sysids}
+        arms = list(arms) if arms is not None else [
+            HoldJoints(q0[s], v.joint_torque_max_nm, joint_damping(self.model)) for s in self.sysids]
         if wrist_sensors is not None and len(wrist_sensors) != n:
             raise ValueError(f"{len(wrist_sensors)} wrist sensors for {n} vehicles (one per [[am]], in order)")
         # each vehicle's wrist F/T server (simulator.netft: publish(t, wrench_E), poll(t)), and the
         # object's motion-capture stream (simulator.mocap_stream), or None
-        self.wrist_sensors = dict(zip(self.sysids, wrist_sensors)) if wrist_sensors is not None else {}
+        wrists = list(wrist_sensors) if wrist_sensors is not None else [None] * n
+        self.vehicles = {s: Px4Vehicle(i, s, commanders[i], ports[i], gcs_ports[i], arms[i], wrists[i])
+                         for i, s in enumerate(self.sysids)}
+        self.ports = ports
+        self.gcs_ports = [g for g in gcs_ports if g is not None]
+        self.all_ports = [*self.ports, *self.gcs_ports]
+        self._arms = arms
+        self._wrists = [ft for ft in wrists if ft is not None]
         self.mocap = mocap
         self._mocap_every = max(1, round(spec.rate_hz / spec.devices.mocap.rate_hz))
         self._object_bias = None  # the object's first measurement less its truth (open)
-        self.starts: dict[int, AmState] = {}  # where each vehicle stands (open)
         self.core: SitlCore | None = None  # the world and its pieces (open)
         # the autopilot's loops, with feed-forward on: `flown_target` forms PX4's feed-forward
         self._fc_params = dataclasses.replace(v.flight_controller, body_rate_feedforward=True)
-        self.fcs: dict[int, FlightController] = {}
-        self._flying: dict[int, list | None] = {s: None for s in self.sysids}  # [kind, Failsafe, last command]
-        self._throttle = {s: 0.0 for s in self.sysids}
-        self._was_armed = {s: False for s in self.sysids}
-        self._last_nav: dict[int, cm.NavState] = {}
-        self._index = {s: i for i, s in enumerate(self.sysids)}
-        self._v_prev: dict[int, tuple[float, float, float]] = {}
-        self._targets: dict[int, tuple] = {}  # per vehicle: (setpoint, its AttitudeTarget)
         self.pacer: Pacer | None = None
         self._gc: dict | None = None  # the run's garbage collections (`_GcTimer`)
         self.takeoff_track: dict[str, list[dict]] = {}  # by sysid: the vehicles before the mission (`_track_takeoff`)
@@ -366,8 +387,10 @@ class FreeRun:
         """Build the world (the vehicles on the ground), bind the ports, open the arms (OSError
         names what failed)."""
         pose = measure_object(self.spec) if self.spec.mission.object_pose == "mocap" else None  # as SitlCore's
-        self.starts = ground_start_states(self.spec, self.model, pose)
-        self.core = SitlCore(self.spec, log=self.log, initial=self.starts)
+        starts = ground_start_states(self.spec, self.model, pose)
+        for s, ve in self.vehicles.items():
+            ve.start = starts[s]
+        self.core = SitlCore(self.spec, log=self.log, initial=starts)
         self.core.connect()
         self._opened = True
         for port in self.all_ports:
@@ -376,7 +399,7 @@ class FreeRun:
             except OSError as exc:
                 raise OSError(f"vehicle {port.index} (sysid {port.sysid}): cannot bind its {port.role} port "
                               f"for {port.endpoint}: {exc.strerror or exc}") from None
-        for arm in self.arms.values():
+        for arm in self._arms:
             arm.open()
         for dev in self._devices():
             dev.open()
@@ -386,13 +409,13 @@ class FreeRun:
             self._object_bias = np.asarray(p_meas, dtype=float) - np.asarray(p_true, dtype=float)
 
     def _devices(self) -> list:
-        return [*self.wrist_sensors.values(), *([self.mocap] if self.mocap is not None else [])]
+        return [*self._wrists, *([self.mocap] if self.mocap is not None else [])]
 
     def close(self) -> None:
         self._fixed_fds = None
         for port in self.all_ports:
             port.close()
-        for arm in self.arms.values():
+        for arm in self._arms:
             arm.close()
         for dev in self._devices():
             dev.close()
@@ -454,7 +477,7 @@ class FreeRun:
             self._fixed_fds = [p.fileno() for p in self.all_ports]
             for dev in self._devices():
                 self._fixed_fds.extend(getattr(dev, "fds", lambda: [])())
-            self._arm_fds = [arm.fds for arm in self.arms.values() if hasattr(arm, "fds")]
+            self._arm_fds = [arm.fds for arm in self._arms if hasattr(arm, "fds")]
         fds = list(self._fixed_fds)
         for arm_fds in self._arm_fds:  # (a bus's client comes and goes)
             fds.extend(arm_fds())
@@ -465,7 +488,7 @@ class FreeRun:
         return set(readable)
 
     def _poll_arms(self, now: float, ready: set[int]) -> None:
-        for arm in self.arms.values():
+        for arm in self._arms:
             if hasattr(arm, "fds"):
                 arm.poll(now, ready)  # only what is readable costs a system call
             else:
@@ -496,7 +519,7 @@ class FreeRun:
         self._poll_arms(now, ready)
         for dev in self._devices():
             dev.poll(now)  # (they stream: polled every step)
-        reports = {s: self._vehicle(s, now) for s in self.sysids}
+        reports = {s: self._vehicle(ve, now) for s, ve in self.vehicles.items()}
         if self.mocap is not None and w.step_index % self._mocap_every == 0:
             p_obj, q_obj = w.object_pose()
             self.mocap.publish(now, np.asarray(p_obj) + self._object_bias, q_obj)
@@ -506,7 +529,8 @@ class FreeRun:
         # physics waits half as long (its loop blocks on the answer)
         self._poll_arms(t_next, self._readable(0.0))
         if self.mission_t0_s is None:
-            engaged = [c.offboard_engaged_s for c in self.commanders.values() if c.offboard_engaged_s is not None]
+            engaged = [ve.commander.offboard_engaged_s for ve in self.vehicles.values()
+                       if ve.commander.offboard_engaged_s is not None]
             if engaged:
                 self.mission_t0_s = min(engaged) + TAKEOFF_S
                 self.log(f"t = {min(engaged):.3f} s: OFFBOARD engaged; mission clock starts at "
@@ -520,14 +544,12 @@ class FreeRun:
             self.mission_steps += 1
             if w.step_index % self._truth_every == 0:
                 self._truth(t_next - self.mission_t0_s)
-        for i, port in enumerate(self.ports):
-            port.publish(now, reports[self.sysids[i]])
-        for i, port in enumerate(self.gcs_ports):
-            port.publish(now, reports[self.sysids[i]])
+        for port in self.all_ports:
+            port.publish(now, reports[port.sysid])
 
-    def _vehicle(self, s: int, t: float) -> VehicleReport:
+    def _vehicle(self, ve: Px4Vehicle, t: float) -> VehicleReport:
         """One vehicle's commander and actuation for the physics step that starts at t (module doc)."""
-        core, w, c = self.core, self.core.world, self.commanders[s]
+        core, w, c, s = self.core, self.core.world, ve.commander, ve.sysid
         n = self.model.n
         if self.spec.devices.enabled:  # the autopilot flies on its estimator (EKF2's place)
             values = w.sensor_values(s)
@@ -539,65 +561,65 @@ class FreeRun:
         p, quat, w_B = tuple(est[0:3]), tuple(est[3:7]), tuple(est[10:13])
         v_W = _rotate(quat, est[7:10])
         q, qdot = values[13:13 + n], values[13 + n:13 + 2 * n]
-        c.update(t, cm.LandInputs(throttle=self._throttle[s], v_z_mps=v_W[2], v_xy_mps=math.hypot(v_W[0], v_W[1]),
+        c.update(t, cm.LandInputs(throttle=ve.throttle, v_z_mps=v_W[2], v_xy_mps=math.hypot(v_W[0], v_W[1]),
                                     rate_xy_radps=math.hypot(w_B[0], w_B[1]),
                                     climb_rate_control=c.nav_state in cm.HOLDING or c.nav_state in cm.LANDING,
                                     descending=c.nav_state in cm.LANDING))
-        arm = self.arms[s]
+        arm = ve.arm
         tau_q = arm.joint_torques_nm(q, qdot)
         target = rates_sp = None
         nav = c.nav_state
-        entered = nav == cm.NavState.OFFBOARD and self._last_nav.get(s) != nav
-        if c.armed and (not self._was_armed[s] or entered):
+        entered = nav == cm.NavState.OFFBOARD and ve.last_nav != nav
+        if c.armed and (not ve.was_armed or entered):
             # PX4 resets the rate integrator while disarmed; after another mode (the failsafe flew)
             # the loops start afresh, as the lockstep's (simulator.core)
-            self.fcs[s] = FlightController(self._fc_params, self.spec.vehicle.rotors, self.spec.dt_s)
-        self._was_armed[s] = c.armed
-        self._last_nav[s] = nav
+            ve.fc = FlightController(self._fc_params, self.spec.vehicle.rotors, self.spec.dt_s)
+        ve.was_armed = c.armed
+        ve.last_nav = nav
         mission_t = None if self.mission_t0_s is None else t - self.mission_t0_s
         if not c.armed or nav == cm.NavState.TERMINATION or (nav != cm.NavState.OFFBOARD and c.landed):
-            self._flying[s] = None
-            self._motors_off(s, tau_q)
+            ve.flying = None
+            self._motors_off(ve, tau_q)
         elif nav == cm.NavState.OFFBOARD:
-            self._flying[s] = None
+            ve.flying = None
             sp = c.target
             if sp is None:
-                self._motors_off(s, tau_q)
+                self._motors_off(ve, tau_q)
             else:
-                target = self._target(s, sp, quat, rate_B)
-                fc = self.fcs[s]
+                target = self._target(ve, sp, quat, rate_B)
+                fc = ve.fc
                 frozen = list(fc.rate_int) if (c.landed or c.maybe_landed) else None
                 out = fc.step(quat, rate_B, target)
                 if frozen is not None:
                     fc.rate_int = frozen  # RateControl::update(..., landed): no integration on the ground
                 rates_sp = out.rates_sp
-                self._throttle[s] = out.thrust_sp
+                ve.throttle = out.thrust_sp
                 axes = out.allocation.saturated_axes
                 joints = w.apply_rotors(s, out.rotor_thrusts_n, tau_q, axes)
                 self._count_saturation(s, mission_t, out.allocation.saturated, joints.saturated, axes)
         else:
             kind = "land" if nav in cm.LANDING else "hold"
-            flying = self._flying[s]
+            flying = ve.flying
             if flying is None or flying[0] != kind:
                 x = _state(values, n)
                 gains = LAND_NOW if kind == "land" else HOLD_FOREVER
-                flying = self._flying[s] = [kind, Failsafe(self.model, x, t, gains), None]
+                flying = ve.flying = [kind, Failsafe(self.model, x, t, gains), None]
             # vehicles take turns (index offset), so that two evaluations rarely share a step
-            if flying[2] is None or (w.step_index + self._index[s]) % self.spec.control_every == 0:
+            if flying[2] is None or (w.step_index + ve.index) % self.spec.control_every == 0:
                 flying[2] = flying[1].command(t, _state(values, n))
             cmd = flying[2]
             rep = w.apply(s, cmd.thrust_n, cmd.tau_B_nm, tau_q)
-            self._throttle[s] = cmd.thrust_n / self.thrust_scale_n
+            ve.throttle = cmd.thrust_n / self.thrust_scale_n
             self._count_saturation(s, mission_t, rep.mix.saturated, rep.joints.saturated,
                                    rep.mix.allocation.saturated_axes)
         arm.observe(t, q, qdot, w.joint_torques(s))
-        ft = self.wrist_sensors.get(s)
+        ft = ve.wrist
         if ft is not None:  # the wrist sensor's reading (with [devices], the F/T device model's)
             ft.publish(t, est[13 + 2 * n:19 + 2 * n] if self.spec.devices.enabled else w.wrench_ee(s))
         # the IMU (ideal): body rate, and specific force R^T (a_W + g e_z) over the last step
         v_exact = v_W if est is values else _rotate(values[3:7], values[7:10])
-        v_prev = self._v_prev.get(s, v_exact)
-        self._v_prev[s] = v_exact
+        v_prev = v_exact if ve.v_prev is None else ve.v_prev
+        ve.v_prev = v_exact
         g = self.spec.vehicle.gravity_mps2
         a_W = ((v_exact[0] - v_prev[0]) / self.spec.dt_s, (v_exact[1] - v_prev[1]) / self.spec.dt_s,
                (v_exact[2] - v_prev[2]) / self.spec.dt_s + g)
@@ -605,15 +627,15 @@ class FreeRun:
         return VehicleReport(time_s=t, p_W=p, quat_WB=quat, v_W=v_W, w_B=w_B, gyro_B=tuple(values[10:13]),
                              accel_B=accel_B, target=target, rates_sp_B=rates_sp)
 
-    def _target(self, s: int, sp, quat, rate_B):
+    def _target(self, ve: Px4Vehicle, sp, quat, rate_B):
         """`flown_target` of sp, reused while it is the same setpoint and needs no attitude
         (no yaw feed-forward, not rates only): one AttitudeTarget per setpoint, not per step."""
-        last = self._targets.get(s)
+        last = ve.target
         if last is not None and last[0] is sp:
             return last[1]
         target = flown_target(sp, quat, rate_B)
         if sp.attitude and (math.isnan(sp.yaw_move_rate_rad_s) or sp.yaw_move_rate_rad_s == 0.0):
-            self._targets[s] = (sp, target)
+            ve.target = (sp, target)
         return target
 
     def _track_takeoff(self, t: float, reports: dict) -> None:
@@ -622,15 +644,16 @@ class FreeRun:
         for s, r in reports.items():
             w, x, y, z = r.quat_WB
             tilt = math.degrees(math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y)))))
-            c = self.commanders[s]
+            ve = self.vehicles[s]
+            c = ve.commander
             self.takeoff_track.setdefault(str(s), []).append(
                 {"t_s": round(t, 3), "z_m": round(r.p_W[2], 4), "tilt_deg": round(tilt, 2),
-                 "thrust": round(self._throttle[s], 3), "armed": c.armed, "landed": c.landed,
+                 "thrust": round(ve.throttle, 3), "armed": c.armed, "landed": c.landed,
                  "mode": cm.nav_name(c.nav_state)})
 
-    def _motors_off(self, s: int, tau_q) -> None:
-        self._throttle[s] = 0.0
-        self.core.world.apply_rotors(s, [0.0] * self.spec.vehicle.rotors.count, tau_q)
+    def _motors_off(self, ve: Px4Vehicle, tau_q) -> None:
+        ve.throttle = 0.0
+        self.core.world.apply_rotors(ve.sysid, [0.0] * self.spec.vehicle.rotors.count, tau_q)
 
     def _count_saturation(self, s: int, mission_t: float | None, rotors: bool, joints: bool, axes) -> None:
         if (rotors or joints) and mission_t is not None and mission_t >= 0.0:
@@ -653,8 +676,8 @@ class FreeRun:
         t0 = self.mission_t0_s
         if t0 is None:
             return out
-        for s, c in self.commanders.items():
-            for e in c.events:
+        for s, ve in self.vehicles.items():
+            for e in ve.commander.events:
                 tm = e["t_s"] - t0
                 if not 0.0 <= tm < self.spec.duration_s:
                     continue
@@ -672,9 +695,9 @@ class FreeRun:
         t0 = self.mission_t0_s
         if t0 is None:
             return out
-        for s, c in self.commanders.items():
+        for s, ve in self.vehicles.items():
             engaged, pending, why = False, None, None
-            for e in c.events:
+            for e in ve.commander.events:
                 tm = e["t_s"] - t0
                 if tm >= self.spec.duration_s:
                     break
@@ -706,7 +729,7 @@ class FreeRun:
         complete = t0 is not None
         if complete and self._opened and core.world.time_s - t0 >= 0.0:
             self._truth(core.world.time_s - t0)
-        failsafe_at_end = [s for s, c in self.commanders.items() if c.failsafe]
+        failsafe_at_end = [s for s, ve in self.vehicles.items() if ve.commander.failsafe]
         verdict = judge(core.outcome, spec.success, self.mission_steps, failsafe_at_end, (), (), self._commanded(),
                         self._failovers())
         timing = self.pacer.to_dict() if self.pacer is not None else {}
@@ -719,15 +742,15 @@ class FreeRun:
             timing["mean_step_cpu_s"] = self._cpu_s / timing["steps"]
         sim_s = core.world.time_s if self._opened else 0.0
         vehicles = {}
-        for port in self.ports:
-            c = port.commander
+        for ve in self.vehicles.values():
+            port, c = ve.port, ve.commander
             vehicles[str(port.sysid)] = {
                 "index": port.index, "port": port.describe() if port.sock is not None else str(port.endpoint),
                 "offboard_engaged_s": c.offboard_engaged_s, "armed_at_end": c.armed,
                 "mode_at_end": cm.nav_name(c.nav_state), "landed_at_end": c.landed, "failsafe_at_end": c.failsafe,
                 "events": c.events, "link": dataclasses.asdict(port.stats),
                 "impairment": None if port.impaired is None else vars(port.impaired.stats),
-                "start_p_WB_m": self.starts[port.sysid].p_WB.tolist()}
+                "start_p_WB_m": ve.start.p_WB.tolist()}
         for g in self.gcs_ports:
             vehicles[str(g.sysid)]["gcs"] = {
                 "port": g.describe() if g.sock is not None else str(g.endpoint), "signing": g.signing,

@@ -84,7 +84,7 @@ def test_a_vehicle_takes_off_hovers_and_fails_over(spec):
     starts late (misses counted), physics as fast as it computes."""
     run = FreeRun(spec, [parse_endpoint("udpin:127.0.0.1:0")] * 2, clock=itertools.count(0, 2_000_000).__next__)
     s0, s1 = run.sysids
-    c = run.commanders[s0]
+    c = run.vehicles[s0].commander
     hover = run.model.mass_kg * spec.vehicle.gravity_mps2 / run.thrust_scale_n
     seen = {}
     q_yaw = (H, 0.0, 0.0, H)  # NED <- FRD nose east: vehicle 0 faces +x
@@ -110,7 +110,7 @@ def test_a_vehicle_takes_off_hovers_and_fails_over(spec):
 
     run.open()
     try:
-        z1 = run.starts[s1].p_WB[2]
+        z1 = run.vehicles[s1].start.p_WB[2]
         result = run.run(duration_s=7.0, should_stop=pilot)
         x1 = run.core.world.state(s1)  # at rest on the ground (tipped back onto the base's edge), motors off
         assert 0.0 < x1.p_WB[2] <= z1 + 1e-6 and np.linalg.norm(x1.v_B) < 1e-3
