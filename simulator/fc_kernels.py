@@ -3,8 +3,8 @@ per step of `simulator.flight_controller`'s module doc. Their readable reference
 equations in plain Python, is tests/simulator/reference_flight_controller.py, which
 tests/simulator/test_fc_kernels.py compares them with.
 
-`FlightController` keeps its loops' state in one array (`S_*` offsets) and its constants in
-another (`P_*`); `rate_loops` runs steps 1 and 2 of the module doc of
+`FlightController` keeps its loops' state and its constants in two numpy records, their fields
+named (`STATE`, `PARAMS`; numba reads and writes them by name); `rate_loops` runs steps 1 and 2 of the module doc of
 `simulator.flight_controller` (attitude P loop, rate PID with the gyro filters); the
 allocation (step 3) stays in `amcore.allocation`, shared with torque mode.
 
@@ -23,17 +23,20 @@ from amcore.quat_kernels import quat_canonical, quat_conj, quat_mul, quat_normal
 
 I_ATTENUATION_RAD_S = math.radians(400.0)  # RateControl::updateIntegral's i_factor scale
 
-# the loops' state: each filter's two delays per axis, the rate integral, the last gyro
-# sample, the allocation's saturation per axis and direction, whether the loops have started
-S_GYRO_D1, S_GYRO_D2, S_DGYRO_D1, S_DGYRO_D2 = 0, 3, 6, 9
-S_RATE_INT, S_W_PREV, S_SAT_POS, S_SAT_NEG, S_STARTED = 12, 15, 18, 21, 24
-N_S = 25
-# the constants: each filter's (active, b0, b1, b2, a1, a2), then per axis the gains and limits
-P_GYRO, P_DGYRO = 0, 6
-P_ATT_P, P_RATE_MAX, P_GAIN_P, P_GAIN_I, P_GAIN_D, P_GAIN_FF, P_INT_LIM = 12, 15, 18, 21, 24, 27, 30
-P_YAW_WEIGHT, P_DT, P_FEEDFORWARD, P_TWO = 33, 34, 35, 36
-N_P = 37
-
+_AXES = (np.float64, 3)
+# the loops' state (a numpy record, `new_state`): each filter's two delays per axis, the rate
+# integral, the last gyro sample, the allocation's saturation per axis and direction (1 or 0),
+# whether the loops have started (1 or 0)
+STATE = np.dtype([("gyro_d1", *_AXES), ("gyro_d2", *_AXES), ("dgyro_d1", *_AXES), ("dgyro_d2", *_AXES),
+                  ("rate_int", *_AXES), ("w_prev", *_AXES), ("sat_pos", *_AXES), ("sat_neg", *_AXES),
+                  ("started", np.float64)])
+# the loops' constants (a numpy record, `constants`): each low-pass filter's (active, b0, b1, b2,
+# a1, a2), the gains and limits per axis, the yaw weight, the loop period [s], whether the
+# target's rates feed forward (1 or 0), and 2.0 (`_square`'s exponent, read at run time)
+PARAMS = np.dtype([("gyro", np.float64, 6), ("dgyro", np.float64, 6), ("att_p", *_AXES), ("rate_max", *_AXES),
+                   ("gain_p", *_AXES), ("gain_i", *_AXES), ("gain_d", *_AXES), ("gain_ff", *_AXES),
+                   ("int_lim", *_AXES), ("yaw_weight", np.float64), ("dt", np.float64),
+                   ("feedforward", np.float64), ("two", np.float64)])
 
 # ----------------------------------------------------------------------------- Python's min, max, **
 @kernel
@@ -49,7 +52,7 @@ def _min(a, b):
 @kernel
 def _square(x, two):
     """x ** 2 as Python computes it for a float: C's pow(x, 2.0), which can differ from x * x in
-    the last bit. The exponent comes in at run time (`P_TWO`), else the compiler makes it x * x."""
+    the last bit. The exponent comes in at run time (`PARAMS`' two), else the compiler makes it x * x."""
     return math.pow(x, two)
 
 
@@ -93,17 +96,17 @@ def attitude_error(q, q_d, yaw_weight):
 
 # ----------------------------------------------------------------------------- filters
 @kernel
-def lowpass2p_apply(p, at, s, d1, d2, i, x):
-    """One sample x through PX4's LowPass2p of axis i: coefficients p[at:at + 6] (active, b0,
-    b1, b2, a1, a2), delays s[d1 + i], s[d2 + i] (reset to x's steady state when `started` is 0)."""
-    if p[at] == 0.0:
+def lowpass2p_apply(c, d1, d2, started, i, x):
+    """One sample x through PX4's LowPass2p of axis i: coefficients c (active, b0, b1, b2, a1,
+    a2), delays d1[i], d2[i] (reset to x's steady state when `started` is 0)."""
+    if c[0] == 0.0:
         return x
-    b0, b1, b2, a1, a2 = p[at + 1], p[at + 2], p[at + 3], p[at + 4], p[at + 5]
-    if s[S_STARTED] == 0.0:
-        s[d1 + i] = s[d2 + i] = x / (b0 + b1 + b2)
-    d0 = x - s[d1 + i] * a1 - s[d2 + i] * a2
-    y = d0 * b0 + s[d1 + i] * b1 + s[d2 + i] * b2
-    s[d2 + i], s[d1 + i] = s[d1 + i], d0
+    b0, b1, b2, a1, a2 = c[1], c[2], c[3], c[4], c[5]
+    if started == 0.0:
+        d1[i] = d2[i] = x / (b0 + b1 + b2)
+    d0 = x - d1[i] * a1 - d2[i] * a2
+    y = d0 * b0 + d1[i] * b1 + d2[i] * b2
+    d2[i], d1[i] = d1[i], d0
     return y
 
 
@@ -111,68 +114,76 @@ def lowpass2p_apply(p, at, s, d1, d2, i, x):
 @kernel
 def allocator_status(s, unallocated, saturated):
     """The saturation per axis and direction that the last allocation left (PX4's
-    control_allocator_status), into s: an axis whose unallocated command is above (below)
-    +-1.2e-7 in an allocation that fell short may not integrate further up (down)."""
+    control_allocator_status), into the state s: an axis whose unallocated command is above
+    (below) +-1.2e-7 in an allocation that fell short may not integrate further up (down)."""
     for ax in range(3):
-        s[S_SAT_POS + ax] = 1.0 if saturated and unallocated[ax] > 1.2e-7 else 0.0
-        s[S_SAT_NEG + ax] = 1.0 if saturated and unallocated[ax] < -1.2e-7 else 0.0
+        s.sat_pos[ax] = 1.0 if saturated and unallocated[ax] > 1.2e-7 else 0.0
+        s.sat_neg[ax] = 1.0 if saturated and unallocated[ax] < -1.2e-7 else 0.0
 
 
 @kernel
-def rate_loops(p, s, quat_WB, w, quat_d, ff, thrust, unallocated, saturated, out):
-    """Steps 1 and 2 (attitude P loop, rate PID) of one loop period: quat_WB the vehicle's
-    attitude and quat_d the target's ((w, x, y, z), normalized here), w the body rates
-    [rad/s], ff the target's body rates [rad/s], thrust its normalized thrust. Writes
-    (rates_sp [rad/s], torque [normalized], the thrust within [0, 1] for step 3) into out (7,);
-    updates the integral with the saturation of the last allocation (its unallocated control
-    (4,) and whether it fell short: `allocator_status`)."""
+def rate_loops(params, state, quat_WB, w, quat_d, ff, thrust, unallocated, saturated, out):
+    """Steps 1 and 2 (attitude P loop, rate PID) of one loop period, with the constants
+    (`PARAMS`) and the state (`STATE`), each an array of one record (numba takes an array
+    from Python at a third of a bare record's cost): quat_WB the vehicle's attitude and quat_d the
+    target's ((w, x, y, z), normalized here), w the body rates [rad/s], ff the target's body
+    rates [rad/s], thrust its normalized thrust. Writes (rates_sp [rad/s], torque
+    [normalized], the thrust within [0, 1] for step 3) into out (7,); updates the integral
+    with the saturation of the last allocation (its unallocated control (4,) and whether it
+    fell short: `allocator_status`)."""
+    p, s = params[0], state[0]
     allocator_status(s, unallocated, saturated)
     out[6] = _min(_max(thrust, 0.0), 1.0)  # `_update`'s min(max(thrust, 0), 1)
-    dt = p[P_DT]
+    dt = p.dt
     q = quat_normalized(quat_WB)
     q_d = quat_normalized((quat_d[0], quat_d[1], quat_d[2], quat_d[3]))
-    w_prev = (s[S_W_PREV], s[S_W_PREV + 1], s[S_W_PREV + 2]) if s[S_STARTED] != 0.0 else w
-    s[S_W_PREV], s[S_W_PREV + 1], s[S_W_PREV + 2] = w
-    rate = (lowpass2p_apply(p, P_GYRO, s, S_GYRO_D1, S_GYRO_D2, 0, w[0]),
-            lowpass2p_apply(p, P_GYRO, s, S_GYRO_D1, S_GYRO_D2, 1, w[1]),
-            lowpass2p_apply(p, P_GYRO, s, S_GYRO_D1, S_GYRO_D2, 2, w[2]))
-    accel = (lowpass2p_apply(p, P_DGYRO, s, S_DGYRO_D1, S_DGYRO_D2, 0, (w[0] - w_prev[0]) / dt),
-             lowpass2p_apply(p, P_DGYRO, s, S_DGYRO_D1, S_DGYRO_D2, 1, (w[1] - w_prev[1]) / dt),
-             lowpass2p_apply(p, P_DGYRO, s, S_DGYRO_D1, S_DGYRO_D2, 2, (w[2] - w_prev[2]) / dt))
-    s[S_STARTED] = 1.0
+    started = s.started
+    w_prev = (s.w_prev[0], s.w_prev[1], s.w_prev[2]) if started != 0.0 else w
+    s.w_prev[0], s.w_prev[1], s.w_prev[2] = w
+    g, dg = p.gyro, p.dgyro
+    rate = (lowpass2p_apply(g, s.gyro_d1, s.gyro_d2, started, 0, w[0]),
+            lowpass2p_apply(g, s.gyro_d1, s.gyro_d2, started, 1, w[1]),
+            lowpass2p_apply(g, s.gyro_d1, s.gyro_d2, started, 2, w[2]))
+    accel = (lowpass2p_apply(dg, s.dgyro_d1, s.dgyro_d2, started, 0, (w[0] - w_prev[0]) / dt),
+             lowpass2p_apply(dg, s.dgyro_d1, s.dgyro_d2, started, 1, (w[1] - w_prev[1]) / dt),
+             lowpass2p_apply(dg, s.dgyro_d1, s.dgyro_d2, started, 2, (w[2] - w_prev[2]) / dt))
+    s.started = 1.0
 
     # 1. attitude P loop
-    e = attitude_error(q, q_d, p[P_YAW_WEIGHT])
+    e = attitude_error(q, q_d, p.yaw_weight)
     for ax in range(3):
-        f = ff[ax] if p[P_FEEDFORWARD] != 0.0 else 0.0
-        m = p[P_RATE_MAX + ax]
-        out[ax] = _min(_max(p[P_ATT_P + ax] * e[ax] + f, -m), m)
+        f = ff[ax] if p.feedforward != 0.0 else 0.0
+        m = p.rate_max[ax]
+        out[ax] = _min(_max(p.att_p[ax] * e[ax] + f, -m), m)
 
     # 2. rate PID, the integral updated after the output (RateControl::update)
     for ax in range(3):
         err = out[ax] - rate[ax]
-        out[3 + ax] = (p[P_GAIN_P + ax] * err + s[S_RATE_INT + ax] - p[P_GAIN_D + ax] * accel[ax]
-                       + p[P_GAIN_FF + ax] * out[ax])
+        out[3 + ax] = (p.gain_p[ax] * err + s.rate_int[ax] - p.gain_d[ax] * accel[ax]
+                       + p.gain_ff[ax] * out[ax])
         ei = err
-        if s[S_SAT_POS + ax] != 0.0:
+        if s.sat_pos[ax] != 0.0:
             ei = _min(ei, 0.0)
-        if s[S_SAT_NEG + ax] != 0.0:
+        if s.sat_neg[ax] != 0.0:
             ei = _max(ei, 0.0)
-        i_factor = _max(0.0, 1.0 - _square(ei / I_ATTENUATION_RAD_S, p[P_TWO]))
-        r_i = s[S_RATE_INT + ax] + i_factor * p[P_GAIN_I + ax] * ei * dt
+        i_factor = _max(0.0, 1.0 - _square(ei / I_ATTENUATION_RAD_S, p.two))
+        r_i = s.rate_int[ax] + i_factor * p.gain_i[ax] * ei * dt
         if math.isfinite(r_i):
-            lim = p[P_INT_LIM + ax]
-            s[S_RATE_INT + ax] = _min(_max(r_i, -lim), lim)
+            lim = p.int_lim[ax]
+            s.rate_int[ax] = _min(_max(r_i, -lim), lim)
+
+
+def new_state() -> np.ndarray:
+    """A zero `STATE` record (the loops not started), in an array of one."""
+    return np.zeros(1, STATE)
 
 
 def constants(fc) -> np.ndarray:
-    """The P_* array of a `simulator.flight_controller.FlightController`."""
-    p = np.zeros(N_P)
-    p[P_GYRO:P_GYRO + 6] = fc.gyro_filter
-    p[P_DGYRO:P_DGYRO + 6] = fc.dgyro_filter
-    for at, v in ((P_ATT_P, fc.att_p), (P_RATE_MAX, fc.rate_max), (P_GAIN_P, fc.gain_p), (P_GAIN_I, fc.gain_i),
-                  (P_GAIN_D, fc.gain_d), (P_GAIN_FF, fc.gain_ff), (P_INT_LIM, fc.int_lim)):
-        p[at:at + 3] = v
-    p[P_YAW_WEIGHT], p[P_DT], p[P_FEEDFORWARD] = fc.yaw_weight, fc.dt_s, 1.0 if fc.feedforward else 0.0
-    p[P_TWO] = 2.0
-    return p
+    """The `PARAMS` record of a `simulator.flight_controller.FlightController`, in an array of one."""
+    a = np.zeros(1, PARAMS)
+    p = a[0]
+    p["gyro"], p["dgyro"] = fc.gyro_filter, fc.dgyro_filter
+    p["att_p"], p["rate_max"], p["gain_p"], p["gain_i"] = fc.att_p, fc.rate_max, fc.gain_p, fc.gain_i
+    p["gain_d"], p["gain_ff"], p["int_lim"] = fc.gain_d, fc.gain_ff, fc.int_lim
+    p["yaw_weight"], p["dt"], p["feedforward"], p["two"] = fc.yaw_weight, fc.dt_s, 1.0 if fc.feedforward else 0.0, 2.0
+    return a

@@ -116,7 +116,7 @@ class FlightController:
         self.dgyro_filter = lowpass2p(rate_hz, fc.IMU_DGYRO_CUTOFF)
         self._k = 0
         self.output: FcOutput | None = None
-        self._p, self._s, self._out = fc_kernels.constants(self), np.zeros(fc_kernels.N_S), np.zeros(7)
+        self._p, self._s, self._out = fc_kernels.constants(self), fc_kernels.new_state(), np.zeros(7)
         self._rate_loops = fc_kernels.rate_loops
 
     def step(self, quat_WB_wxyz, w_B, target) -> FcOutput | None:
@@ -132,13 +132,13 @@ class FlightController:
     @property
     def rate_int(self) -> list[float]:
         """The rate loop's integral per axis (normalized torque)."""
-        return self._s[fc_kernels.S_RATE_INT:fc_kernels.S_RATE_INT + 3].tolist()
+        return self._s[0]["rate_int"].tolist()
 
     @rate_int.setter
     def rate_int(self, values) -> None:
         """Set the integral (the free-running autopilot keeps it while landed, as PX4's
         RateControl::update(..., landed) does not integrate on the ground)."""
-        self._s[fc_kernels.S_RATE_INT:fc_kernels.S_RATE_INT + 3] = [float(x) for x in values]
+        self._s[0]["rate_int"] = [float(x) for x in values]
 
     def _update(self, q, w, target) -> FcOutput:
         """Steps 1 and 2 (simulator.fc_kernels), taking the last allocation's saturation there
