@@ -172,24 +172,22 @@ class DeviceSuite:
 
     def _kernel_state(self) -> None:
         """The device objects' constants and state as `simulator.device_kernels.suite_step`
-        takes them (one array each; the parts named here are views of them)."""
+        takes them (`CONSTANTS` and `STATE`, each a record in an array of one; the parts named
+        here are views of them)."""
         imu, ft = self.imu, self.ft
-        self._c, self._s = c, s = np.zeros(dk.N_C), np.zeros(dk.N_S)
-        self._imu_c = c[dk.C_IMU:dk.C_IMU + dk.N_IMU]
-        self._imu_c[[dk.IMU_PHI_G, dk.IMU_SIGMA_BG, dk.IMU_PHI_A, dk.IMU_SIGMA_BA, dk.IMU_SIGMA_G, dk.IMU_SIGMA_A]] = (
-            imu.phi_g, imu.sigma_bg, imu.phi_a, imu.sigma_ba, imu.sigma_g, imu.sigma_a)
-        self._imu_c[dk.IMU_TURN_ON_G:dk.IMU_TURN_ON_G + 3] = imu.turn_on_g
-        self._imu_c[dk.IMU_TURN_ON_A:dk.IMU_TURN_ON_A + 3] = imu.turn_on_a
-        self._ft_c = c[dk.C_FT:dk.C_FT + dk.N_FT]
-        self._ft_c[dk.FT_DRIFT:dk.FT_DRIFT + 6], self._ft_c[dk.FT_SIGMA:dk.FT_SIGMA + 6] = ft.drift, ft.sigma
-        self._ft_c[dk.FT_LO], self._ft_c[dk.FT_HI] = ft._window
+        self._c, self._s = np.zeros(1, dk.CONSTANTS), np.zeros(1, dk.STATE)
+        c, st = self._c[0], self._s[0]  # views of the records
+        c["phi_g"], c["sigma_bg"], c["phi_a"], c["sigma_ba"] = imu.phi_g, imu.sigma_bg, imu.phi_a, imu.sigma_ba
+        c["sigma_g"], c["sigma_a"] = imu.sigma_g, imu.sigma_a
+        c["turn_on_g"], c["turn_on_a"] = imu.turn_on_g, imu.turn_on_a
+        c["ft_drift"], c["ft_sigma"], (c["ft_lo"], c["ft_hi"]) = ft.drift, ft.sigma, ft._window
         self._tare_from = ft._window[0]  # `needs_reading`'s, on Python values
         self._tare_pending = not ft.tared
-        c[dk.C_DT], c[dk.C_G], c[dk.C_DQ], c[dk.C_DQDOT] = self.dt, imu.g, self.encoders.dq, self.encoders.dqdot
-        s[dk.S_B_G:dk.S_B_G + 3], s[dk.S_B_A:dk.S_B_A + 3] = imu.b_g, imu.b_a
-        self._omega_m, self._f_m = s[dk.S_OMEGA_M:dk.S_OMEGA_M + 3], s[dk.S_F_M:dk.S_F_M + 3]
-        self._ft_s = s[dk.S_FT:dk.S_FT + dk.N_FT_STATE]
-        self._ft_s[dk.FT_OFFSET:dk.FT_OFFSET + 6], self._ft_s[dk.FT_TARED] = ft.offset, 1.0 if ft.tared else 0.0
+        c["dt"], c["g"], c["dq"], c["dqdot"] = self.dt, imu.g, self.encoders.dq, self.encoders.dqdot
+        st["b_g"], st["b_a"] = imu.b_g, imu.b_a
+        self._omega_m, self._f_m = self._s["omega_m"][0], self._s["f_m"][0]  # views: the kernel writes them
+        st["ft_offset"], st["ft_tared"] = ft.offset, 1.0 if ft.tared else 0.0
+        self._ft_state = st
         self._imu_noise, self._ft_noise = dk.NoiseBlock(imu.rng, 12), dk.NoiseBlock(ft.rng, 12)
         self._tail = self._frame[N_OUT:]
 
@@ -204,7 +202,7 @@ class DeviceSuite:
     def needs_reading(self, t: float) -> bool:
         """Whether a step at t needs the arm's and the wrist's values although no frame is sent:
         the F/T tare averages its readings until it is done."""
-        if self._tare_pending and self._ft_s[dk.FT_TARED] != 0.0:  # done by the last step's kernel
+        if self._tare_pending and self._ft_state["ft_tared"] != 0.0:  # done by the last step's kernel
             self._tare_pending = False
         return self._tare_pending and t >= self._tare_from
 

@@ -72,7 +72,7 @@ def test_the_devices_give_their_references_frames(spec):
         assert close(fast.step(v, k * DT), slow.step(v, k * DT)), f"step {k}"
         assert close(fast.autopilot_rate, slow.autopilot_rate), f"step {k}"
     assert fast.mocap.captured == slow.mocap.captured and fast.mocap.dropped == slow.mocap.dropped
-    assert bool(fast._ft_s[dk.FT_TARED]) == slow.ft.tared
+    assert bool(fast._ft_state["ft_tared"]) == slow.ft.tared
 
 
 def test_a_wrong_step_is_seen():
@@ -165,12 +165,11 @@ def test_the_kernels_products_round_as_numpys():
         assert same(y, R.T @ v), (R, v)
 
 
-
 def test_the_specific_force_is_the_references():
     """`specific_force` gives the f_B that the reference truth and IMU make in numpy, from the
     first step (a_W = 0) on."""
     values = moving_values(np.random.default_rng(14), 300)
-    s, f_B = np.zeros(dk.N_TRUTH), np.empty(3)
+    s, f_B = np.zeros(1, dk.STATE)[0], np.empty(3)
     v_W_prev = None
     for v in values:
         truth = truth_of(v, v_W_prev, DT)
@@ -178,4 +177,4 @@ def test_the_specific_force_is_the_references():
         dk.specific_force(np.array(v), DT, G, s, f_B)
         expected = truth.R_WB.T @ (truth.a_W + np.array([0.0, 0.0, G]))
         assert close(f_B.tolist(), expected.tolist())
-        assert close(s[dk.TRUTH_V_W:dk.TRUTH_V_W + 3].tolist(), truth.v_W.tolist())
+        assert close(s["v_W"].tolist(), truth.v_W.tolist())
