@@ -1,7 +1,8 @@
 """Telemetry speed figures (never timed tests): CPU per step, publish cost on the caller, recorder throughput.
 
     python -m benchmarks.bench_telemetry [--ams 10] [--rate 1000] [--truth-every 1] [--seconds 5]
-        [--encoding binary|json] [--skip-cpu] [--skip-caller] [--skip-throughput] [--cpu-steps 3000] [--cpu-rounds 3]
+        [--encoding binary|json] [--skip-cpu] [--skip-caller] [--skip-throughput] [--skip-recorder-work]
+        [--cpu-steps 3000] [--cpu-rounds 3] [--recorder-rounds 7]
         [--before REV] [--cpu-setups "binary,binary (before)"]
 
 0. Telemetry CPU per step of a companion (its controller sample) and of the simulator (truth
@@ -26,6 +27,10 @@
    Payloads are real: one simulated second of the two-AM scenario, cycled, in --encoding
    (binary: the JSON templates converted once, t and sysid patched per step).
 3. Recorder capacity: pre-encoded samples (--encoding) put as fast as the recorder takes them.
+4. Recorder work per simulated step, in process (no zenoh, no pacing): one simulated second of
+   the two-AM scenario's samples in publication order, JSON and binary, translated
+   (ground_station.contract) and written to MCAP (ground_station.mcap_io) as the recorder's
+   drain loop does; CPU time of the process, medians over --recorder-rounds rounds.
 Run from the repository root (it reuses the tests' short-run helper for real payloads: `tests.ground_station.simrun`).
 """
 from __future__ import annotations
@@ -503,6 +508,66 @@ def recorder_capacity(templates: dict, n_ams: int, seconds: float, encoding: str
           f"{summary['received']}, seq gaps {summary['missing']}")
 
 
+# ----------------------------------------------------------------------------- part 4
+def _published_second(templates: dict, form: str) -> list[tuple[str, bytes, bool]]:
+    """(key, sample, binary?) of the captured second in the order the processes publish them:
+    the run_start event, then per step each AM's controller sample, each AM's truth and
+    contact, the object; seq stamped per key."""
+    seqs: dict[str, int] = {}
+    out = []
+
+    def add(key: str, ch: Channel, p: dict) -> None:
+        seq = seqs[key] = seqs.get(key, -1) + 1
+        p = dict(p, seq=seq)
+        out.append((key, binary.from_dict(ch, p), True) if form == "binary" else (key, schema.encode(p)[0], False))
+
+    out.append((KEYS.sim_event, schema.encode(dict(templates["run_start"], seq=0))[0], False))
+    sysids = sorted(templates["controller"])
+    n = min(len(templates["object"]), *(len(templates[c][s]) for c in ("controller", "truth", "contact")
+                                        for s in sysids))
+    for j in range(n):
+        for s in sysids:
+            add(KEYS.controller(s), Channel.CONTROLLER, templates["controller"][s][j])
+        for s in sysids:
+            add(KEYS.am_truth(s), Channel.AM_TRUTH, templates["truth"][s][j])
+            add(KEYS.contact(s), Channel.CONTACT, templates["contact"][s][j])
+        add(KEYS.object, Channel.OBJECT, templates["object"][j])
+    return out
+
+
+def recorder_work(templates: dict, rounds: int) -> None:
+    """Part 4: the recorder's translation and writing of one simulated second, in process."""
+    from ground_station.contract import Translator
+    from ground_station.mcap_io import McapLogWriter
+
+    n_steps = len(templates["object"])
+    print(f"\n4. recorder work in process (translate + write MCAP, zstd), one simulated second of the two-AM "
+          f"scenario ({n_steps} steps), {rounds} rounds per form, alternating; medians over rounds")
+    samples = {form: _published_second(templates, form) for form in FORMS}
+    got: dict[str, list[tuple[float, int, int]]] = {form: [] for form in FORMS}
+    with tempfile.TemporaryDirectory() as tmp:
+        for r in range(rounds):
+            for form in FORMS if r % 2 == 0 else FORMS[::-1]:
+                path = Path(tmp) / f"{form}.mcap"
+                translate = Translator(KEYS).translate
+                writer = McapLogWriter(path)
+                writer.open()
+                c0 = time.process_time_ns()
+                for key, data, is_binary in samples[form]:
+                    for out in translate(key, data, is_binary):
+                        writer.write(out)
+                writer.close()
+                got[form].append(((time.process_time_ns() - c0) / 1e3, writer.messages, path.stat().st_size))
+    for form in FORMS:
+        us = [g[0] for g in got[form]]
+        n = len(samples[form])
+        per_step = float(np.median(us)) / n_steps
+        print(f"  {form:6s}: {per_step:5.1f} us per simulated step ({float(np.median(us)) / n:4.2f} us per sample, "
+              f"{n / (float(np.median(us)) * 1e-6):7.0f} samples/s of one core; rounds: "
+              f"{', '.join(f'{u / n_steps:.1f}' for u in us)}), {got[form][0][1]} MCAP messages, "
+              f"{got[form][0][2] / 1e6:.2f} MB")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--ams", type=int, default=10)
@@ -518,6 +583,8 @@ def main() -> None:
     ap.add_argument("--skip-cpu", action="store_true")
     ap.add_argument("--skip-caller", action="store_true")
     ap.add_argument("--skip-throughput", action="store_true")
+    ap.add_argument("--skip-recorder-work", action="store_true")
+    ap.add_argument("--recorder-rounds", type=int, default=7, help="part 4: rounds per form")
     ap.add_argument("--child", choices=("companion", "sim"))
     ap.add_argument("--sysid", type=int, default=0)
     ap.add_argument("--data")
@@ -544,6 +611,8 @@ def main() -> None:
     if not a.skip_throughput:
         throughput(templates, a.ams, a.rate, a.seconds, a.truth_every, a.encoding)
         recorder_capacity(templates, a.ams, a.seconds, a.encoding)
+    if not a.skip_recorder_work:
+        recorder_work(templates, a.recorder_rounds)
 
 
 if __name__ == "__main__":

@@ -116,7 +116,7 @@ def _review(a: argparse.Namespace) -> int:
         log = read_log(a.log)
         run = load_run(log)
         summary = summarize(log, run)
-    except (NotAnMcapError, NoDataError) as exc:
+    except (NotAnMcapError, NoDataError, ValueError) as exc:  # ValueError: a message that does not decode
         _err(str(exc))
         return 2
     if a.plots is not None:

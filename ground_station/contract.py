@@ -5,6 +5,7 @@
     <p>/am/<id>/event           ->   /am/<id>/event               amstack.Event (as received)
                                      /am/<id>/events              foxglove.Log
     <p>/sim/am/<id>/truth       ->   /tf                          foxglove.FrameTransforms: world->am<id>/base, world->am<id>/ee
+                                     /sim/am/<id>/truth           amstack/AmTruth (ros1) as received
     <p>/sim/am/<id>/contact     ->   /sim/am/<id>/contact         amstack/PadContact (ros1) as received
     <p>/sim/object              ->   /sim/object/pose             foxglove.PoseInFrame (frame world)
                                      /sim/object/state            amstack/ObjectTruth (ros1) as received
@@ -15,9 +16,11 @@
     (recorder, every flush)     ->   /recorder/stats              amstack.RecorderStats
     anything else under <p>/    ->   /unknown/<key>               (no schema) JSON as received; binary: counted only
 
-Schemas with a dot are JSON Schemas of JSON messages; those with a slash are ROS 1 .msg
-texts of binary messages (telemetry.binary), written when the channel's first sample was
-binary (a JSON-speaking publisher's channel is JSON: amstack.ControllerState, ...).
+The foxglove.* channels are Foxglove's own protobuf types (foxglove-schemas-protobuf; message
+encoding `protobuf`, the schema the type's FileDescriptorSet), declared once in DERIVED: topic,
+type and builder. Other schemas with a dot are JSON Schemas of JSON messages; those with a slash
+are ROS 1 .msg texts of binary messages (telemetry.binary), written when the channel's first
+sample was binary (a JSON-speaking publisher's channel is JSON: amstack.ControllerState, ...).
 Log time and publish time of every message = simulation time "t" of its payload [ns].
 Every channel is fed by one process, so its log times do not decrease.
 """
@@ -25,13 +28,15 @@ from __future__ import annotations
 
 import json
 import math
-import re
 import struct
 from dataclasses import dataclass
+from typing import Callable
 
-from telemetry.binary import (BY_NAME as ROS1_SCHEMAS, HEADER, JSON_TITLE, MESSAGES as BINARY_MESSAGES, OBJECT_POSE,
-                              TRUTH_POSES, from_dict, to_dict)
-from telemetry.schema import SCHEMAS as PAYLOAD_SCHEMAS, Channel, Keys, encode, finite_or_null, peek_header
+import msgspec
+
+from telemetry.binary import (BY_NAME as ROS1_SCHEMAS, HEADER, JSON_TITLE, MESSAGES as BINARY_MESSAGES,
+                              OBJECT_POSE as OBJECT_POSE_STRUCT, TRUTH_POSES, from_dict, to_dict)
+from telemetry.schema import SCHEMAS as PAYLOAD_SCHEMAS, Channel, Keys, encode, peek_header
 
 from . import foxglove as fg
 from .scene import SceneState
@@ -51,10 +56,10 @@ RECORDER_STATS_SCHEMA = {
 }
 
 SCHEMAS: dict[str, dict] = {s["title"]: s for s in PAYLOAD_SCHEMAS.values()}  # JSON Schemas by title
-SCHEMAS.update(fg.SCHEMAS)
 SCHEMAS[RECORDER_STATS_SCHEMA["title"]] = RECORDER_STATS_SCHEMA
 _RAW_SCHEMA = {ch: PAYLOAD_SCHEMAS[ch]["title"] for ch in Channel}
 ROS1 = "ros1"  # MCAP message encoding of the binary channels (schema encoding ros1msg; ROS1_SCHEMAS by name)
+PROTOBUF = "protobuf"  # MCAP message encoding of Foxglove's types (schema encoding protobuf; PROTOBUF_TYPES by name)
 
 
 def json_schema(name: str) -> dict:
@@ -62,13 +67,42 @@ def json_schema(name: str) -> dict:
     name of a binary channel ('amstack/ControllerState' -> amstack.ControllerState)."""
     return SCHEMAS[JSON_TITLE.get(name, name)]
 
-TF_TOPIC = "/tf"
-SCENE_TOPIC = "/scene"
+
+@dataclass(frozen=True)
+class Derived:
+    """A channel the recorder derives in one of Foxglove's types: its topic ('{sysid}' stands
+    for the AM's), the protobuf message type, the builder that makes or fills the message
+    (ground_station.foxglove, .scene), and what it is made of."""
+
+    topic: str
+    message: type
+    build: Callable
+    source: str
+
+    @property
+    def schema(self) -> str:
+        """The MCAP schema name: the type's full protobuf name (foxglove.FrameTransforms, ...)."""
+        return self.message.DESCRIPTOR.full_name
+
+
+TF = Derived("/tf", fg.FrameTransforms, fg.set_transforms,
+             "each AM truth sample: world -> am<sysid>/base, world -> am<sysid>/ee")
+OBJECT_POSE = Derived("/sim/object/pose", fg.PoseInFrame, fg.set_pose_in_frame, "each object sample, frame world")
+SCENE = Derived("/scene", fg.SceneUpdate, SceneState.update,
+                "scene_rate_hz per simulated second, at an object sample: the object, each AM's base, arm, pad "
+                "and contact force")
+SIM_LOG = Derived("/events", fg.Log, fg.log, "each simulator event")
+AM_LOG = Derived("/am/{sysid}/events", fg.Log, fg.log, "each event of the AM's companion")
+DERIVED = (TF, OBJECT_POSE, SCENE, SIM_LOG, AM_LOG)
+PROTOBUF_TYPES: dict[str, type] = {d.schema: d.message for d in DERIVED}  # MCAP schema name -> message type
+
+TF_TOPIC = TF.topic
+SCENE_TOPIC = SCENE.topic
 STATS_TOPIC = "/recorder/stats"
-OBJECT_POSE_TOPIC = "/sim/object/pose"
+OBJECT_POSE_TOPIC = OBJECT_POSE.topic
 OBJECT_STATE_TOPIC = "/sim/object/state"
 SIM_EVENT_TOPIC = "/sim/event"
-EVENTS_TOPIC = "/events"
+EVENTS_TOPIC = SIM_LOG.topic
 
 
 def controller_topic(sysid: int) -> str:
@@ -90,7 +124,7 @@ def am_event_topic(sysid: int) -> str:
 
 
 def am_log_topic(sysid: int) -> str:
-    return f"/am/{sysid}/events"
+    return AM_LOG.topic.format(sysid=sysid)
 
 
 def publisher_topic(name: str) -> str:
@@ -108,7 +142,7 @@ def ee_frame(sysid: int) -> str:
 @dataclass(frozen=True)
 class Out:
     """One MCAP message to write. schema: a key of SCHEMAS (encoding json), of ROS1_SCHEMAS
-    (encoding ros1), or None (schemaless JSON)."""
+    (encoding ros1), of PROTOBUF_TYPES (encoding protobuf), or None (schemaless JSON)."""
 
     topic: str
     schema: str | None
@@ -174,84 +208,32 @@ def _dumps(obj) -> bytes:
     return json.dumps(obj, separators=(",", ":")).encode()
 
 
-# Fast path for the high-rate poses: our encoder writes `"name":[a,b,c]` with each number
-# in Python's shortest repr, which is valid JSON as it stands; splicing that text into the
-# Foxglove message avoids parsing and re-printing ~14 floats per sample (the recorder's
-# hottest path). Anything else (nulls, other layouts) takes the general json path.
-_ARRAY = re.compile(rb'"([A-Za-z_]+)":\[([^\[\]]*)\]')
-_NUMBERS = re.compile(rb"-?[0-9][0-9.eE+\-]*(?:,-?[0-9][0-9.eE+\-]*)*")
-_TF = (b'{"timestamp":{"sec":%d,"nsec":%d},"parent_frame_id":"world","child_frame_id":"%s",'
-       b'"translation":{"x":%s,"y":%s,"z":%s},"rotation":{"x":%s,"y":%s,"z":%s,"w":%s}}')
-_POSE = (b'{"timestamp":{"sec":%d,"nsec":%d},"frame_id":"world","pose":{"position":{"x":%s,"y":%s,"z":%s},'
-         b'"orientation":{"x":%s,"y":%s,"z":%s,"w":%s}}}')
+# The poses /tf and /sim/object/pose need, decoded from a JSON sample by msgspec into just
+# these fields (the rest skipped unread). JSON has no NaN: a non-finite number comes as
+# null (telemetry.schema.encode), and goes into the protobuf double as NaN.
+_X = float | None
+_V3 = tuple[_X, _X, _X]
+_Q = tuple[_X, _X, _X, _X]
 
 
-def _numbers(data: bytes, names: tuple[bytes, ...], sizes: tuple[int, ...]) -> list[list[bytes]] | None:
-    found = dict(_ARRAY.findall(data))
-    out = []
-    for name, n in zip(names, sizes):
-        v = found.get(name)
-        if v is None or not _NUMBERS.fullmatch(v):  # null, NaN, strings: not for splicing
-            return None
-        parts = v.split(b",")
-        if len(parts) != n:
-            return None
-        out.append(parts)
-    return out
+class _TruthPoses(msgspec.Struct):
+    p_WB: _V3
+    q_WB: _Q
+    p_WE: _V3
+    q_WE: _Q
 
 
-def _sec_nsec(t: float) -> tuple[int, int]:
-    return divmod(_ns(t), 1_000_000_000)
+class _ObjectPose(msgspec.Struct):
+    p_WO: _V3
+    q_WO: _Q
 
 
-def _tf_spliced(t: float, sysid: int, data: bytes) -> bytes | None:
-    v = _numbers(data, (b"p_WB", b"q_WB", b"p_WE", b"q_WE"), (3, 4, 3, 4))
-    if v is None:
-        return None
-    (pb, qb, pe, qe), (sec, nsec) = v, _sec_nsec(t)
-    base = _TF % (sec, nsec, base_frame(sysid).encode(), *pb, qb[1], qb[2], qb[3], qb[0])
-    ee = _TF % (sec, nsec, ee_frame(sysid).encode(), *pe, qe[1], qe[2], qe[3], qe[0])
-    return b'{"transforms":[' + base + b"," + ee + b"]}"
+_TRUTH_POSES = msgspec.json.Decoder(_TruthPoses)
+_OBJECT_POSE = msgspec.json.Decoder(_ObjectPose)
 
 
-def _pose_spliced(t: float, data: bytes) -> bytes | None:
-    v = _numbers(data, (b"p_WO", b"q_WO"), (3, 4))
-    if v is None:
-        return None
-    (p, q), (sec, nsec) = v, _sec_nsec(t)
-    return _POSE % (sec, nsec, *p, q[1], q[2], q[3], q[0])
-
-
-def _poses(p: dict) -> tuple:
-    return p["p_WB"], p["q_WB"], p["p_WE"], p["q_WE"]
-
-
-def _finite_numbers(*vectors) -> bool:
-    return all(math.isfinite(x) for v in vectors for x in v)
-
-
-# The same messages from a decoded binary sample's floats: `%r` prints Python's shortest
-# repr, which is what json.dumps writes for a finite float (non-finite ones take the
-# general path, where they become null as in a JSON sample).
-_TF_R = _TF.replace(b'"child_frame_id":"%s"', b'"child_frame_id":"%b"').replace(b"%s", b"%r")
-_POSE_R = _POSE.replace(b"%s", b"%r")
-
-
-def _tf_of(t: float, sysid: int, pb, qb, pe, qe) -> bytes:
-    if not _finite_numbers(pb, qb, pe, qe) or (len(pb), len(qb), len(pe), len(qe)) != (3, 4, 3, 4):
-        return _dumps(finite_or_null({"transforms": [fg.frame_transform(t, "world", base_frame(sysid), pb, qb),
-                                              fg.frame_transform(t, "world", ee_frame(sysid), pe, qe)]}))
-    sec, nsec = _sec_nsec(t)
-    base = _TF_R % (sec, nsec, base_frame(sysid).encode(), *pb, qb[1], qb[2], qb[3], qb[0])
-    ee = _TF_R % (sec, nsec, ee_frame(sysid).encode(), *pe, qe[1], qe[2], qe[3], qe[0])
-    return b'{"transforms":[' + base + b"," + ee + b"]}"
-
-
-def _pose_of(t: float, pos, q) -> bytes:
-    if not _finite_numbers(pos, q) or (len(pos), len(q)) != (3, 4):
-        return _dumps(finite_or_null(fg.pose_in_frame(t, "world", pos, q)))
-    sec, nsec = _sec_nsec(t)
-    return _POSE_R % (sec, nsec, *pos, q[1], q[2], q[3], q[0])
+def _nan_for_null(v: tuple) -> tuple:
+    return v if None not in v else tuple(math.nan if x is None else x for x in v)
 
 
 class Translator:
@@ -261,7 +243,9 @@ class Translator:
     hot channel. Channels fed as received keep the form their first sample had: JSON on a
     `json` channel with its JSON Schema, binary on a `ros1` channel with its .msg text; a
     later sample of the other form is converted (a publisher of another version), so that
-    a topic has one schema. The derived Foxglove topics are JSON whatever the input.
+    a topic has one schema. The derived Foxglove topics (DERIVED) are protobuf whatever the
+    input; /tf and /sim/object/pose are filled into messages kept here, one per AM and one
+    for the object, and serialized (ground_station.foxglove).
 
     scene_rate_hz: /scene messages per simulated second (0: none), drawn when an object
     sample arrives (the simulator publishes the object after every AM of a step)."""
@@ -280,6 +264,15 @@ class Translator:
         self._parsed: dict = {}  # key -> KeyMatch | None (a deployment has few keys)
         self._binary_topic: dict[str, bool] = {}  # topic fed as received -> its first sample was binary
         self._scene = SceneState()
+        self._tf: dict[int, fg.FrameTransforms] = {}  # sysid -> its /tf message, filled per sample
+        self._object_pose = fg.pose_in_frame("world")
+
+    def _tf_out(self, t: float, ns: int, sysid: int, p_WB, q_WB, p_WE, q_WE) -> Out:
+        msg = self._tf.get(sysid)
+        if msg is None:
+            msg = self._tf[sysid] = fg.frame_transforms("world", (base_frame(sysid), ee_frame(sysid)))
+        TF.build(msg, t, ((p_WB, q_WB), (p_WE, q_WE)))
+        return Out(TF.topic, TF.schema, ns, msg.SerializeToString(), PROTOBUF)
 
     def _match(self, key: str):
         try:
@@ -343,17 +336,14 @@ class Translator:
                 return [Out(publisher_topic(m.name), _RAW_SCHEMA[ch], ns, raw)]
             if ch is Channel.AM_TRUTH:
                 self._scene.truth[sysid] = raw
-                tf = _tf_spliced(t, sysid, raw)  # None: not our encoder's layout, the slow, general way
-                return [Out(TF_TOPIC, "foxglove.FrameTransforms", ns,
-                            tf if tf is not None else _tf_of(t, sysid, *_poses(parsed or json.loads(raw)))),
+                v = _TRUTH_POSES.decode(raw)
+                return [self._tf_out(t, ns, sysid, _nan_for_null(v.p_WB), _nan_for_null(v.q_WB),
+                                     _nan_for_null(v.p_WE), _nan_for_null(v.q_WE)),
                         self._as_received(truth_topic(sysid), ch, ns, raw, parsed)]
             if ch is Channel.OBJECT:
-                pose = _pose_spliced(t, raw)
-                if pose is None:
-                    parsed = parsed or json.loads(raw)
-                    pose = _pose_of(t, parsed["p_WO"], parsed["q_WO"])
-                return self._object(t, ns, pose, self._as_received(OBJECT_STATE_TOPIC, ch, ns, raw, parsed),
-                                    lambda: parsed or json.loads(raw))
+                v = _OBJECT_POSE.decode(raw)
+                return self._object(t, ns, _nan_for_null(v.p_WO), _nan_for_null(v.q_WO),
+                                    self._as_received(OBJECT_STATE_TOPIC, ch, ns, raw, parsed), raw)
             return self._event(key, m, t, ns, raw, parsed if parsed is not None else json.loads(raw))
         except (ValueError, KeyError, TypeError, IndexError, OverflowError, AttributeError, struct.error) as exc:
             return self._bad(key, f"{type(exc).__name__}: {exc}")
@@ -383,13 +373,12 @@ class Translator:
                 return [self._as_received(contact_topic(sysid), ch, ns, raw, None, True)]
             if ch is Channel.AM_TRUTH:
                 self._scene.truth[sysid] = (ch, raw)
-                v = TRUTH_POSES.unpack_from(raw)
-                tf = _tf_of(t, sysid, v[3:6], v[6:10], v[10:13], v[13:17])  # p_WB, q_WB, p_WE, q_WE
-                return [Out(TF_TOPIC, "foxglove.FrameTransforms", ns, tf),
+                v = TRUTH_POSES.unpack_from(raw)  # t, seq, sysid, p_WB, q_WB, p_WE, q_WE
+                return [self._tf_out(t, ns, sysid, v[3:6], v[6:10], v[10:13], v[13:17]),
                         self._as_received(truth_topic(sysid), ch, ns, raw, None, True)]
-            v = OBJECT_POSE.unpack_from(raw)
+            v = OBJECT_POSE_STRUCT.unpack_from(raw)  # t, seq, p_WO, q_WO
             state = self._as_received(OBJECT_STATE_TOPIC, ch, ns, raw, None, True)
-            return self._object(t, ns, _pose_of(t, v[2:5], v[5:9]), state, lambda: to_dict(ch, raw))
+            return self._object(t, ns, v[2:5], v[5:9], state, (ch, raw))
         except (ValueError, KeyError, TypeError, IndexError, OverflowError, struct.error) as exc:
             return self._bad(key, f"{type(exc).__name__}: {exc}")
 
@@ -408,14 +397,17 @@ class Translator:
             return Out(topic, BINARY_MESSAGES[ch].name, ns, raw, ROS1)
         return Out(topic, _RAW_SCHEMA[ch], ns, raw)
 
-    def _object(self, t: float, ns: int, pose: bytes, state: Out, fields) -> list[Out]:
-        out = [Out(OBJECT_POSE_TOPIC, "foxglove.PoseInFrame", ns, pose), state]
+    def _object(self, t: float, ns: int, p_WO, q_WO, state: Out, sample) -> list[Out]:
+        """/sim/object/pose, the state as received and, on its slot, /scene. sample: the object
+        sample as SceneState keeps samples (JSON bytes, or (channel, binary sample))."""
+        pose = OBJECT_POSE.build(self._object_pose, t, p_WO, q_WO).SerializeToString()
+        out = [Out(OBJECT_POSE.topic, OBJECT_POSE.schema, ns, pose, PROTOBUF), state]
         if t >= self._next_scene_t - _SCENE_SLACK * self.scene_period_s:
             # the next slot of the fixed grid k * period (t + period would drift: a sample
             # a hair before its slot waits for the next one)
             self._next_scene_t = (math.floor(t / self.scene_period_s + _SCENE_SLACK) + 1) * self.scene_period_s
-            scene = finite_or_null(self._scene.update(t, fields()))
-            out.append(Out(SCENE_TOPIC, "foxglove.SceneUpdate", ns, _dumps(scene)))
+            scene = SCENE.build(self._scene, t, sample)
+            out.append(Out(SCENE.topic, SCENE.schema, ns, scene.SerializeToString(), PROTOBUF))
         return out
 
     def _event(self, key: str, m, t: float, ns: int, raw: bytes, p: dict) -> list[Out]:
@@ -427,10 +419,11 @@ class Translator:
         if ch is Channel.SIM_EVENT and kind == "run_end":
             self.run_end = p
         name = p.get("source", "simulator" if sysid is None else f"am{sysid}")
-        msg = _dumps(fg.log(t, level, f"[{kind}] {p['text']}", name))
-        if ch is Channel.SIM_EVENT:
-            return [Out(SIM_EVENT_TOPIC, _RAW_SCHEMA[ch], ns, raw), Out(EVENTS_TOPIC, "foxglove.Log", ns, msg)]
-        return [Out(am_event_topic(sysid), _RAW_SCHEMA[ch], ns, raw), Out(am_log_topic(sysid), "foxglove.Log", ns, msg)]
+        log = SIM_LOG if ch is Channel.SIM_EVENT else AM_LOG
+        msg = log.build(t, level, f"[{kind}] {p['text']}", name).SerializeToString()
+        raw_topic = SIM_EVENT_TOPIC if ch is Channel.SIM_EVENT else am_event_topic(sysid)
+        return [Out(raw_topic, _RAW_SCHEMA[ch], ns, raw),
+                Out(log.topic.format(sysid=sysid), log.schema, ns, msg, PROTOBUF)]
 
     def stats_out(self, wall_s: float, inbox_overflow: int, rejected: int = 0) -> Out:
         body = {"t": self.latest_t, "wall_s": wall_s, "inbox_overflow": inbox_overflow, "malformed": self.malformed,

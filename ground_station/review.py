@@ -83,19 +83,20 @@ def load_run(log: LogData) -> RunData:
         s.normal_n = _arr([p["normal_force_n"] for p in msgs])
         s.tangential_W = _arr([p["tangential_force_W"] for p in msgs], 3)
     tf: dict[int, list] = {}
-    for t, m in log.decoded(c.TF_TOPIC):
-        for tr in m["transforms"]:
-            child = tr["child_frame_id"]
+    for t, m in log.protobuf(c.TF_TOPIC):  # foxglove.FrameTransforms
+        for tr in m.transforms:
+            child = tr.child_frame_id
             if child.endswith("/ee") and child.startswith("am"):
-                v = tr["translation"]
-                tf.setdefault(int(child[2:-3]), []).append((t, v["x"], v["y"], v["z"]))
+                v = tr.translation
+                tf.setdefault(int(child[2:-3]), []).append((t, v.x, v.y, v.z))
     for sysid, rows in tf.items():
         a = np.array(rows)
         am(sysid).t_tf, am(sysid).p_WE = a[:, 0], a[:, 1:4]
-    obj = log.decoded(c.OBJECT_POSE_TOPIC)
+    obj = log.protobuf(c.OBJECT_POSE_TOPIC)  # foxglove.PoseInFrame
     t_obj = _arr([t for t, _ in obj])
-    p_WO = _arr([[m["pose"]["position"][k] for k in "xyz"] for _, m in obj], 3)
-    q_WO = _arr([[m["pose"]["orientation"][k] for k in "wxyz"] for _, m in obj], 4)
+    p_WO = _arr([[m.pose.position.x, m.pose.position.y, m.pose.position.z] for _, m in obj], 3)
+    q_WO = _arr([[m.pose.orientation.w, m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z]
+                 for _, m in obj], 4)
 
     run_start = None
     for _, e in log.decoded(c.SIM_EVENT_TOPIC):

@@ -196,7 +196,7 @@ def test_the_foxglove_layout_names_topics_and_fields_the_log_has():
         fields[contract.controller_topic(s)] = binary.CONTROLLER
         fields[contract.contact_topic(s)] = binary.CONTACT
         fields[contract.truth_topic(s)] = binary.AM_TRUTH
-    whole = {contract.SCENE_TOPIC, contract.TF_TOPIC, contract.OBJECT_POSE_TOPIC, contract.EVENTS_TOPIC}
+    whole = {d.topic.format(sysid=s) for d in contract.DERIVED for s in sysids}  # Foxglove's types, shown whole
     paths = []
     for cfg in layout["configById"].values():
         paths += [p["value"] for p in cfg.get("paths", [])]

@@ -40,6 +40,23 @@ def test_review_of_missing_file_not_an_mcap_or_empty_log_exits_2(tmp_path, capsy
     w.close()
 
 
+def test_review_of_a_log_whose_foxglove_channels_are_json_exits_2_saying_so(tmp_path, capsys):
+    """An older recorder wrote /tf as JSON with a JSON Schema: the review says it reads them as
+    protobuf only, rather than failing with a traceback."""
+    from mcap.writer import Writer
+
+    p = tmp_path / "old.mcap"
+    with open(p, "wb") as f:
+        w = Writer(f)
+        w.start()
+        sid = w.register_schema("foxglove.FrameTransforms", "jsonschema", b'{"type": "object"}')
+        cid = w.register_channel("/tf", "json", sid)
+        w.add_message(cid, log_time=1000, data=b'{"transforms": []}', publish_time=1000)
+        w.finish()
+    assert main(["review", str(p)]) == 2
+    assert "/tf: json messages, not protobuf" in capsys.readouterr().err
+
+
 def test_review_text_json_and_plots(good_log, tmp_path, capsys):
     assert main(["review", str(good_log)]) == 0
     text = capsys.readouterr().out

@@ -149,3 +149,55 @@ def test_binary_channels_decode_with_the_stored_schema_in_a_ros1_reader(capture,
                 else:
                     assert got == value, (channel.topic, name)
     assert seen.keys() == ros1_topics and all(n > 100 for n in seen.values())
+
+
+def test_foxglove_channels_decode_with_the_stored_schema_in_a_protobuf_reader(capture, tmp_path):
+    """What Foxglove does with the log's Foxglove channels, done by mcap-protobuf-support's
+    reader: every protobuf channel decodes with the FileDescriptorSet stored in the file alone
+    (a descriptor pool of the reader's own, not this program's types), and the /tf transforms
+    and the object pose decoded that way are the poses of the truth samples in the same log."""
+    from mcap_protobuf.decoder import DecoderFactory
+
+    from ground_station import contract as c
+
+    from .conftest import write_mcap
+
+    p = tmp_path / "run.mcap"
+    write_mcap(p, capture.samples)
+    ours = read_log(p)
+    topics = {t for t, e in ours.encodings.items() if e == "protobuf"}
+    assert topics == {c.TF_TOPIC, c.OBJECT_POSE_TOPIC, c.SCENE_TOPIC, c.EVENTS_TOPIC}
+    got: dict[str, list] = {}
+    with open(p, "rb") as f:
+        for schema, channel, message, msg in make_reader(f, decoder_factories=[DecoderFactory()]) \
+                .iter_decoded_messages(topics=sorted(topics)):
+            assert (schema.encoding, channel.message_encoding) == ("protobuf", "protobuf")
+            assert schema.name == msg.DESCRIPTOR.full_name == ours.channels[channel.topic]
+            assert type(msg) is not c.PROTOBUF_TYPES[schema.name]  # built from the file, not imported
+            got.setdefault(channel.topic, []).append((message.log_time, msg))
+    for topic in topics:  # our reader (classes from the same stored schema) reads the same messages
+        assert [m.SerializeToString() for _, m in got[topic]] == [d for _, d in ours.messages[topic]], topic
+        assert [type(m).__name__ for _, m in ours.protobuf(topic)] == [type(m).__name__ for _, m in got[topic]]
+    truths = {t: ours.decoded(t) for t in ours.topics("/sim/am/", "/truth")}
+    expected = sorted((round(t * 1e9), child, tuple(p), tuple(q)) for topic, msgs in truths.items()
+                      for t, s in msgs
+                      for child, p, q in ((f"am{s['sysid']}/base", s["p_WB"], s["q_WB"]),
+                                          (f"am{s['sysid']}/ee", s["p_WE"], s["q_WE"])))
+    tf = sorted((ns, tr.child_frame_id, (tr.translation.x, tr.translation.y, tr.translation.z),
+                 (tr.rotation.w, tr.rotation.x, tr.rotation.y, tr.rotation.z))
+                for ns, m in got[c.TF_TOPIC] for tr in m.transforms)
+    assert len(tf) > 1000 and tf == expected  # exactly: the same doubles
+    assert all(tr.parent_frame_id == "world" for _, m in got[c.TF_TOPIC] for tr in m.transforms)
+    objects = ours.decoded(c.OBJECT_STATE_TOPIC)
+    poses = [(m.pose.position.x, m.pose.position.y, m.pose.position.z, m.pose.orientation.w, m.pose.orientation.x,
+              m.pose.orientation.y, m.pose.orientation.z) for _, m in got[c.OBJECT_POSE_TOPIC]]
+    assert poses == [tuple(s["p_WO"]) + tuple(s["q_WO"]) for _, s in objects]
+    levels = {m.level for _, m in got[c.EVENTS_TOPIC]}
+    assert levels and levels <= {1, 2, 3, 4, 5}  # Foxglove's Log.Level: DEBUG..FATAL, never UNKNOWN here
+    with open(p, "rb") as f:  # the schema is Foxglove's files and google/protobuf's they import, nothing else
+        from google.protobuf.descriptor_pb2 import FileDescriptorSet
+
+        for schema in make_reader(f).get_summary().schemas.values():
+            if schema.encoding == "protobuf":
+                names = {fd.name for fd in FileDescriptorSet.FromString(schema.data).file}
+                assert all(n.startswith(("foxglove/", "google/protobuf/")) for n in names), names

@@ -151,6 +151,7 @@ def test_two_am_comp_log_holds_the_topic_contract_and_agrees_with_ground_truth(c
                           ("/tf", "foxglove.FrameTransforms"), ("/scene", "foxglove.SceneUpdate"),
                           ("/events", "foxglove.Log")]:
         assert log.channels.get(topic) == schema, (topic, log.channels.get(topic))
+        assert log.encodings[topic] == ("protobuf" if schema.startswith("foxglove.") else "ros1"), topic
         times = [ns for ns, _ in log.messages[topic]]
         assert times and all(b >= a for a, b in zip(times, times[1:])), topic  # simulation time, monotonic
     r = subprocess.run([script("ground-station"), "review", str(mcap), "--json"], capture_output=True, text=True,
