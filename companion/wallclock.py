@@ -99,7 +99,7 @@ class WallClockLoop:
         self.offboard_loss_s = offboard_loss_s
         self._rate = 1.0  # the autopilot's clock rate against ours
         self._takeoff_started = False
-        self._psi = pilot.mission.psi
+        self._level_q = R_to_quat_wxyz(Rz(pilot.mission.psi))  # level at the mission's heading
         # SET_ATTITUDE_TARGET's thrust that carries the whole AM (m g over thrust 1's force)
         self._hover_thrust = min(1.0, pilot.model.mass_kg * spec.vehicle.gravity_mps2 / pilot.thrust_max_n)
         self.arm_errors = 0
@@ -317,8 +317,7 @@ class WallClockLoop:
                 return None
             return AttitudeTarget(0, quat_wxyz=np.asarray(att.q_WB_wxyz, dtype=float), rates_rad_s=np.zeros(3),
                                   thrust_normalized=self._hover_thrust)
-        q = R_to_quat_wxyz(Rz(self._psi))
-        return AttitudeTarget(0, quat_wxyz=q, rates_rad_s=np.zeros(3), thrust_normalized=0.0)
+        return AttitudeTarget(0, quat_wxyz=self._level_q, rates_rad_s=np.zeros(3), thrust_normalized=0.0)
 
     def _end(self, why: str, code: int) -> WallClockResult:
         self._drop_joints()

@@ -187,7 +187,7 @@ class DeviceSuite:
         st["b_g"], st["b_a"] = imu.b_g, imu.b_a
         self._omega_m, self._f_m = self._s["omega_m"][0], self._s["f_m"][0]  # views: the kernel writes them
         st["ft_offset"], st["ft_tared"] = ft.offset, 1.0 if ft.tared else 0.0
-        self._ft_state = st
+        self._state = st
         self._imu_noise, self._ft_noise = dk.NoiseBlock(imu.rng, 12), dk.NoiseBlock(ft.rng, 12)
         self._tail = self._frame[N_OUT:]
 
@@ -202,7 +202,7 @@ class DeviceSuite:
     def needs_reading(self, t: float) -> bool:
         """Whether a step at t needs the arm's and the wrist's values although no frame is sent:
         the F/T tare averages its readings until it is done."""
-        if self._tare_pending and self._ft_state["ft_tared"] != 0.0:  # done by the last step's kernel
+        if self._tare_pending and self._state["ft_tared"] != 0.0:  # done by the last step's kernel
             self._tare_pending = False
         return self._tare_pending and t >= self._tare_from
 

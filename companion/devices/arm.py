@@ -204,6 +204,13 @@ class ArmClient:
         for i in self.ids:
             self._sync_read.addParam(i)
 
+    def _lost(self, what: str, exc: Exception) -> ArmError:
+        """The error of a transaction the bus broke off (the simulator ended, a cable pulled). The
+        SDK leaves its transaction flag set on an exception; cleared here, so that the next
+        call reports its own error, not "Port is in use!"."""
+        self._port.is_using = False
+        return ArmError(f"servo bus {self.ep}: {what}: {exc}")
+
     def _count(self, result: int) -> None:
         if result == COMM_RX_CORRUPT:
             self.stats.crc_errors += 1
@@ -290,8 +297,7 @@ class ArmClient:
         try:
             result = self._sync_read.txPacket()
         except (serial.SerialException, OSError) as e:  # the bus went away (the simulator ended, a cable)
-            self._port.is_using = False  # the SDK leaves its transaction flag set on an exception
-            raise ArmError(f"servo bus {self.ep}: sync read: {e}") from None
+            raise self._lost("sync read", e) from None
         if result != COMM_SUCCESS:
             self._count(result)
             raise ArmError(f"servo bus {self.ep}: sync read: {self._ph.getTxRxResult(result)}")
@@ -308,8 +314,7 @@ class ArmClient:
         try:
             result = self._sync_read.rxPacket()
         except (serial.SerialException, OSError) as e:
-            self._port.is_using = False  # as in `request`: the next transaction reports its own error
-            raise ArmError(f"servo bus {self.ep}: sync read: {e}") from None
+            raise self._lost("sync read", e) from None
         t_ns = self.clock()
         self._count(result)
         if result != COMM_SUCCESS:
@@ -347,8 +352,7 @@ class ArmClient:
         try:
             result = w.txPacket()
         except (serial.SerialException, OSError) as e:
-            self._port.is_using = False
-            raise ArmError(f"servo bus {self.ep}: sync write: {e}") from None
+            raise self._lost("sync write", e) from None
         self._count(result)
         if result != COMM_SUCCESS:
             raise ArmError(f"servo bus {self.ep}: sync write: {self._ph.getTxRxResult(result)}")

@@ -72,7 +72,7 @@ def test_the_devices_give_their_references_frames(spec):
         assert close(fast.step(v, k * DT), slow.step(v, k * DT)), f"step {k}"
         assert close(fast.autopilot_rate, slow.autopilot_rate), f"step {k}"
     assert fast.mocap.captured == slow.mocap.captured and fast.mocap.dropped == slow.mocap.dropped
-    assert bool(fast._ft_state["ft_tared"]) == slow.ft.tared
+    assert bool(fast._state["ft_tared"]) == slow.ft.tared
 
 
 def test_a_wrong_step_is_seen():
