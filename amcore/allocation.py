@@ -24,9 +24,12 @@ ControlAllocationPseudoInverse and ControlAllocationSequentialDesaturation (MC_A
 Torque mode (the companion's thrust and body torque) and the emulated PX4 (attitude mode)
 both call `Allocation.allocate`; torque mode converts its physical request with the scales.
 Steps 1 and 2 are set-up (numpy, here); step 3, per command, is `amcore.allocation_kernels`
-(numba), loaded at the first allocation, so that the modules that only read the scales (the
-config loader's PX4 gains, the envelope's set-up) do not load numba. Its readable reference,
-the steps above in plain Python, is tests/amcore/reference_allocation.py.
+(numba), loaded at the first allocation (or at `kernel_constants`), so that the modules that
+only read the scales (the config loader's PX4 gains, the envelope's set-up) do not load
+numba. The kernel writes a named record (`allocation_kernels.result_dtype`); `read_result`
+turns one into the `AllocationResult` and the rotor thrusts, for `allocate_thrusts` and for a
+caller that ran the kernel itself. Step 3's readable reference, the steps above in plain
+Python, is tests/amcore/reference_allocation.py.
 """
 from __future__ import annotations
 
@@ -123,15 +126,24 @@ class Allocation:
         self.out_max = 1.0
         self.rotor_thrust_max_n = tuple(self.f_max.tolist())  # per rotor [N]
         self._inv_scale = (scale[0], scale[1], scale[2], scale[5])
-        self._kernel = None  # amcore.allocation_kernels.allocate and its constants, at the first allocation
-        self._result = np.zeros(2 * self.count + 9)
+        self._kernel = None  # amcore.allocation_kernels.allocate, its constants and result, at the first allocation
+        self._read = None  # the result record array `read_result` read last, and its fields' views
+
+    def kernel_constants(self) -> np.ndarray:
+        """The constants record of `amcore.allocation_kernels.allocate` for this rotor table
+        (`allocation_kernels.constants_dtype(count)`, in an array of one), loading the kernel
+        module at the first call (numba: the pure modules that only read the scales do not)."""
+        if self._kernel is None:
+            self._load_kernel()
+        return self._c
 
     def _load_kernel(self) -> None:
         from . import allocation_kernels
 
         self._c = allocation_kernels.constants(tuple(map(tuple, self.mix.T.tolist())), self.out_min,
                                                tuple(map(tuple, self.effectiveness_normalized.tolist())),
-                                               self.rotor_thrust_max_n)
+                                               self.rotor_thrust_max_n, self.out_max, WEAK_EFFECTIVENESS, YAW_MARGIN)
+        self._result = allocation_kernels.new_result(self.count)
         self._kernel = allocation_kernels.allocate
 
     def allocate(self, roll: float, pitch: float, yaw: float, thrust: float) -> AllocationResult:
@@ -144,16 +156,32 @@ class Allocation:
         rotor's most thrust)."""
         if self._kernel is None:
             self._load_kernel()
-        self._kernel(self._c, roll, pitch, yaw, thrust, self.out_max, WEAK_EFFECTIVENESS, YAW_MARGIN, self._result)
-        v, n = self._result.tolist(), self.count
-        thrusts = tuple(v[n + 9:])
-        if v[n + 8] == 0.0:
-            return frozen_instance(AllocationResult, outputs=tuple(v[:n]), allocated=(roll, pitch, yaw, thrust),
+        self._kernel(self._c, roll, pitch, yaw, thrust, self._result)
+        return self.read_result(self._result, roll, pitch, yaw, thrust)
+
+    def read_result(self, result: np.ndarray, roll: float, pitch: float, yaw: float,
+                    thrust: float) -> tuple[AllocationResult, tuple[float, ...]]:
+        """The allocation and the rotor thrusts [N] in a result record
+        (`allocation_kernels.result_dtype(count)`, in an array of one) that
+        `allocation_kernels.allocate` wrote for the normalized request (roll, pitch, yaw,
+        thrust), without running it again: where it did not desaturate, the request is what
+        was allocated. The fields are read through views made at the first read of an array
+        and kept for the next reads of that array (a field's view costs ~0.1 us); ValueError
+        for a record of another rotor count."""
+        if self._read is None or self._read[0] is not result:
+            if result.shape != (1,) or result.dtype.names is None or result.dtype["outputs"].shape != (self.count,):
+                raise ValueError(f"not a result record of {self.count} rotors: {result.dtype} {result.shape}")
+            self._read = (result, result["outputs"][0], result["allocated"][0], result["unallocated"][0],
+                          result["desaturated"], result["thrusts_n"][0])
+        _, outputs, allocated, unallocated, desaturated, thrusts_n = self._read
+        out, thrusts = tuple(outputs.tolist()), tuple(thrusts_n.tolist())
+        if desaturated.item() == 0.0:
+            return frozen_instance(AllocationResult, outputs=out, allocated=(roll, pitch, yaw, thrust),
                                    unallocated=_NONE_UNALLOCATED, saturated=False, saturated_axes=_NO_AXES), thrusts
-        unallocated = tuple(v[n + 4:n + 8])
-        axes = tuple([abs(u) > SATURATION_TOL for u in unallocated])
-        return frozen_instance(AllocationResult, outputs=tuple(v[:n]), allocated=tuple(v[n:n + 4]),
-                               unallocated=unallocated, saturated=any(axes), saturated_axes=axes), thrusts
+        u = tuple(unallocated.tolist())
+        axes = tuple([abs(x) > SATURATION_TOL for x in u])
+        return frozen_instance(AllocationResult, outputs=out, allocated=tuple(allocated.tolist()),
+                               unallocated=u, saturated=any(axes), saturated_axes=axes), thrusts
 
     # ------------------------------------------------------------------ physical units
     def normalized(self, thrust_n: float, tau_B_nm) -> tuple[float, float, float, float]:

@@ -4,24 +4,52 @@ ControlAllocationSequentialDesaturation (amcore.allocation's docstring lists the
 readable reference is tests/amcore/reference_allocation.py; tests/amcore/test_allocation_kernels.py
 compares the two.
 
-The rotor table's constants travel in one array (`constants`: the mix's roll, pitch, yaw and
-thrust columns, each rotor's least output, the normalized effectiveness rows, each rotor's
-most thrust); `allocate` writes the outputs, the allocated and the unallocated control,
-whether it desaturated and the rotor thrusts into one array. `_min` and `_max` keep their
-first argument on ties, as Python's min and max do. Imported at an `Allocation`'s first
-allocation: the pure modules that only read its scales do not load numba. numba's
-cache keys each kernel on its own and its callees' files (amcore.jit).
+The rotor table's constants and the result travel in two numpy records, their fields named
+(numba reads and writes them by name), each in an array of one, as simulator.fc_kernels'
+`STATE` and `PARAMS`. Their subarrays are a rotor count long, so each count has its own
+dtypes (`constants_dtype`, `result_dtype`, made once per count) and numba compiles each
+kernel once per count. The constants (`constants`): the mix's roll, pitch, yaw and thrust
+columns, each rotor's least output, the normalized effectiveness rows, each rotor's most
+thrust, the most output, the effectiveness computeDesaturationGain ignores and yaw's margin
+(scalars carried in the record: a call unboxes three floats fewer). The result
+(`new_result`), which `allocate` writes: the outputs, the allocated and the unallocated
+control, whether it desaturated, the rotor thrusts; `amcore.allocation.Allocation.read_result`
+reads it. `_min` and `_max` keep their first argument on ties, as Python's min and max do.
+Imported at an `Allocation`'s first allocation: the pure modules that only read its scales do
+not load numba. numba's cache keys each kernel on its own and its callees' files (amcore.jit).
 """
 from __future__ import annotations
+
+import functools
 
 import numpy as np
 
 from .jit import kernel
 
-# rows of the constants array (each `count` long): the mix's columns, the least outputs, the
-# normalized effectiveness rows of roll, pitch, yaw and thrust, each rotor's most thrust [N]
-ROLL, PITCH, YAW, THRUST, OUT_MIN, EFF, F_MAX = 0, 1, 2, 3, 4, 5, 9
-N_ROWS = 10
+
+@functools.lru_cache(maxsize=None)
+def constants_dtype(count: int) -> np.dtype:
+    """The constants record of `count` rotors: the mix's columns (`roll`, `pitch`, `yaw`,
+    `thrust`: outputs per unit normalized command), each rotor's least output `out_min`, the
+    normalized effectiveness rows of roll, pitch, yaw and thrust (`effectiveness`, (4, count):
+    normalized control per unit output), each rotor's most thrust `thrust_max_n` [N], the
+    most output `out_max`, the effectiveness below which computeDesaturationGain ignores a
+    rotor (`weak`) and yaw's room above full output (`yaw_margin`, a fraction of the range)."""
+    rotors = (np.float64, (count,))
+    return np.dtype([("roll", *rotors), ("pitch", *rotors), ("yaw", *rotors), ("thrust", *rotors),
+                     ("out_min", *rotors), ("effectiveness", np.float64, (4, count)), ("thrust_max_n", *rotors),
+                     ("out_max", np.float64), ("weak", np.float64), ("yaw_margin", np.float64)])
+
+
+@functools.lru_cache(maxsize=None)
+def result_dtype(count: int) -> np.dtype:
+    """The result record of `count` rotors: the `outputs` (count,), the `allocated` and the
+    `unallocated` control (4,: roll, pitch, yaw, thrust, normalized), `desaturated` (1.0 if it
+    desaturated, else 0.0: the request is met exactly and the two middle fields are left as
+    they were) and the rotor thrusts `thrusts_n` [N] (count,)."""
+    rotors = (np.float64, (count,))
+    return np.dtype([("outputs", *rotors), ("allocated", np.float64, (4,)), ("unallocated", np.float64, (4,)),
+                     ("desaturated", np.float64), ("thrusts_n", *rotors)])
 
 
 @kernel
@@ -65,63 +93,77 @@ def desaturate(out, v, out_min, hi, weak, thrust_down_only):
 
 
 @kernel
-def mix_and_desaturate(c, roll, pitch, yaw, thrust, hi, weak, yaw_margin, result):
-    """`allocate` up to the rotor thrusts: the outputs, the allocated and the unallocated
-    control, whether it desaturated."""
-    n = c.shape[1]
-    r, p, y, t, lo = c[ROLL], c[PITCH], c[YAW], c[THRUST], c[OUT_MIN]
+def mix_and_desaturate(c, roll, pitch, yaw, thrust, r):
+    """`allocate` up to the rotor thrusts, with the constants record c into the result record
+    r: the outputs, the allocated and the unallocated control, whether it desaturated."""
+    lo, hi, weak = c.out_min, c.out_max, c.weak
+    n = lo.shape[0]
     out = np.empty(n)
     inside = True
     for i in range(n):
-        out[i] = roll * r[i] + pitch * p[i] + thrust * t[i]
-        full = out[i] + yaw * y[i]
-        result[i] = full
+        out[i] = roll * c.roll[i] + pitch * c.pitch[i] + thrust * c.thrust[i]
+        full = out[i] + yaw * c.yaw[i]
+        r.outputs[i] = full
         if not (out[i] >= lo[i] and out[i] <= hi and full >= lo[i] and full <= hi):
             inside = False
     if inside:  # inside the limits with and without yaw: every desaturation gain below is zero
-        result[n + 8] = 0.0
+        r.desaturated = 0.0
         return
-    desaturate(out, t, lo, hi, weak, True)
-    desaturate(out, r, lo, hi, weak, False)
-    desaturate(out, p, lo, hi, weak, False)
+    desaturate(out, c.thrust, lo, hi, weak, True)
+    desaturate(out, c.roll, lo, hi, weak, False)
+    desaturate(out, c.pitch, lo, hi, weak, False)
     for i in range(n):
-        out[i] = out[i] + yaw * y[i]  # mixYaw
+        out[i] = out[i] + yaw * c.yaw[i]  # mixYaw
     lo_min = lo[0]
     for i in range(1, n):
         lo_min = _min(lo_min, lo[i])
-    desaturate(out, y, lo, hi + (hi - lo_min) * yaw_margin, weak, False)
-    desaturate(out, t, lo, hi, weak, True)
+    desaturate(out, c.yaw, lo, hi + (hi - lo_min) * c.yaw_margin, weak, False)
+    desaturate(out, c.thrust, lo, hi, weak, True)
     for i in range(n):
-        result[i] = _min(_max(out[i], lo[i]), hi)
+        r.outputs[i] = _min(_max(out[i], lo[i]), hi)
     request = (roll, pitch, yaw, thrust)
     for a in range(4):
         s = 0.0
         for i in range(n):
-            s += c[EFF + a, i] * result[i]
-        result[n + a] = s
-        result[n + 4 + a] = request[a] - s
-    result[n + 8] = 1.0
+            s += c.effectiveness[a, i] * r.outputs[i]
+        r.allocated[a] = s
+        r.unallocated[a] = request[a] - s
+    r.desaturated = 1.0
 
 
 @kernel
-def rotor_thrusts(c, result):
-    """Each rotor's thrust [N]: its output times its most thrust, after the outputs."""
-    n = c.shape[1]
-    for i in range(n):
-        result[n + 9 + i] = result[i] * c[F_MAX, i]
+def rotor_thrusts(c, r):
+    """Each rotor's thrust [N] into the result record r: its output times its most thrust,
+    after the outputs."""
+    for i in range(r.outputs.shape[0]):
+        r.thrusts_n[i] = r.outputs[i] * c.thrust_max_n[i]
 
 
 @kernel
-def allocate(c, roll, pitch, yaw, thrust, hi, weak, yaw_margin, result):
+def allocate(constants, roll, pitch, yaw, thrust, result):
     """Outputs for normalized (roll, pitch, yaw) torque and thrust (mixAirmodeDisabled) into
-    result: the outputs (count), the allocated and the unallocated control (4 each), 1.0 if it
-    desaturated (else the request is met exactly and the two middle parts are unset), then
-    the rotor thrusts [N] the outputs command (count; `rotor_thrusts`)."""
-    mix_and_desaturate(c, roll, pitch, yaw, thrust, hi, weak, yaw_margin, result)
-    rotor_thrusts(c, result)
+    result's record (`result_dtype`), with the constants (`constants_dtype`), each an array
+    of one record (numba takes an array from Python at a third of a bare record's cost): the
+    outputs, the allocated and the unallocated control, `desaturated` (1.0 if it desaturated;
+    else 0.0, the request met exactly and the two middle fields unset), then the rotor
+    thrusts [N] the outputs command (`rotor_thrusts`)."""
+    c, r = constants[0], result[0]
+    mix_and_desaturate(c, roll, pitch, yaw, thrust, r)
+    rotor_thrusts(c, r)
 
 
-def constants(mix_columns, out_min, effectiveness_rows, thrust_max_n) -> np.ndarray:
-    """The (N_ROWS, count) constants array of `allocate`."""
-    return np.vstack([np.array(mix_columns, dtype=float), np.array(out_min, dtype=float)[None, :],
-                      np.array(effectiveness_rows, dtype=float), np.array(thrust_max_n, dtype=float)[None, :]])
+def new_result(count: int) -> np.ndarray:
+    """A zero result record (`result_dtype(count)`), in an array of one."""
+    return np.zeros(1, result_dtype(count))
+
+
+def constants(mix_columns, out_min, effectiveness_rows, thrust_max_n, out_max, weak, yaw_margin) -> np.ndarray:
+    """The constants record of `allocate` (`constants_dtype`), in an array of one: mix_columns
+    the mix's (roll, pitch, yaw, thrust) columns, each a rotor count long."""
+    roll, pitch, yaw, thrust = (np.array(col, dtype=float) for col in mix_columns)
+    a = np.zeros(1, constants_dtype(roll.shape[0]))
+    c = a[0]
+    c["roll"], c["pitch"], c["yaw"], c["thrust"] = roll, pitch, yaw, thrust
+    c["out_min"], c["effectiveness"], c["thrust_max_n"] = out_min, effectiveness_rows, thrust_max_n
+    c["out_max"], c["weak"], c["yaw_margin"] = out_max, weak, yaw_margin
+    return a

@@ -32,7 +32,6 @@ import time
 
 import numpy as np
 
-from amcore.allocation import WEAK_EFFECTIVENESS, YAW_MARGIN
 from amcore.estimator import estimator_update
 from amlink.types import AttitudeSetpoint, AttitudeTarget
 from benchmarks.bench_core import spec_for
@@ -103,7 +102,7 @@ def run_stripped(core: SitlCore, steps: int) -> float:
             fc._rate_loops(fc._p, fc._s, (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), att.quat_wxyz, att.rates_rad_s,
                            att.thrust_normalized, (0.0, 0.0, 0.0, 0.0), False, fc._out)
             o, a = fc._out, fc.allocation
-            a._kernel(a._c, o[3], o[4], o[5], o[6], a.out_max, WEAK_EFFECTIVENESS, YAW_MARGIN, a._result)
+            a._kernel(a._c, o[3], o[4], o[5], o[6], a._result)
             pb.applyExternalForce(body, -1, (0.0, 0.0, thrust_n), (0.0, 0.0, 0.0), pb.LINK_FRAME, physicsClientId=c)
             pb.applyExternalTorque(body, -1, (0.0, 0.0, 0.0), pb.LINK_FRAME, physicsClientId=c)
             pb.setJointMotorControlArray(body, arm, pb.TORQUE_CONTROL, forces=[0.0] * len(arm), physicsClientId=c)
