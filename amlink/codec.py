@@ -38,6 +38,7 @@ import math
 from dataclasses import dataclass
 
 from amlink import wire
+from amlink.px4 import q_enu_flu_to_ned_frd, q_ned_frd_to_enu_flu
 from amlink.types import (
     MAX_JOINTS,
     AttitudeSetpoint,
@@ -56,7 +57,6 @@ ODOM_FRAME_ID = mav.MAV_FRAME_LOCAL_ENU
 ODOM_CHILD_FRAME_ID = mav.MAV_FRAME_RESERVED_13  # formerly MAV_FRAME_BODY_FLU
 _UNKNOWN_COV = [math.nan] + [0.0] * 20  # MAVLink: NaN first element = unknown
 _ZEROS = [0.0] * MAX_JOINTS
-_H = math.sqrt(0.5)
 
 
 class NonFiniteValueError(CodecError):
@@ -98,23 +98,6 @@ def _usec(time_s: float) -> int:
     return round(time_s * 1e6)
 
 
-# -- attitude frame conversion (ENU <- FLU)  <->  (NED <- FRD) ------------------
-
-
-def enu_flu_to_ned_frd(q_wxyz) -> tuple[float, float, float, float]:
-    """Map q_ENU_FLU (W <- B) to q_NED_FRD, the convention of SET_ATTITUDE_TARGET.
-
-    q_NED_FRD = -(q_NED_ENU * q_ENU_FLU * q_FLU_FRD) with q_NED_ENU = (0, h, h, 0),
-    q_FLU_FRD = (0, 1, 0, 0), h = sqrt(1/2); the overall sign (same rotation) is
-    dropped so the map is linear, orthogonal and its own inverse.
-    """
-    w, x, y, z = q_wxyz
-    return (_H * (w + z), _H * (x + y), _H * (x - y), _H * (w - z))
-
-
-ned_frd_to_enu_flu = enu_flu_to_ned_frd  # the map is an involution
-
-
 # -- message builders ---------------------------------------------------------
 
 
@@ -151,7 +134,7 @@ def attitude_report_message(att: AttitudeTarget, time_boot_ms: int = 0) -> objec
     quat, r = att.quat_wxyz.tolist(), att.rates_rad_s.tolist()
     if not all_finite([*quat, *r, att.thrust_normalized]):
         raise EncodeError(f"non-finite value in AttitudeTarget step {att.step}")
-    return mav.MAVLink_attitude_target_message(time_boot_ms & 0xFFFFFFFF, 0, list(enu_flu_to_ned_frd(quat)),
+    return mav.MAVLink_attitude_target_message(time_boot_ms & 0xFFFFFFFF, 0, list(q_enu_flu_to_ned_frd(quat)),
                                                r[0], -r[1], -r[2], att.thrust_normalized)  # FLU -> FRD rates
 
 
@@ -176,7 +159,7 @@ def setpoint_messages(
         # FLU -> FRD body rates: (p, q, r) -> (p, -q, -r)
         out.append(mav.MAVLink_set_attitude_target_message(
             time_boot_ms & 0xFFFFFFFF, target_system, target_component, 0,
-            list(enu_flu_to_ned_frd(quat)), r[0], -r[1], -r[2], attitude.thrust_normalized,
+            list(q_enu_flu_to_ned_frd(quat)), r[0], -r[1], -r[2], attitude.thrust_normalized,
         ))  # fmt: skip
     out.append(mav.MAVLink_am_torque_setpoint_message(
         sp.step, sp.thrust_n, tau_B, len(tau_q), _pad(tau_q), int(sp.flags),
@@ -206,7 +189,7 @@ def attitude_setpoint_messages(
     return [
         mav.MAVLink_set_attitude_target_message(
             time_boot_ms & 0xFFFFFFFF, target_system, target_component, 0,
-            list(enu_flu_to_ned_frd(quat)), r[0], -r[1], -r[2], att.thrust_normalized,
+            list(q_enu_flu_to_ned_frd(quat)), r[0], -r[1], -r[2], att.thrust_normalized,
         ),  # FLU -> FRD body rates
         mav.MAVLink_am_joint_torque_setpoint_message(sp.step, len(tau_q), _pad(tau_q), int(sp.flags)),
     ]  # fmt: skip
@@ -290,7 +273,7 @@ def attitude_report_from_message(msg, step: int) -> AttitudeTarget:
     """The ATTITUDE_TARGET of a sensor batch, for the batch's step (the message carries none)."""
     vals = (*msg.q, msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate, msg.thrust)
     _check_finite("ATTITUDE_TARGET", "q/rates/thrust", vals)
-    return AttitudeTarget(step, ned_frd_to_enu_flu(vals[0:4]), (vals[4], -vals[5], -vals[6]), vals[7])
+    return AttitudeTarget(step, q_ned_frd_to_enu_flu(vals[0:4]), (vals[4], -vals[5], -vals[6]), vals[7])
 
 
 def setpoint_from_message(msg) -> TorqueSetpoint:
@@ -319,7 +302,7 @@ def attitude_from_message(msg, step: int) -> AttitudeTarget:
     vals = (*msg.q, msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate, msg.thrust)
     _check_finite("SET_ATTITUDE_TARGET", "q/rates/thrust", vals)
     rates = (vals[4], -vals[5], -vals[6])  # FRD -> FLU
-    return AttitudeTarget(step, ned_frd_to_enu_flu(vals[0:4]), rates, vals[7])
+    return AttitudeTarget(step, q_ned_frd_to_enu_flu(vals[0:4]), rates, vals[7])
 
 
 # -- stateful assemblers (one per connection) ---------------------------------

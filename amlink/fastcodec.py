@@ -40,9 +40,9 @@ from amlink.codec import (
     _usec,
     attitude_setpoint_values,
     all_finite,
-    enu_flu_to_ned_frd,
+    q_enu_flu_to_ned_frd,
     mav,
-    ned_frd_to_enu_flu,
+    q_ned_frd_to_enu_flu,
 )
 from amlink.layout import MessageLayout
 from amlink.types import (
@@ -166,7 +166,7 @@ def attitude_report_payload(att: AttitudeTarget, time_boot_ms: int = 0) -> tuple
     if not all_finite([*quat, *r, att.thrust_normalized]):
         raise EncodeError(f"non-finite value in AttitudeTarget step {att.step}")
     try:  # FLU -> FRD body rates: (p, q, r) -> (p, -q, -r)
-        return _ATTITUDE_REPORT_ID, _pack_report(time_boot_ms & 0xFFFFFFFF, *enu_flu_to_ned_frd(quat), r[0], -r[1],
+        return _ATTITUDE_REPORT_ID, _pack_report(time_boot_ms & 0xFFFFFFFF, *q_enu_flu_to_ned_frd(quat), r[0], -r[1],
                                                  -r[2], att.thrust_normalized, 0)  # fmt: skip
     except (struct.error, OverflowError) as exc:
         raise EncodeError(f"cannot pack ATTITUDE_TARGET: {exc}") from exc
@@ -176,7 +176,7 @@ def attitude_report_from_fields(fields: tuple, step: int) -> AttitudeTarget:
     """As :func:`amlink.codec.attitude_report_from_message`; ``fields`` = (q[4], roll, pitch, yaw rates, thrust)."""
     if not all_finite(fields):
         raise NonFiniteValueError("ATTITUDE_TARGET", "q/rates/thrust")
-    return attitude_target_from_wire(step, (*ned_frd_to_enu_flu(fields[0:4]), fields[4], -fields[5], -fields[6],
+    return attitude_target_from_wire(step, (*q_ned_frd_to_enu_flu(fields[0:4]), fields[4], -fields[5], -fields[6],
                                             fields[7]))  # fmt: skip
 
 
@@ -198,7 +198,7 @@ def setpoint_payloads(
         raise EncodeError(f"non-finite value in AttitudeTarget step {attitude.step}")
     # FLU -> FRD body rates: (p, q, r) -> (p, -q, -r)
     try:
-        att = _pack_attitude(time_boot_ms & 0xFFFFFFFF, *enu_flu_to_ned_frd(quat), r[0], -r[1], -r[2],
+        att = _pack_attitude(time_boot_ms & 0xFFFFFFFF, *q_enu_flu_to_ned_frd(quat), r[0], -r[1], -r[2],
                              attitude.thrust_normalized, target_system, target_component)  # fmt: skip
     except (struct.error, OverflowError) as exc:
         raise EncodeError(f"cannot pack SET_ATTITUDE_TARGET: {exc}") from exc
@@ -212,7 +212,7 @@ def attitude_setpoint_payloads(
     att = sp.attitude
     quat, r, tau_q = attitude_setpoint_values(sp)
     try:  # FLU -> FRD body rates: (p, q, r) -> (p, -q, -r)
-        payload = _pack_attitude(time_boot_ms & 0xFFFFFFFF, *enu_flu_to_ned_frd(quat), r[0], -r[1], -r[2],
+        payload = _pack_attitude(time_boot_ms & 0xFFFFFFFF, *q_enu_flu_to_ned_frd(quat), r[0], -r[1], -r[2],
                                  att.thrust_normalized, target_system, target_component)  # fmt: skip
     except (struct.error, OverflowError) as exc:
         raise EncodeError(f"cannot pack SET_ATTITUDE_TARGET: {exc}") from exc
@@ -291,7 +291,7 @@ def attitude_from_fields(fields: tuple, step: int) -> AttitudeTarget:
     if not all_finite(fields):
         raise NonFiniteValueError("SET_ATTITUDE_TARGET", "q/rates/thrust")
     # FRD -> FLU rates; the quaternion map is an involution
-    return attitude_target_from_wire(step, (*ned_frd_to_enu_flu(fields[0:4]), fields[4], -fields[5], -fields[6],
+    return attitude_target_from_wire(step, (*q_ned_frd_to_enu_flu(fields[0:4]), fields[4], -fields[5], -fields[6],
                                             fields[7]))  # fmt: skip
 
 

@@ -84,7 +84,3 @@ def is_subscribe(data: bytes) -> bool:
     return len(data) == SUBSCRIBE_SIZE and data[:4] == MAGIC_SUBSCRIBE and data[4] == VERSION
 
 
-def yaw_of(q_wxyz) -> float:
-    """The yaw about z_W [rad] of attitude q (w, x, y, z): atan2 of R's (1,0), (0,0) entries."""
-    w, x, y, z = q_wxyz
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))

@@ -106,9 +106,10 @@ frd_to_flu = flu_to_frd
 
 
 def q_enu_flu_to_ned_frd(q_wxyz) -> tuple[float, float, float, float]:
-    """q_ENU_FLU (world <- body, w x y z) as q_NED_FRD: q_NED_ENU * q * q_FLU_FRD with
-    q_NED_ENU = (0, h, h, 0), q_FLU_FRD = (0, 1, 0, 0), h = sqrt(1/2), sign dropped (the same
-    rotation), so the map is linear and its own inverse (as amlink.codec.enu_flu_to_ned_frd)."""
+    """q_ENU_FLU (world <- body, w x y z) as q_NED_FRD, the convention of SET_ATTITUDE_TARGET,
+    ATTITUDE_QUATERNION and ODOMETRY: q_NED_ENU * q * q_FLU_FRD with q_NED_ENU = (0, h, h, 0),
+    q_FLU_FRD = (0, 1, 0, 0), h = sqrt(1/2), sign dropped (the same rotation), so the map is
+    linear, orthogonal and its own inverse (q_ned_frd_to_enu_flu is the same function)."""
     w, x, y, z = q_wxyz
     return (_H * (w + z), _H * (x + y), _H * (x - y), _H * (w - z))
 

@@ -31,6 +31,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 
+from amcore.so3 import quat_wxyz_rotate_inverse
 from amlink import px4
 from amlink.types import AttitudeTarget
 
@@ -171,16 +172,6 @@ def _unit(name: str, q) -> Quat:
     return tuple(x / n for x in q)
 
 
-def rotate_inverse(q_wxyz: Quat, v: Vec3) -> Vec3:
-    """R(q)^T v: a world vector in the body frame of the unit quaternion q (world <- body)."""
-    w, x, y, z = q_wxyz
-    vx, vy, vz = v
-    # R^T v = v + 2 w (v x u) + 2 u x (u x v)... written as the rotation by the conjugate (w, -u)
-    ux, uy, uz = -x, -y, -z
-    tx, ty, tz = 2.0 * (uy * vz - uz * vy), 2.0 * (uz * vx - ux * vz), 2.0 * (ux * vy - uy * vx)
-    return (vx + w * tx + (uy * tz - uz * ty), vy + w * ty + (uz * tx - ux * tz), vz + w * tz + (ux * ty - uy * tx))
-
-
 def odometry_of(m) -> Odometry:
     """ODOMETRY (PX4's frames, module docstring) as an :class:`Odometry` in ENU / FLU."""
     name = "ODOMETRY"
@@ -197,7 +188,7 @@ def odometry_of(m) -> Odometry:
     if m.child_frame_id == MAV_FRAME_BODY_FRD:
         v_B = px4.frd_to_flu(v)
     else:
-        v_B = rotate_inverse(q_WB, px4.ned_to_enu(v))
+        v_B = quat_wxyz_rotate_inverse(q_WB, px4.ned_to_enu(v))
     return Odometry(int(m.time_usec), px4.ned_to_enu(p), q_WB, v_B, px4.frd_to_flu(w),
                     int(m.reset_counter), int(m.quality), int(m.child_frame_id))
 

@@ -5,13 +5,11 @@ Both run every step; they work on Python floats and build each array in one nump
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from amcore.control import StepResult
 from amcore.model import AmState
-from amcore.so3 import quat_wxyz_to_R, quat_xyzw_of_R
+from amcore.so3 import quat_wxyz_normalized, quat_wxyz_to_R, quat_xyzw_of_R
 from amlink.types import (MAX_JOINTS, AttitudeSetpoint, AttitudeTarget, SensorFrame, TorqueSetpoint,
                           attitude_setpoint_from_wire, frame_values, attitude_target_from_wire, torque_setpoint_from_wire)
 
@@ -24,9 +22,7 @@ def state_from_frame(frame: SensorFrame) -> AmState:
     views of one copy of the frame's values (`amlink.types.frame_values`).
     """
     a = np.array(frame_values(frame))  # one writable copy; the state's vectors are views of it
-    w, x, y, z = a[3:7].tolist()
-    n = math.sqrt(w * w + x * x + y * y + z * z)
-    w, x, y, z = w / n, x / n, y / n, z / n
+    w, x, y, z = quat_wxyz_normalized(a[3:7].tolist())
     n_q = frame.q.shape[0]
     j = 13 + n_q
     # positional (p_WB, R_WB, v_B, w_B, q, qdot, quat_xyzw): matching keywords costs more than the rest

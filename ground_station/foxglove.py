@@ -17,7 +17,6 @@ such a literal construction).
 """
 from __future__ import annotations
 
-import math
 from typing import Sequence
 
 from foxglove_schemas_protobuf.ArrowPrimitive_pb2 import ArrowPrimitive
@@ -120,20 +119,6 @@ def log(t_s: float, level: str, message: str, name: str) -> Log:
 
 def color(r: float, g: float, b: float, a: float = 1.0) -> Color:
     return Color(r=r, g=g, b=b, a=a)
-
-
-def quat_x_to(d: Sequence[float]) -> list[float]:
-    """(w, x, y, z) of the shortest rotation taking +x to the direction d (arrows point along +x)."""
-    n = math.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
-    if n == 0.0:
-        return [1.0, 0.0, 0.0, 0.0]
-    ux, uy, uz = d[0] / n, d[1] / n, d[2] / n
-    w = 1.0 + ux  # q = (1 + x.u, x cross u) normalised
-    if w < 1e-9:  # opposite to +x: half turn about z
-        return [0.0, 0.0, 0.0, 1.0]
-    qx, qy, qz = 0.0, -uz, uy
-    m = math.sqrt(w * w + qx * qx + qy * qy + qz * qz)
-    return [w / m, qx / m, qy / m, qz / m]
 
 
 def entity(t_s: float, eid: str, frame_id: str = "world", **primitives) -> SceneEntity:

@@ -20,6 +20,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from amcore import cliargs  # noqa: E402
+from amcore.so3 import unit_quat_wxyz_to_R  # noqa: E402
 
 from .mcap_io import NotAnMcapError, read_log  # noqa: E402
 
@@ -32,13 +33,6 @@ def _at(samples: list[tuple[float, dict]], t: float) -> dict:
             break
         best = d
     return best
-
-
-def _rot(q_wxyz) -> np.ndarray:
-    w, x, y, z = q_wxyz
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
 def _box(ax, p, R, size, color) -> None:
@@ -70,7 +64,7 @@ def render(log_path: Path, t: float, out: Path, shape: str = "box", size=(0.2, 0
     obj = log.decoded("/sim/object/state")
     if obj:
         o = _at(obj, t)
-        p, R = np.asarray(o["p_WO"]), _rot(o["q_WO"])
+        p, R = np.asarray(o["p_WO"]), unit_quat_wxyz_to_R(o["q_WO"])
         if shape == "cylinder":
             _cylinder(ax, p, R, radius, height, "tab:brown")
         else:
@@ -81,7 +75,7 @@ def render(log_path: Path, t: float, out: Path, shape: str = "box", size=(0.2, 0
         base, ee = np.asarray(d["p_WB"]), np.asarray(d["p_WE"])
         joints = np.asarray(d.get("p_W_joints", [])).reshape(-1, 3)
         arm = np.vstack([base, *joints, ee])
-        R = _rot(d["q_WB"])
+        R = unit_quat_wxyz_to_R(d["q_WB"])
         a = np.linspace(0, 2 * np.pi, 32)
         disc = np.stack([0.2 * np.cos(a), 0.2 * np.sin(a), np.zeros_like(a)], axis=1) @ R.T + base
         ax.plot(disc[:, 0], disc[:, 1], disc[:, 2], color="tab:blue", lw=2)

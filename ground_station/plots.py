@@ -15,6 +15,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from amcore.so3 import euler_zyx_of_quats_wxyz  # noqa: E402
+
 from .review import RunData, phase_windows  # noqa: E402
 
 PHASE_COLORS = {"approach": "#c8ecc8", "grasp": "#fff2b0", "hover": "#dddddd"}
@@ -25,11 +27,9 @@ def rpy_zyx(q: np.ndarray) -> np.ndarray:
     """(N,4) (w,x,y,z) -> (N,3) roll, pitch, yaw [rad] (R = Rz(yaw) Ry(pitch) Rx(roll)), yaw unwrapped."""
     if len(q) == 0:
         return np.zeros((0, 3))
-    w, x, y, z = q.T
-    roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
-    yaw = np.unwrap(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
-    return np.stack([roll, pitch, yaw], axis=1)
+    rpy = euler_zyx_of_quats_wxyz(q)
+    rpy[:, 2] = np.unwrap(rpy[:, 2])
+    return rpy
 
 
 def _shade(ax, run: RunData) -> None:

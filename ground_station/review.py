@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from amcore.so3 import quats_wxyz_to_R
 
 from . import contract as c
 from .mcap_io import LogData
@@ -151,14 +152,6 @@ def _final_max(x: np.ndarray) -> dict | None:
     return {"final": float(x[-1]), "max": float(np.max(x))}
 
 
-def _quat_R(q: np.ndarray) -> np.ndarray:
-    """(N,4) (w,x,y,z) -> (N,3,3)."""
-    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
-    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-                     np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-                     np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], -2)
-
-
 def nearest_index(t_ref: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Index into the sorted t_ref of the sample nearest to each t."""
     j = np.clip(np.searchsorted(t_ref, t), 0, len(t_ref) - 1)
@@ -172,7 +165,7 @@ def ee_in_object(run: RunData, s: AmSeries) -> tuple[np.ndarray, np.ndarray]:
     if len(s.t_tf) == 0 or len(run.t_obj) == 0:
         return np.zeros(0), np.zeros((0, 3))
     i = nearest_index(run.t_obj, s.t_tf)
-    R = _quat_R(run.q_WO[i])
+    R = quats_wxyz_to_R(run.q_WO[i])
     return s.t_tf, np.einsum("nji,nj->ni", R, s.p_WE - run.p_WO[i])
 
 

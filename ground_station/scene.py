@@ -11,6 +11,7 @@ import json
 import math
 from dataclasses import dataclass, field
 
+from amcore.so3 import quat_wxyz_from_x_to
 from telemetry.binary import to_dict
 
 from . import foxglove as fg
@@ -80,7 +81,7 @@ class SceneState:
                 f = [c["normal_force_n"] * n + s for n, s in zip(c["normal_W"], c["tangential_force_W"])]
                 mag = math.sqrt(sum(v * v for v in f))
                 if mag > 1e-6:
-                    arrows.append(fg.ArrowPrimitive(pose=fg.pose(c["point_W"], fg.quat_x_to(f)),
+                    arrows.append(fg.ArrowPrimitive(pose=fg.pose(c["point_W"], quat_wxyz_from_x_to(f)),
                                                     shaft_length=0.02 * mag, shaft_diameter=0.008, head_length=0.02,
                                                     head_diameter=0.02, color=fg.color(0.9, 0.1, 0.1)))
         return fg.entity(t, f"am{sysid}", cylinders=[base], lines=[arm], cubes=[pad], texts=[label], arrows=arrows)

@@ -72,6 +72,7 @@ from amcore.allocation import Allocation
 from amcore.config import ScenarioSpec
 from amcore.mission import TAKEOFF_S
 from amcore.model import AmState, build_model
+from amcore.so3 import quat_wxyz_R_T_times, quat_wxyz_R_times, unit_quat_wxyz_to_R
 from amlink import px4
 from amlink.endpoint import Endpoint
 from amlink.impair import LinkImpairment
@@ -559,7 +560,7 @@ class FreeRun:
             values = est = w.flight_values(s)
             rate_B = tuple(values[10:13])
         p, quat, w_B = tuple(est[0:3]), tuple(est[3:7]), tuple(est[10:13])
-        v_W = _rotate(quat, est[7:10])
+        v_W = quat_wxyz_R_times(quat, est[7:10])
         q, qdot = values[13:13 + n], values[13 + n:13 + 2 * n]
         c.update(t, cm.LandInputs(throttle=ve.throttle, v_z_mps=v_W[2], v_xy_mps=math.hypot(v_W[0], v_W[1]),
                                     rate_xy_radps=math.hypot(w_B[0], w_B[1]),
@@ -617,13 +618,13 @@ class FreeRun:
         if ft is not None:  # the wrist sensor's reading (with [devices], the F/T device model's)
             ft.publish(t, est[13 + 2 * n:19 + 2 * n] if self.spec.devices.enabled else w.wrench_ee(s))
         # the IMU (ideal): body rate, and specific force R^T (a_W + g e_z) over the last step
-        v_exact = v_W if est is values else _rotate(values[3:7], values[7:10])
+        v_exact = v_W if est is values else quat_wxyz_R_times(values[3:7], values[7:10])
         v_prev = v_exact if ve.v_prev is None else ve.v_prev
         ve.v_prev = v_exact
         g = self.spec.vehicle.gravity_mps2
         a_W = ((v_exact[0] - v_prev[0]) / self.spec.dt_s, (v_exact[1] - v_prev[1]) / self.spec.dt_s,
                (v_exact[2] - v_prev[2]) / self.spec.dt_s + g)
-        accel_B = _rotate(values[3:7], a_W, inverse=True)
+        accel_B = quat_wxyz_R_T_times(values[3:7], a_W)
         return VehicleReport(time_s=t, p_W=p, quat_WB=quat, v_W=v_W, w_B=w_B, gyro_B=tuple(values[10:13]),
                              accel_B=accel_B, target=target, rates_sp_B=rates_sp)
 
@@ -769,25 +770,9 @@ class FreeRun:
                 **core.outcome.to_dict()}
 
 
-def _rotate(q, v, inverse: bool = False) -> tuple[float, float, float]:
-    """R(q) v (or R(q)^T v) for a unit quaternion q = (w, x, y, z), on Python floats."""
-    w, x, y, z = q
-    a, b, c = v
-    r00, r01, r02 = 1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)
-    r10, r11, r12 = 2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)
-    r20, r21, r22 = 2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)
-    if inverse:
-        return (r00 * a + r10 * b + r20 * c, r01 * a + r11 * b + r21 * c, r02 * a + r12 * b + r22 * c)
-    return (r00 * a + r01 * b + r02 * c, r10 * a + r11 * b + r12 * c, r20 * a + r21 * b + r22 * c)
-
-
 def _state(values, n: int) -> AmState:
     """The AmState of one vehicle's `World.flight_values` (velocities in B)."""
-    w, x, y, z = values[3:7]
-    R = np.array([[1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
-                  [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
-                  [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)]])
-    return AmState(p_WB=np.array(values[0:3]), R_WB=R, v_B=np.array(values[7:10]), w_B=np.array(values[10:13]),
+    return AmState(p_WB=np.array(values[0:3]), R_WB=unit_quat_wxyz_to_R(values[3:7]), v_B=np.array(values[7:10]), w_B=np.array(values[10:13]),
                    q=np.array(values[13:13 + n]), qdot=np.array(values[13 + n:13 + 2 * n]))
 
 

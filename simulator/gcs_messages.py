@@ -15,9 +15,9 @@ magic), not PX4.
 """
 from __future__ import annotations
 
-import math
-
-from amlink.codec import enu_flu_to_ned_frd, mav
+from amcore.so3 import euler_zyx_of_quat_wxyz, quat_wxyz_rotate
+from amlink.codec import mav
+from amlink.px4 import q_enu_flu_to_ned_frd
 
 from .fcstate import FcMode, FleetSnapshot, VehicleSnapshot
 
@@ -74,21 +74,9 @@ def sys_status(v: VehicleSnapshot):
         errors_count4=0)  # battery: unknown (the simulation has none)
 
 
-def rotate(q_wxyz, v) -> tuple[float, float, float]:
-    """q v q^*: the vector v rotated by the unit quaternion q (w, x, y, z), on Python floats."""
-    w, x, y, z = q_wxyz
-    vx, vy, vz = v
-    tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
-    return (vx + w * tx + (y * tz - z * ty), vy + w * ty + (z * tx - x * tz), vz + w * tz + (x * ty - y * tx))
-
-
 def euler_ned_frd(q_wxyz) -> tuple[float, float, float]:
     """(roll, pitch, yaw) [rad] of the FRD body against NED, from q_WB (ENU <- FLU)."""
-    w, x, y, z = enu_flu_to_ned_frd(q_wxyz)
-    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
-    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    return roll, pitch, yaw
+    return euler_zyx_of_quat_wxyz(q_enu_flu_to_ned_frd(q_wxyz))
 
 
 def attitude(v: VehicleSnapshot, t_ms: int):
@@ -100,7 +88,7 @@ def attitude(v: VehicleSnapshot, t_ms: int):
 
 def local_position_ned(v: VehicleSnapshot, t_ms: int):
     x, y, z = v.p_WB
-    vx, vy, vz = rotate(v.quat_WB_wxyz, v.v_B)  # v_W, ENU
+    vx, vy, vz = quat_wxyz_rotate(v.quat_WB_wxyz, v.v_B)  # v_W, ENU
     return mav.MAVLink_local_position_ned_message(time_boot_ms=t_ms, x=y, y=x, z=-z, vx=vy, vy=vx, vz=-vz)
 
 

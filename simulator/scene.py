@@ -27,7 +27,7 @@ from .bullet import pb
 
 from amcore.config import ObjectSpec, VehicleParams
 from amcore.model import AmState
-from amcore.so3 import R_to_quat_wxyz
+from amcore.so3 import R_to_quat_wxyz, quat_xyzw_of_wxyz
 
 ENV_GROUP = 0b01
 AM_GROUP = 0b10
@@ -40,12 +40,6 @@ TABLE_LATERAL_FRICTION = 1.0
 OBJECT_ROLLING_FRICTION = 1e-4
 OBJECT_SPINNING_FRICTION = 1e-3
 _GROUND_HALF_THICKNESS_M = 0.05  # visual slab only; the collision shape is a plane
-
-
-def quat_xyzw(R: np.ndarray) -> list[float]:
-    """PyBullet's (x, y, z, w) quaternion of a rotation matrix."""
-    w, x, y, z = R_to_quat_wxyz(np.asarray(R, dtype=float))
-    return [x, y, z, w]
 
 
 def _set_env_filter(client: int, body: int) -> None:
@@ -270,7 +264,8 @@ def load_am(client: int, vehicle: VehicleParams, friction: float) -> AmBody:
 def reset_am(client: int, am: AmBody, state: AmState) -> None:
     """Put the AM at `state` (pose of {b}, body-frame velocities, joint angles and rates)."""
     R = np.asarray(state.R_WB, dtype=float)
-    pb.resetBasePositionAndOrientation(am.body_id, list(map(float, state.p_WB)), quat_xyzw(R), physicsClientId=client)
+    quat_xyzw = quat_xyzw_of_wxyz(R_to_quat_wxyz(R))  # PyBullet's order
+    pb.resetBasePositionAndOrientation(am.body_id, list(map(float, state.p_WB)), quat_xyzw, physicsClientId=client)
     pb.resetBaseVelocity(am.body_id, list(R @ state.v_B), list(R @ state.w_B), physicsClientId=client)
     if len(state.q) != len(am.arm_joint_ids) or len(state.qdot) != len(am.arm_joint_ids):
         raise ValueError(f"state has {len(state.q)} joint angles and {len(state.qdot)} rates for "

@@ -16,12 +16,12 @@ is reproducible and the multi-process and in-process SITL see the same frames.
 """
 from __future__ import annotations
 
-import math
 from collections import deque
 
 import numpy as np
 
 from amcore.config import SensorSpec
+from amcore.so3 import quat_wxyz_boxplus
 
 _STREAM = 0x5E45  # distinguishes the sensor stream from other seeded streams of an AM
 
@@ -46,7 +46,7 @@ class SensorModel:
         e = (self.bias + self.noise_std * self.rng.standard_normal(18)).tolist()
         n = self.n
         p = [v[0] + e[0], v[1] + e[1], v[2] + e[2]]
-        quat = _rotate_body(v[3:7], e[3:6])
+        quat = quat_wxyz_boxplus(v[3:7], e[3:6])  # the attitude error in {b}
         vel = [v[7] + e[6], v[8] + e[7], v[9] + e[8]]
         w = [v[10] + e[9], v[11] + e[10], v[12] + e[11]]
         joints = v[13:13 + 2 * n]
@@ -55,18 +55,3 @@ class SensorModel:
         return [*p, *quat, *vel, *w, *joints, *wrench]
 
 
-def _rotate_body(q_wxyz, d) -> list[float]:
-    """q * exp(d / 2) as a unit quaternion (w, x, y, z) with w >= 0; d a rotation vector [rad]."""
-    a = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    if a == 0.0:
-        return list(q_wxyz)
-    k = math.sin(0.5 * a) / a
-    bw, bx, by, bz = math.cos(0.5 * a), k * d[0], k * d[1], k * d[2]
-    aw, ax, ay, az = q_wxyz
-    w = aw * bw - ax * bx - ay * by - az * bz
-    x = aw * bx + ax * bw + ay * bz - az * by
-    y = aw * by - ax * bz + ay * bw + az * bx
-    z = aw * bz + ax * by - ay * bx + az * bw
-    n = math.sqrt(w * w + x * x + y * y + z * z)
-    sgn = 1.0 if w >= 0.0 else -1.0
-    return [sgn * w / n, sgn * x / n, sgn * y / n, sgn * z / n]

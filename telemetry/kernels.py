@@ -25,7 +25,7 @@ FLAG = 2  # one bool byte: the float64 at the source is not 0 (NaN is true, as P
 @kernel
 def quaternion_wxyz(R, q):
     """q = the unit quaternion (w, x, y, z), w >= 0, of a 3x3 rotation matrix R, with exactly
-    the arithmetic of telemetry.schema.quat_wxyz (Shepperd's method), so the same bits."""
+    the arithmetic of amcore.so3.R_to_quat_wxyz_shepperd (the builders' in telemetry.schema), so the same bits."""
     a, b, c = R[0, 0], R[0, 1], R[0, 2]
     d, e, f = R[1, 0], R[1, 1], R[1, 2]
     g, h, i = R[2, 0], R[2, 1], R[2, 2]

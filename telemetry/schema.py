@@ -29,6 +29,8 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import Any, Iterator, Mapping
 
+from amcore.so3 import R_to_quat_wxyz_shepperd
+
 DEFAULT_PREFIX = "amstack"
 PHASES = ("approach", "grasp", "hover")
 EVENT_KINDS = ("run_start", "run_end", "phase", "fault", "info")
@@ -259,30 +261,6 @@ SCHEMAS: Mapping[Channel, dict] = {
 
 
 # ----------------------------------------------------------------------------- builders
-def quat_wxyz(R) -> list[float]:
-    """Unit quaternion (w, x, y, z), w >= 0, of a 3x3 rotation matrix (numpy or nested lists).
-
-    Scalar Python arithmetic (Shepperd's method): ~5x cheaper than numpy for one matrix,
-    and this runs per message on the control loop's thread."""
-    (a, b, c), (d, e, f), (g, h, i) = (R.tolist() if hasattr(R, "tolist") else R)
-    tr = a + e + i
-    if tr > 0.0:
-        s = 2.0 * math.sqrt(tr + 1.0)
-        q = [0.25 * s, (h - f) / s, (c - g) / s, (d - b) / s]
-    elif a >= e and a >= i:
-        s = 2.0 * math.sqrt(1.0 + a - e - i)
-        q = [(h - f) / s, 0.25 * s, (b + d) / s, (c + g) / s]
-    elif e >= i:
-        s = 2.0 * math.sqrt(1.0 + e - a - i)
-        q = [(c - g) / s, (b + d) / s, 0.25 * s, (f + h) / s]
-    else:
-        s = 2.0 * math.sqrt(1.0 + i - a - e)
-        q = [(d - b) / s, (c + g) / s, (f + h) / s, 0.25 * s]
-    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    k = (1.0 if q[0] >= 0.0 else -1.0) / n
-    return [q[0] * k, q[1] * k, q[2] * k, q[3] * k]
-
-
 def _l(x) -> list:
     return x.tolist() if hasattr(x, "tolist") else [float(v) for v in x]
 
@@ -295,7 +273,7 @@ def controller_sample(t_s: float, phase: str, diag, cmd, seq: int = 0, sysid: in
         "t": float(t_s), "seq": int(seq), "sysid": int(sysid), "phase": phase,
         "r_c": _l(diag.r_c), "r_c_d": _l(diag.r_c_d), "r_c_err": _l(diag.r_c_err),
         "e_R": _l(diag.e_R), "e_w": _l(diag.e_w),
-        "q_WB": quat_wxyz(diag.R_WB), "q_WB_d": quat_wxyz(diag.R_d),
+        "q_WB": R_to_quat_wxyz_shepperd(diag.R_WB), "q_WB_d": R_to_quat_wxyz_shepperd(diag.R_d),
         "y": _l(diag.y), "y_d": _l(diag.y_d), "y_err": _l(diag.y_err), "F_y": _l(diag.F_y),
         "f_W": _l(diag.F_rc), "wrench_W": _l(diag.wrench_W_filtered), "wrench_E": _l(diag.wrench_E_filtered),
         "thrust_n": float(cmd.thrust_n), "tau_B_nm": _l(cmd.tau_B_nm), "tau_q_nm": _l(cmd.tau_q_nm),
@@ -308,7 +286,7 @@ def am_truth_sample(t_s: float, sysid: int, am, seq: int = 0) -> dict:
     """Payload of <p>/sim/am/<sysid>/truth from a simulator AmTruth (duck-typed:
     p_WB, R_WB, p_WE, R_WE)."""
     out = {"t": float(t_s), "seq": int(seq), "sysid": int(sysid),
-           "p_WB": _l(am.p_WB), "q_WB": quat_wxyz(am.R_WB), "p_WE": _l(am.p_WE), "q_WE": quat_wxyz(am.R_WE)}
+           "p_WB": _l(am.p_WB), "q_WB": R_to_quat_wxyz_shepperd(am.R_WB), "p_WE": _l(am.p_WE), "q_WE": R_to_quat_wxyz_shepperd(am.R_WE)}
     joints = getattr(am, "p_W_joints", ())
     if len(joints):
         out["p_W_joints"] = [_l(p) for p in joints]

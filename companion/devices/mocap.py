@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from amcore.mission import ObjectPose
+from amcore.so3 import yaw_of_quat_wxyz
 from amlink import mocap_protocol as mp
 from amlink.endpoint import UDP_IN, UDP_OUT, EndpointError, as_destination, parse_endpoint
 
@@ -159,7 +160,7 @@ class MocapClient:
         s = self.read(max_age_s)
         if s is None:
             return None
-        return ObjectPose(tuple(float(x) for x in s.p_W), mp.yaw_of(s.q_W_wxyz))
+        return ObjectPose(tuple(float(x) for x in s.p_W), yaw_of_quat_wxyz(s.q_W_wxyz))
 
     def wait(self, timeout_s: float) -> MocapSample:
         """Poll until a frame of the body arrives; MocapError after timeout_s [s]."""

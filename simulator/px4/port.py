@@ -99,6 +99,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from amcore.so3 import euler_zyx_of_quat_wxyz, yaw_of_quat_wxyz
 from amlink import px4
 from amlink.endpoint import UDP_IN, UDP_OUT, Endpoint, EndpointError, parse_endpoint
 from amlink.impair import ImpairedChannel, LinkImpairment
@@ -498,7 +499,7 @@ class Px4Port:
         self._setpoints_since_step = 0
         c = self.commander
         if not c.armed and c.landed:  # home follows the vehicle on the ground until armed (Commander.cpp)
-            self._home = (report.p_W, _yaw(report.quat_WB))
+            self._home = (report.p_W, yaw_of_quat_wxyz(report.quat_WB))
         texts = c.pop_texts()
         if texts:
             self._texts.extend(texts)
@@ -587,12 +588,12 @@ class Px4Port:
         if name == "ATTITUDE_QUATERNION":
             return mav.MAVLink_attitude_quaternion_message(_ms(r.time_s), *q, *w, [0.0, 0.0, 0.0, 0.0])
         if name == "ATTITUDE":
-            return mav.MAVLink_attitude_message(_ms(r.time_s), *_euler(q), *w)
+            return mav.MAVLink_attitude_message(_ms(r.time_s), *euler_zyx_of_quat_wxyz(q), *w)
         if name == "GLOBAL_POSITION_INT":
             x, y, z = px4.enu_to_ned(r.p_W)
             vx, vy, vz = px4.enu_to_ned(r.v_W)
             lat, lon = _lat_lon(x, y)
-            hdg = round(math.degrees(math.pi / 2.0 - _yaw(r.quat_WB)) * 100.0) % 36000
+            hdg = round(math.degrees(math.pi / 2.0 - yaw_of_quat_wxyz(r.quat_WB)) * 100.0) % 36000
             rel = -z - (0.0 if self._home is None else -px4.enu_to_ned(self._home[0])[2])
             return mav.MAVLink_global_position_int_message(_ms(r.time_s), lat, lon, round((HOME_ALT_M - z) * 1e3),
                                                            round(rel * 1e3), _cm_s(vx), _cm_s(vy), _cm_s(vz), hdg)
@@ -667,16 +668,3 @@ def _ns(t: float) -> int:
     return max(0, int(t * 1e9))
 
 
-def _yaw(q_wxyz) -> float:
-    """Yaw about ENU z of q_WB (ENU <- FLU) [rad]."""
-    w, x, y, z = q_wxyz
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-
-
-def _euler(q) -> tuple[float, float, float]:
-    """(roll, pitch, yaw) of q (w, x, y, z) as matrix::Eulerf (Z-Y-X)."""
-    w, x, y, z = q
-    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
-    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    return roll, pitch, yaw

@@ -9,7 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from amlink import codec
+from amcore.so3 import quat_wxyz_to_R
+from amlink import codec, px4
 from amlink.codec import mav
 from amlink.types import (AttitudeSetpoint, AttitudeTarget, ScenarioInfo, SensorFrame, SetpointFlag, StepFlag,
                           TorqueSetpoint)
@@ -110,22 +111,13 @@ def test_setpoint_round_trip_is_exact(sp):
     np.testing.assert_array_equal(got.tau_q_nm, sp.tau_q_nm)
 
 
-def quat_to_R(q):
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])  # fmt: skip
-
-
 @settings(database=None)
 @given(vec(4, st.floats(-1, 1)).filter(lambda q: np.linalg.norm(q) > 0.1))
 def test_attitude_conversion_is_the_enu_flu_to_ned_frd_change_of_frames(q):
     T_NED_ENU = np.array([[0, 1, 0], [1, 0, 0], [0, 0, -1]])
     T_FLU_FRD = np.diag([1, -1, -1])
-    R_ned_frd = quat_to_R(np.array(codec.enu_flu_to_ned_frd(q)))
-    np.testing.assert_allclose(R_ned_frd, T_NED_ENU @ quat_to_R(q) @ T_FLU_FRD, atol=1e-12)
+    R_ned_frd = quat_wxyz_to_R(px4.q_enu_flu_to_ned_frd(q))
+    np.testing.assert_allclose(R_ned_frd, T_NED_ENU @ quat_wxyz_to_R(q) @ T_FLU_FRD, atol=1e-12)
 
 
 @settings(database=None)

@@ -7,7 +7,7 @@ from types import SimpleNamespace as NS
 import numpy as np
 import pytest
 
-from amcore.so3 import Rz
+from amcore.so3 import R_to_quat_wxyz_shepperd, Rz
 from ground_station.mcap_io import read_log
 from ground_station.plots import rpy_zyx, write_plots
 from ground_station.review import load_run, summarize
@@ -79,7 +79,7 @@ def synthetic_samples(with_run_start=True, form="binary"):
                         pad_object_contact=NS(normal_force_n=n, normal_W=np.array([1.0, 0, 0]) if n else np.zeros(3),
                                               tangential_force_W=tangential(t), point_W=p_WE, n_points=4 if n else 0),
                         pad_other_contacts=(), base_contacts=())
-        gt = NS(time_s=t, ams=ams, object=NS(p_WO=p_WO, quat_WO_wxyz=np.array(schema.quat_wxyz(R_WO)),
+        gt = NS(time_s=t, ams=ams, object=NS(p_WO=p_WO, quat_WO_wxyz=np.array(R_to_quat_wxyz_shepperd(R_WO)),
                                              v_WO=np.zeros(3), w_WO=np.zeros(3), touching=("table",)))
         out.extend(truth(gt, KEYS))
     out.append((KEYS.sim_event, schema.run_end_event(float(T[-1]))))
@@ -162,4 +162,4 @@ def test_plots_reproduce_the_figure_rows(log, tmp_path):
 def test_rpy_of_known_rotations():
     from amcore.so3 import exp_so3
     R = Rz(0.3) @ exp_so3(np.array([0.0, -0.2, 0.0])) @ exp_so3(np.array([0.1, 0.0, 0.0]))
-    np.testing.assert_allclose(rpy_zyx(np.array([schema.quat_wxyz(R)])), [[0.1, -0.2, 0.3]], atol=1e-12)
+    np.testing.assert_allclose(rpy_zyx(np.array([R_to_quat_wxyz_shepperd(R)])), [[0.1, -0.2, 0.3]], atol=1e-12)

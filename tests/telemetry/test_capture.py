@@ -10,6 +10,7 @@ from types import SimpleNamespace as NS
 import numpy as np
 import pytest
 
+from amcore.so3 import R_to_quat_wxyz_shepperd
 from telemetry import binary, capture, schema
 from telemetry.capture import finished
 from telemetry.schema import PHASES, Channel, Keys
@@ -178,11 +179,11 @@ def test_real_runs_samples_in_one_batch_are_the_literal_paths_bytes(spec, model)
 
 
 def test_the_laws_q_d_is_the_same_rotation_not_the_same_bits(step_result):
-    """q_WB_d is computed from R_d as the literal path does (schema.quat_wxyz), not taken from
+    """q_WB_d is computed from R_d as the literal path does (amcore.so3.R_to_quat_wxyz_shepperd), not taken from
     the law's q_d: both are (w, x, y, z) with w >= 0 of the same matrix, but Eigen's
     arithmetic (law.quaternion_xyzw) rounds differently in the last bits."""
     d = step_result.diagnostics
-    q = np.array(schema.quat_wxyz(d.R_d))
+    q = np.array(R_to_quat_wxyz_shepperd(d.R_d))
     assert d.q_d[0] >= 0.0 and q[0] >= 0.0
     assert np.allclose(d.q_d, q, rtol=0.0, atol=4 * np.finfo(float).eps)
     sent = binary.to_dict(Channel.CONTROLLER, finished(capture.controller(0.7, "grasp", d, step_result.command)))

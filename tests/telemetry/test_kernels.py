@@ -1,5 +1,5 @@
 """telemetry.kernels: the compiled quaternion has exactly the bits of the literal one
-(telemetry.schema.quat_wxyz) in every branch; the assembly program copies, converts and
+(amcore.so3.R_to_quat_wxyz_shepperd) in every branch; the assembly program copies, converts and
 flags as it says."""
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
+from amcore.so3 import R_to_quat_wxyz_shepperd
 from telemetry import kernels
-from telemetry.schema import quat_wxyz
 
 
 def _q(R) -> np.ndarray:
@@ -33,10 +33,10 @@ def test_the_compiled_quaternion_is_the_literal_one_bit_for_bit():
             M = R @ F if np.linalg.det(F) > 0 else R
             d = np.diag(M)
             branches.add(-1 if d.sum() > 0 else int(np.argmax(d)))
-            assert _q(M).tobytes() == np.array(quat_wxyz(M)).tobytes()
+            assert _q(M).tobytes() == np.array(R_to_quat_wxyz_shepperd(M)).tobytes()
     assert branches == {-1, 0, 1, 2}
     for M in flips + [np.zeros((3, 3)), np.full((3, 3), np.nan), np.diag([np.inf, 1.0, 1.0])]:
-        want = np.array(quat_wxyz(M))
+        want = np.array(R_to_quat_wxyz_shepperd(M))
         got = _q(M)
         assert np.array_equal(np.isnan(got), np.isnan(want))
         assert np.array_equal(got[~np.isnan(got)], want[~np.isnan(want)])
@@ -54,4 +54,4 @@ def test_assemble_copies_quaternions_and_flags_by_its_program():
     kernels.assemble(pre, out, program)
     for r, flag in zip(out, (0, 0, 1, 1)):  # NaN is true, as Python's bool(nan); -0.0 is zero
         assert bytes(r[1:4]) == b"abc" and r[0] == 7 and r[36] == flag and list(r[37:]) == [7, 7, 7]
-        assert np.frombuffer(bytes(r[4:36]), np.float64).tolist() == pytest.approx(quat_wxyz(R))
+        assert np.frombuffer(bytes(r[4:36]), np.float64).tolist() == pytest.approx(R_to_quat_wxyz_shepperd(R))
