@@ -118,8 +118,10 @@ def scenario_with(n: int, folder: Path, base: Path = BASE, devices: bool = False
     text = base.read_text()
     head = re.sub(r'(?m)^vehicle = "\.\./vehicles/(\w+\.toml)"',
                   lambda m: f'vehicle = "{ROOT / "configs" / "vehicles" / m.group(1)}"', text.split("[[am]]")[0])
+    # an overlay's base beside it: from the copy, by its absolute path
+    head = re.sub(r'(?m)^base = "([\w.]+\.toml)"', lambda m: f'base = "{base.parent / m.group(1)}"', head)
     head = re.sub(r'name = "ten_am\w*"', f'name = "bench_{n}am"', head)
-    head = re.sub(r"(?m)^mass_kg = .*$", "mass_kg = 1.0", head)  # liftable by any N (the approach is what runs)
+    head = _set_key(head, "object", "mass_kg", 1.0)  # liftable by any N (the approach is what runs)
     if delay_steps:  # [flight_controller].actuation_delay_steps
         head = _set_key(head, "flight_controller", "actuation_delay_steps", delay_steps)
     if physics_hz is not None:  # [scenario].rate_hz, and the emulated autopilot's loops at most as fast
