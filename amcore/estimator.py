@@ -49,9 +49,13 @@ import numpy as np
 from .jit import kernel
 from .quat_kernels import quat_conj, quat_exp, quat_log, quat_mul, quat_normalized, rotation
 
-# indices into the state vector x
-P, V, Q, BG, BA = 0, 3, 6, 10, 13
-N_STATE = 16
+_F8 = np.float64
+# the filter's state (a numpy record, in an array of one: numba reads and writes it by name):
+# p_WB [m], v_WB_W [m/s], q_WB (w, x, y, z), the gyroscope bias b_g [rad/s] and the
+# accelerometer bias b_a [m/s^2] in B
+STATE = np.dtype([("p", _F8, 3), ("v", _F8, 3), ("q", _F8, 4), ("b_g", _F8, 3), ("b_a", _F8, 3)])
+# one step of the history (an array of these records, one per step of the delayed-fusion horizon)
+SNAPSHOT = np.dtype([("p", _F8, 3), ("v", _F8, 3), ("q", _F8, 4)])
 # indices into the output (one odometry frame): p_WB, quat_WB (w, x, y, z; w >= 0), v_B, w_B
 N_OUT = 13
 
@@ -94,22 +98,38 @@ def biquad_reset(d, coef, x):
 
 # ----------------------------------------------------------------------------- the filter
 @kernel
+def _set_quat(dst, q):
+    """A quaternion tuple q into the array dst (4,)."""
+    dst[0], dst[1], dst[2], dst[3] = q[0], q[1], q[2], q[3]
+
+
+@kernel
+def _snapshot(dst, src):
+    """p, v and q of record src into record dst (a state and a history step, either way)."""
+    for i in range(3):
+        dst.p[i] = src.p[i]
+        dst.v[i] = src.v[i]
+    for i in range(4):
+        dst.q[i] = src.q[i]
+
+
+@kernel
 def predict(x, hist, k, omega_m, f_m, dt, g):
     """Strapdown propagation over one IMU sample (module doc); stores the state of step k
-    in hist[k % N] (p, v, q)."""
-    w = omega_m - x[BG:BG + 3]
-    a_B = f_m - x[BA:BA + 3]
-    x[Q:Q + 4] = quat_normalized(quat_mul(x[Q:Q + 4], quat_exp(w * dt)))
-    R = rotation(x[Q:Q + 4])  # the sample's specific force is taken at the end of its interval
+    in hist[k % N] (p, v, q). x: the `STATE` record in an array of one; hist: `SNAPSHOT`s."""
+    s = x[0]
+    w = omega_m - s.b_g
+    a_B = f_m - s.b_a
+    _set_quat(s.q, quat_normalized(quat_mul(s.q, quat_exp(w * dt))))
+    R = rotation(s.q)  # the sample's specific force is taken at the end of its interval
     a_W = np.zeros(3)
     for i in range(3):
         a_W[i] = R[i, 0] * a_B[0] + R[i, 1] * a_B[1] + R[i, 2] * a_B[2]
     a_W[2] -= g
     for i in range(3):
-        x[P + i] += x[V + i] * dt + 0.5 * a_W[i] * dt * dt
-        x[V + i] += a_W[i] * dt
-    j = k % hist.shape[0]
-    hist[j, 0:10] = x[0:10]
+        s.p[i] += s.v[i] * dt + 0.5 * a_W[i] * dt * dt
+        s.v[i] += a_W[i] * dt
+    _snapshot(hist[k % hist.shape[0]], s)
 
 
 @kernel
@@ -117,10 +137,10 @@ def fuse_pose(x, hist, k, lag, p_m, q_m, gains, dt):
     """Fuse a pose measured at step k - lag (lag < N) into the state of step k and into the
     history after the measurement (module doc). gains: (k_p, k_v, k_a, k_R, k_g), already
     times the frame period. Returns the innovations (r [m], e [rad]) as one (6,) array."""
+    s = x[0]
     N = hist.shape[0]
-    j0 = (k - lag) % N
-    p_past = hist[j0, 0:3]
-    q_past = hist[j0, 6:10]
+    past = hist[(k - lag) % N]
+    p_past, q_past = past.p, past.q
     r = p_m - p_past
     e = np.array(quat_log(quat_mul(quat_conj(q_past), q_m)))
     R_past = rotation(q_past)
@@ -128,15 +148,15 @@ def fuse_pose(x, hist, k, lag, p_m, q_m, gains, dt):
     dv = gains[1] * r
     dq = quat_exp(gains[3] * e)
     for i in range(3):
-        x[BA + i] -= gains[2] * (R_past[0, i] * r[0] + R_past[1, i] * r[1] + R_past[2, i] * r[2])
-        x[BG + i] -= gains[4] * e[i]
+        s.b_a[i] -= gains[2] * (R_past[0, i] * r[0] + R_past[1, i] * r[1] + R_past[2, i] * r[2])
+        s.b_g[i] -= gains[4] * e[i]
     for a in range(lag + 1):  # the history from the measurement's step to now
-        j = (k - lag + a) % N
+        h = hist[(k - lag + a) % N]
         for i in range(3):
-            hist[j, i] += dp[i] + a * dt * dv[i]
-            hist[j, 3 + i] += dv[i]
-        hist[j, 6:10] = quat_normalized(quat_mul(hist[j, 6:10], dq))
-    x[0:10] = hist[k % N, 0:10]
+            h.p[i] += dp[i] + a * dt * dv[i]
+            h.v[i] += dv[i]
+        _set_quat(h.q, quat_normalized(quat_mul(h.q, dq)))
+    _snapshot(s, hist[k % N])
     out = np.empty(6)
     out[0:3] = r
     out[3:6] = e
@@ -147,13 +167,15 @@ def fuse_pose(x, hist, k, lag, p_m, q_m, gains, dt):
 def odometry(x, lpf, coef, omega_m, out):
     """The odometry frame of the current state into out (N_OUT,): p_WB, quat_WB (w >= 0),
     v_B = R^T v_W, w_B = lowpass(omega_m - b_g)."""
-    q = x[Q:Q + 4]
+    st = x[0]
+    q = st.q
     s = 1.0 if q[0] >= 0.0 else -1.0
     R = rotation(q)
-    w = biquad_step(lpf, coef, omega_m - x[BG:BG + 3])
+    w = biquad_step(lpf, coef, omega_m - st.b_g)
+    v = st.v
     for i in range(3):
-        out[i] = x[P + i]
-        out[7 + i] = R[0, i] * x[V] + R[1, i] * x[V + 1] + R[2, i] * x[V + 2]
+        out[i] = st.p[i]
+        out[7 + i] = R[0, i] * v[0] + R[1, i] * v[1] + R[2, i] * v[2]
         out[10 + i] = w[i]
     for i in range(4):
         out[3 + i] = s * q[i]
@@ -169,6 +191,16 @@ def estimator_update(x, hist, lpf, coef, k, omega_m, f_m, dt, g, has_pose, lag, 
     else:
         nu[:] = 0.0
     odometry(x, lpf, coef, omega_m, out)
+
+
+@kernel
+def estimator_sample(x, hist, lpf, coef, k, first, omega_m, f_m, dt, g, has_pose, lag, p_m, q_m, gains, out, nu):
+    """`estimator_update` for IMU sample k; the first sample (`first`) ends no interval: it
+    takes dt = 0 and starts the gyro low-pass at its steady state on omega_m."""
+    if first:
+        biquad_reset(lpf, coef, omega_m)
+        dt = 0.0
+    estimator_update(x, hist, lpf, coef, k, omega_m, f_m, dt, g, has_pose, lag, p_m, q_m, gains, out, nu)
 
 
 @kernel
@@ -193,16 +225,25 @@ class Estimator:
 
     def __init__(self, p_WB, quat_WB_wxyz, dt_s: float, frame_period_s: float, g: float,
                  attitude_bandwidth_radps: float, position_bandwidth_radps: float,
-                 gyro_cutoff_hz: float, history_steps: int, out: np.ndarray | None = None) -> None:
+                 gyro_cutoff_hz: float, history_steps: int, out: np.ndarray | None = None,
+                 storage: tuple[np.ndarray, ...] | None = None) -> None:
         """out: where `step` writes the odometry (N_OUT,), e.g. the head of a caller's larger
-        array (a view); None: an array of its own."""
-        self.x = np.zeros(N_STATE)
-        self.x[P:P + 3] = p_WB
-        self.x[Q:Q + 4] = quat_WB_wxyz
-        self.hist = np.tile(self.x[0:10], (history_steps, 1))
-        self.coef = biquad_coefficients(1.0 / dt_s, gyro_cutoff_hz)
-        self.lpf = np.zeros((2, 3))
-        self.gains = loop_gains(attitude_bandwidth_radps, position_bandwidth_radps, frame_period_s)
+        array (a view); None: an array of its own. storage: (x (1,) `STATE`, hist (history_steps,)
+        `SNAPSHOT`, lpf (2, 3), coef (5,), gains (5,)) to hold the filter in, e.g. views of a
+        fleet's arrays (simulator.devices.DeviceArrays); None: arrays of its own."""
+        x, hist, lpf, coef, gains = storage if storage is not None else (
+            np.zeros(1, STATE), np.zeros(history_steps, SNAPSHOT), np.zeros((2, 3)), np.zeros(5), np.zeros(5))
+        if hist.shape != (history_steps,) or hist.dtype != SNAPSHOT or x.shape != (1,) or x.dtype != STATE:
+            raise ValueError(f"the estimator's storage: a state {x.dtype} {x.shape} and a history {hist.dtype} "
+                             f"{hist.shape}, not STATE (1,) and SNAPSHOT ({history_steps},)")
+        self.x, self.hist, self.lpf, self.coef, self.gains = x, hist, lpf, coef, gains
+        s = x[0]
+        s["p"], s["v"], s["q"], s["b_g"], s["b_a"] = p_WB, 0.0, quat_WB_wxyz, 0.0, 0.0
+        for name in ("p", "v", "q"):
+            hist[name] = s[name]
+        coef[:] = biquad_coefficients(1.0 / dt_s, gyro_cutoff_hz)
+        lpf[:] = 0.0
+        gains[:] = loop_gains(attitude_bandwidth_radps, position_bandwidth_radps, frame_period_s)
         self.dt, self.g = dt_s, g
         self.out = np.zeros(N_OUT) if out is None else out
         self.innovation = np.zeros(6)
@@ -212,11 +253,7 @@ class Estimator:
     def step(self, k: int, omega_m: np.ndarray, f_m: np.ndarray, pose=None, lag: int = 0) -> np.ndarray:
         """The odometry (N_OUT,) after IMU sample k; pose (p_m, q_m) measured lag steps ago
         if a motion-capture frame arrived now. lag must be below the history length."""
-        dt = self.dt
-        if not self._started:  # the first sample ends no interval
-            biquad_reset(self.lpf, self.coef, omega_m)
-            self._started = True
-            dt = 0.0
+        first, self._started = not self._started, True
         if pose is None:
             p_m, q_m = self._none
             has = False
@@ -225,14 +262,14 @@ class Estimator:
             has = True
             if not 0 <= lag < self.hist.shape[0]:
                 raise ValueError(f"pose lag {lag} steps outside the estimator's history ({self.hist.shape[0]})")
-        estimator_update(self.x, self.hist, self.lpf, self.coef, k, omega_m, f_m, dt, self.g, has, lag, p_m, q_m,
-                         self.gains, self.out, self.innovation)
+        estimator_sample(self.x, self.hist, self.lpf, self.coef, k, first, omega_m, f_m, self.dt, self.g, has, lag,
+                         p_m, q_m, self.gains, self.out, self.innovation)
         return self.out
 
     @property
     def b_g(self) -> np.ndarray:
-        return self.x[BG:BG + 3].copy()
+        return self.x[0]["b_g"].copy()
 
     @property
     def b_a(self) -> np.ndarray:
-        return self.x[BA:BA + 3].copy()
+        return self.x[0]["b_a"].copy()

@@ -11,7 +11,10 @@ run leaves them, not back to back), summed over the run and divided by AMs x phy
 - sense: `World.sensor_values` (PyBullet's getters and the F/T wrench), every control step;
   with --devices every physics step (on a step without a frame, `World.base_values` where
   the tree has it);
-- estimate: the devices and the estimator (`DeviceSuite.step`), with --devices;
+- estimate: the devices and the estimator, with --devices, where a tree steps them one AM at a
+  time (`SitlCore._sense`); where it steps every AM in one compiled call
+  (`simulator.fleet_kernels`), that time is in frame (control steps) and apply (the steps
+  between, fused with the autopilots), and estimate reads 0: compare "lockstep work";
 - frame: the frame's value type and the autopilot's reports (`SitlCore.iter_frames` less the above);
 - sign: the sensor batch packed and signed (`fastcodec.sensor_frame_payloads`, `Encoder.pack_payloads`);
 - verify: the answer verified and decoded (`Decoder.feed_records`, `SetpointAssembler`);

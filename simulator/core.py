@@ -42,12 +42,13 @@ from amlink.impair import ImpairedLink, LinkImpairment
 from amlink.types import (AttitudeSetpoint, AttitudeTarget, SensorFrame, TorqueSetpoint, sensor_frame_from_wire,
                           with_autopilot_reports)
 
+from . import fleet_kernels
 from .failsafe import Failsafe, FailsafeGains
 from .fcstate import FcMode, FleetSnapshot, VehicleSnapshot
-from .flight_controller import FlightController
+from .flight_controller import AutopilotArrays, FlightController
 from .object_mocap import measure_object
 from .outcome import RunOutcome
-from .devices import DeviceSuite
+from .devices import DeviceArrays, DeviceSuite
 from .effort import JointEffortSensor
 from .sensors import SensorModel
 from .vehicle import Vehicle
@@ -56,6 +57,7 @@ from .world import World
 
 Setpoint = TorqueSetpoint | AttitudeSetpoint
 
+_NO_AXES = (False, False, False, False)  # an allocation that met every axis
 TRUTH_PERIOD_S = 0.01  # ground-truth sample period for the outcome and telemetry [s]: every 10 steps at 1 kHz
 
 
@@ -80,9 +82,9 @@ def initial_state(spec: ScenarioSpec, am: AmSpec, model, object_pose: ObjectPose
 
 def warm_up_kernels(spec: ScenarioSpec) -> None:
     """One call of each of the simulator's compiled kernels (the autopilot's loops and
-    allocation, the devices) with a run's argument types, so that numba compiles them (once
-    per machine, a few seconds) or loads them from its cache here, before a lockstep starts,
-    not at a run's first steps."""
+    allocation, the devices; one AM alone and every AM at once, simulator.fleet_kernels) with
+    a run's argument types, so that numba compiles them (once per machine, a few seconds) or
+    loads them from its cache here, before a lockstep starts, not at a run's first steps."""
     v = spec.vehicle
     n = v.n_joints
     target = AttitudeTarget(0, quat_wxyz=np.array([1.0, 0.0, 0.0, 0.0]), rates_rad_s=np.zeros(3),
@@ -93,6 +95,12 @@ def warm_up_kernels(spec: ScenarioSpec) -> None:
     dev.step(values, 0.0)
     if not dev.needs_reading(spec.dt_s):
         dev.step(values[:13], spec.dt_s)
+    fc = FlightController(v.flight_controller, v.rotors, spec.dt_s)
+    fc.allocation.allocate(0.0, 0.0, 0.0, 0.5)  # torque mode's allocation, from Python (simulator.world)
+    fc.arrays.set_target(0, target)
+    one = np.zeros(1, np.int64)
+    fleet_kernels.hold(one, 2 * spec.dt_s, *dev.arrays.sense_arrays(), one, *fc.arrays.fly_arrays())
+    fleet_kernels.fly(one, dev.arrays.frames, dev.arrays.state, dev.arrays.est_x, *fc.arrays.fly_arrays())
 
 
 def kernel_group(spec: ScenarioSpec):
@@ -102,7 +110,8 @@ def kernel_group(spec: ScenarioSpec):
     from amruntime.jitcache import SIMULATOR_LOCK, Group
 
     from . import device_kernels, fc_kernels
-    return Group(SIMULATOR_LOCK, (fc_kernels, allocation_kernels, device_kernels, estimator, quat_kernels),
+    return Group(SIMULATOR_LOCK, (fc_kernels, allocation_kernels, device_kernels, estimator, quat_kernels,
+                                  fleet_kernels),
                  lambda: warm_up_kernels(spec))
 
 
@@ -138,17 +147,27 @@ class SitlCore:
         self._kind = AttitudeSetpoint if self.mode == "attitude" else TorqueSetpoint  # what the autopilot takes
         dv = spec.devices  # without [devices] the servos report the applied torques exactly
         effort, scale = (dv.effort, dv.scale) if dv.enabled else (JointEffortSpec(), 0.0)
+        # every AM's autopilot and devices as rows of stacked arrays (its slot): one compiled call
+        # steps them all (simulator.fleet_kernels)
+        count = len(spec.ams)
+        self.autopilots = AutopilotArrays(count, v.rotors) if self.mode == "attitude" else None
+        self.device_arrays = DeviceArrays(count, self.model.n, spec.devices.estimator.history_steps, spec.dt_s,
+                                          v.gravity_mps2) if spec.devices.enabled else None
+        self._every_slot = np.arange(count, dtype=np.int64)
+        self._loaded = False  # `hold` has loaded the devices' values; `actuate` steps them
+        self._flying: list[tuple[Vehicle, object]] = []  # (vehicle, joint torques) that `_fly` flies
         self.vehicles: dict[int, Vehicle] = {}  # each AM's flight controller: its link, autopilot, devices, state
-        for am in spec.ams:
+        for slot, am in enumerate(spec.ams):
             s, link = am.sysid, am.link or spec.link
             self.vehicles[s] = Vehicle(
-                s, ImpairedLink(LinkImpairment.for_scenario(dataclasses.replace(spec, link=link)), stream=s),
+                s, slot, ImpairedLink(LinkImpairment.for_scenario(dataclasses.replace(spec, link=link)), stream=s),
                 # [link].joints = "servo_bus": the arm's torques reach its servos on the companion's own bus,
                 # untouched by the link's impairment: the last ones computed act (zero-order hold)
                 joints_on_bus=link.joints == "servo_bus",
                 sensor=None if spec.sensors.exact else SensorModel(spec.sensors, self.model.n, spec.control_dt_s,
                                                                     spec.seed, s),
-                fc=FlightController(v.flight_controller, v.rotors, spec.dt_s) if self.mode == "attitude" else None,
+                fc=FlightController(v.flight_controller, v.rotors, spec.dt_s, self.autopilots, slot)
+                if self.mode == "attitude" else None,
                 effort=JointEffortSensor(effort, scale, self.model.n, spec.dt_s, spec.seed, s)
                 if self.mode == "attitude" else None)
         self.commanded: list[tuple[float, int, str]] = []  # (t, sysid, what) of GCS commands that took the vehicle
@@ -217,17 +236,26 @@ class SitlCore:
 
     def iter_frames(self, k: int) -> Iterator[tuple[int, SensorFrame]]:
         """`frames` one AM at a time, so that a caller can send each frame as soon as it is
-        read (that companion computes while the next frame is read). Consume it whole."""
+        made (that companion computes while the next frame is made). With [devices] every AM's
+        devices and estimator step first, in one call. Consume it whole."""
         w, t = self.world, self.world.time_s
         n = self.model.n
         values, out = {}, {}
         self._k = k
         for ve in self.vehicles.values():
             ve.actuated = False
+        devices = self.device_arrays
         for s, ve in self.vehicles.items():
             values[s] = v = w.sensor_values(s)
-            if self.spec.devices.enabled:
-                reported = self._sense(s, v, t)
+            if devices is not None:
+                self._load(ve, v)
+        if devices is not None:
+            devices.step(t)
+            self._loaded = False
+        for s, ve in self.vehicles.items():
+            v = values[s]
+            if devices is not None:
+                ve.odometry = reported = devices.frames[ve.slot].tolist()
             else:  # no sensor: exact frames
                 reported = v if ve.sensor is None else ve.sensor(v)
             f = sensor_frame_from_wire(k, t, reported, n, 0)
@@ -246,13 +274,24 @@ class SitlCore:
         """The exact values (`World.sensor_values`) behind the last frames, per sysid."""
         return {s: v.values for s, v in self.vehicles.items() if v.values is not None}
 
-    def _sense(self, s: int, values: list[float], t: float) -> list[float]:
-        """One physics step of AM s's devices and estimator ([devices]): the frame's values."""
-        ve = self.vehicles[s]
+    def _suite(self, ve: Vehicle, values: list[float]) -> DeviceSuite:
+        """AM ve's devices, made at its first step from its values there (in its row of the
+        stacked devices)."""
         if ve.devices is None:
             sp = self.spec
-            ve.devices = DeviceSuite(sp.devices, self.model.n, sp.dt_s, sp.vehicle.gravity_mps2, sp.seed, s, values)
-        ve.odometry = out = ve.devices.step(values, t)
+            ve.devices = DeviceSuite(sp.devices, self.model.n, sp.dt_s, sp.vehicle.gravity_mps2, sp.seed, ve.sysid,
+                                     values, self.device_arrays, ve.slot)
+        return ve.devices
+
+    def _load(self, ve: Vehicle, values: list[float]) -> None:
+        """AM ve's exact values of this step into the stacked devices, which step later, all in one call."""
+        self._suite(ve, values)
+        self.device_arrays.load(values, ve.slot)
+
+    def _sense(self, s: int, values: list[float], t: float) -> list[float]:
+        """One physics step of AM s's devices and estimator ([devices]) alone: the frame's values."""
+        ve = self.vehicles[s]
+        ve.odometry = out = self._suite(ve, values).step(values, t)
         return out
 
     def observe(self) -> None:
@@ -280,13 +319,16 @@ class SitlCore:
     def hold(self, k: int, lost: Collection[int] = (), setpoints: Mapping[int, Setpoint] | None = None) -> None:
         """Physics step k between control steps: no frames; each flight controller flies on
         what it holds (its failsafe while its companion is lost), or on `setpoints` that act
-        now (an actuation delay, `due`), and ground truth is sampled as on control steps."""
+        now (an actuation delay, `due`), and ground truth is sampled as on control steps.
+        With [devices] the devices, the estimators and the autopilots of every AM step in one
+        call, in `actuate`."""
         self.observe()
-        if self.spec.devices.enabled:  # the devices and the estimator run at the IMU rate
+        if self.device_arrays is not None:  # the devices and the estimator run at the IMU rate
             t, w = self.world.time_s, self.world
             for s, ve in self.vehicles.items():  # no frame: the base alone, unless the F/T tare reads the wrist
                 dev = ve.devices
-                self._sense(s, w.sensor_values(s) if dev is None or dev.needs_reading(t) else w.base_values(s), t)
+                self._load(ve, w.sensor_values(s) if dev is None or dev.needs_reading(t) else w.base_values(s))
+            self._loaded = True
         if k % self._truth_every == 0:
             self._truth({s: self.world.wrench_ee(s) for s in self.sysids})
         self.actuate(k, setpoints or {}, lost)
@@ -300,12 +342,14 @@ class SitlCore:
             return
         ve.actuated = True
         self._apply(self._k, sysid, setpoint)
+        self._fly()
 
     def actuate(self, k: int, setpoints: Mapping[int, Setpoint], lost: Collection[int] = ()) -> None:
         """Each flight controller applies what reached it (zero-order hold), or its failsafe
         while its companion is lost; a companion that answers again takes over again."""
         self.observe()
         w, t = self.world, self.world.time_s
+        self._flying = []
         done = {s for s, ve in self.vehicles.items() if ve.actuated} if self._k == k else set()
         for s, ve in self.vehicles.items():
             ve.actuated = False
@@ -332,11 +376,11 @@ class SitlCore:
             if ve.failsafe is not None:
                 ve.failsafe = None
                 if ve.fc is not None:  # the autopilot's loops start afresh from the failsafe's flight
-                    v = self.spec.vehicle
-                    ve.fc = FlightController(v.flight_controller, v.rotors, self.spec.dt_s)
+                    ve.fc.reset()
                 self.events.append({"t": t, "sysid": s, "event": "rejoined"})
                 self.log(f"t={t:.3f} s sysid {s}: companion back, failsafe ended")
             self._apply(k, s, setpoints.get(s))
+        self._fly()
 
     def _apply(self, k: int, s: int, setpoint: Setpoint | None) -> None:
         """The flight controller of `s` at step k: what its link delivers (zero-order hold);
@@ -362,23 +406,52 @@ class SitlCore:
         if link.silent_for(k) > self.offboard_loss_steps:
             self._offboard_lost(s, link.silent_for(k))
             return
-        if ve.fc is not None:
-            odo = ve.odometry  # [devices]: the autopilot flies on its estimator's attitude
-            quat, w_B = self.world.attitude_and_rate(s) if odo is None else (odo[3:7],
-                                                                             ve.devices.autopilot_rate.tolist())
-            out = ve.fc.step(quat, w_B, sp.attitude)
-            axes = out.allocation.saturated_axes
-            joints = self.world.apply_rotors(s, out.rotor_thrusts_n, tau_q, axes)
-            rotors_saturated, joints_saturated = out.allocation.saturated, joints.saturated
+        if ve.fc is not None:  # flown with the others' in one call (`_fly`)
+            if self.device_arrays is None:  # [devices]: on its estimator's attitude, else the exact one
+                ap = self.autopilots
+                ap.attitude[ve.slot], ap.rate[ve.slot] = self.world.attitude_and_rate(s)
+            if ve.target_set is not sp:  # the held setpoint's target into the arrays, once
+                self.autopilots.set_target(ve.slot, sp.attitude)
+                ve.target_set = sp
+            self._flying.append((ve, tau_q))
+            return
+        rep = self.world.apply(s, sp.thrust_n, sp.tau_B_nm, tau_q)
+        if rep.mix.saturated or rep.joints.saturated:
+            self._saturated(s, sp, rep.mix.saturated, rep.joints.saturated, rep.mix.allocation.saturated_axes)
+
+    def _fly(self) -> None:
+        """The step's compiled call: the devices and estimators loaded by `hold`, and the
+        autopilots of the vehicles `_apply` left to fly (`_flying`); then their rotor thrusts and
+        joint torques into the world."""
+        flying, self._flying = self._flying, []
+        loaded, self._loaded = self._loaded, False
+        if not flying:
+            if loaded:
+                self.device_arrays.step(self.world.time_s)
+            return
+        slots = self._every_slot if len(flying) == len(self._every_slot) else \
+            np.array([ve.slot for ve, _ in flying], np.int64)
+        ap, dev = self.autopilots, self.device_arrays
+        if loaded:
+            fleet_kernels.hold(self._every_slot, self.world.time_s, *dev.sense_arrays(), slots, *ap.fly_arrays())
+        elif dev is not None:
+            fleet_kernels.fly(slots, dev.frames, dev.state, dev.est_x, *ap.fly_arrays())
         else:
-            rep = self.world.apply(s, sp.thrust_n, sp.tau_B_nm, tau_q)
-            axes = rep.mix.allocation.saturated_axes
-            rotors_saturated, joints_saturated = rep.mix.saturated, rep.joints.saturated
-        if rotors_saturated or joints_saturated:
-            t = self.world.time_s
-            if self.outcome.saturation(s, t, rotors_saturated, joints_saturated, axes):
-                self.log(f"t={t:.3f} s sysid {s}: command saturated ({_describe(sp)}); counted in outcome.json, "
-                         f"further ones not printed")
+            fleet_kernels.fly_on(slots, *ap.fly_arrays())
+        saturated = ap.saturated
+        for ve, tau_q in flying:
+            i = ve.slot
+            rotors = saturated[i] != 0.0
+            axes = ap.saturated_axes_of(i) if rotors else _NO_AXES
+            joints = self.world.apply_rotors(ve.sysid, ap.thrusts(i), tau_q, axes)
+            if rotors or joints.saturated:
+                self._saturated(ve.sysid, ve.link.hold.command, rotors, joints.saturated, axes)
+
+    def _saturated(self, s: int, sp: Setpoint, rotors: bool, joints: bool, axes) -> None:
+        t = self.world.time_s
+        if self.outcome.saturation(s, t, rotors, joints, axes):
+            self.log(f"t={t:.3f} s sysid {s}: command saturated ({_describe(sp)}); counted in outcome.json, "
+                     f"further ones not printed")
 
     def note_rejected(self, sysid: int, why: str) -> None:
         """A setpoint of `sysid` answering the current step was refused as implausible: counted;

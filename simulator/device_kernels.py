@@ -8,9 +8,9 @@ multiply-adds in the order OpenBLAS's dgemv kernels use (`mat_vec`, `mat_t_vec`)
 they round as numpy's products do on a machine whose numpy calls OpenBLAS; everywhere, the
 kernels give the same numbers, whatever BLAS numpy has.
 
-What stays in Python: the random draws (`NoiseBlock`: a block of a device's stream at once,
-the same numbers in the same order); the motion capture (one frame in ten steps) and the
-estimator's call (`amcore.estimator`, compiled there).
+What stays in Python: the random draws (`simulator.noise.NoiseBlock`: a block of a device's
+stream at once, the same numbers in the same order) and the motion capture (one frame in ten
+steps). `simulator.fleet_kernels.sense` calls `suite_step` and the estimator for every AM at once.
 
 State and constants travel in two numpy records, their fields named (`STATE`, `CONSTANTS`).
 The quaternion helpers are amcore.quat_kernels'.
@@ -26,7 +26,6 @@ from numba.extending import intrinsic
 from amcore.jit import kernel
 from amcore.quat_kernels import rotation
 
-from .noise import NoiseBlock  # noqa: F401 (DeviceSuite's draws)
 
 _F8 = np.float64
 # `suite_step`'s constants and state, each a numpy record that numba reads and writes by field

@@ -35,10 +35,11 @@ from collections import deque
 import numpy as np
 
 from amcore.config import DevicesSpec, EncoderSpec, ForceTorqueSpec, ImuSpec, MocapSpec
-from amcore.estimator import BG, N_OUT, Estimator
+from amcore.estimator import N_OUT, SNAPSHOT, STATE, Estimator
 from amcore.quat_kernels import quat_exp, quat_mul
 
 from . import device_kernels as dk
+from .noise import NoiseBlock
 
 _STREAM = 0xDE71  # distinguishes the devices' streams from the other seeded streams of an AM
 IMU, MOCAP, FT = 1, 2, 3  # each device's sub-stream
@@ -138,17 +139,79 @@ class Encoders:
         self.dqdot = spec.velocity_quantum_radps
 
 
+NOISE_ROWS = 256  # physics steps of draws taken at once (`DeviceSuite.draw_noise`)
+
+
+class DeviceArrays:
+    """The devices' and estimators' state of `count` AMs, stacked (one row per AM, its slot),
+    so that one compiled call (`simulator.fleet_kernels.sense`) steps every AM; each
+    `DeviceSuite` keeps views of its row. `step` takes the AMs' exact values of one physics step."""
+
+    def __init__(self, count: int, n_joints: int, history_steps: int, dt_s: float, g: float,
+                 rows: int = NOISE_ROWS) -> None:
+        self.count, self.n, self._dt, self._g = count, n_joints, dt_s, g
+        self.constants, self.state = np.zeros(count, dk.CONSTANTS), np.zeros(count, dk.STATE)
+        self.imu_noise, self.ft_noise = np.zeros((count, rows, 12)), np.zeros((count, rows, 12))
+        self.noise_row = np.zeros(count, np.int64)  # each AM's next row of its blocks
+        self._rows = rows
+        self.k = np.full(count, -1, np.int64)  # each AM's last IMU sample
+        self.values = np.zeros((count, N_OUT + 2 * n_joints + 6))  # the exact values of the step (the base's: 13)
+        self.full = np.zeros(count, np.bool_)  # whether a row holds the arm's and the wrist's values too
+        self.frames = np.zeros((count, N_OUT + 2 * n_joints + 6))  # each AM's frame values, odometry first
+        self.est_x, self.est_hist = np.zeros(count, STATE), np.zeros((count, history_steps), SNAPSHOT)
+        self.est_lpf, self.est_coef, self.est_gains = np.zeros((count, 2, 3)), np.zeros((count, 5)), np.zeros((count, 5))
+        self.innovation = np.zeros((count, 6))
+        self.has_pose, self.lag = np.zeros(count, np.bool_), np.zeros(count, np.int64)
+        self.p_m, self.q_m = np.zeros((count, 3)), np.zeros((count, 4))
+        self.suites: list[DeviceSuite | None] = [None] * count
+        self._all = np.arange(count, dtype=np.int64)
+        self._kernel = None
+
+    def load(self, values, slot: int) -> None:
+        """AM `slot`'s exact values of this step (full, or the base's 13), its motion-capture
+        frame if one arrives now, and new blocks of draws if it used its last."""
+        if self.noise_row[slot] == self._rows:
+            self.suites[slot].draw_noise()
+        m = len(values)
+        self.values[slot, :m] = values
+        self.full[slot] = m > N_OUT
+        arrived = self.suites[slot].mocap.sample_values(self.values[slot])
+        if arrived is None:
+            self.has_pose[slot] = False
+        else:
+            (p, q), lag = arrived
+            self.has_pose[slot], self.lag[slot] = True, lag
+            self.p_m[slot], self.q_m[slot] = p, q
+
+    def step(self, t: float, slots: np.ndarray | None = None) -> None:
+        """One physics step of the loaded AMs (`slots`; None: all) in one compiled call; their
+        frames into `frames`."""
+        if self._kernel is None:
+            from .fleet_kernels import sense
+            self._kernel = sense
+        self._kernel(self._all if slots is None else slots, t, *self.sense_arrays())
+
+    def sense_arrays(self) -> tuple:
+        """The arrays `simulator.fleet_kernels.sense` takes after the slots and the time."""
+        return (self.values, self.full, self.constants, self.state, self.imu_noise, self.ft_noise, self.noise_row,
+                self.k, self.frames, self.est_x, self.est_hist, self.est_lpf, self.est_coef, self.est_gains,
+                self.has_pose, self.lag, self.p_m, self.q_m, self.innovation, self._dt, self._g)
+
+
 class DeviceSuite:
     """One AM's devices and estimator (module doc). Seeded by (scenario seed, sysid); each
     device draws from its own stream, so changing one device's levels leaves the others'
     draws alone.
 
-    The truth's, the IMU's, the encoders' and the F/T sensor's per-step arithmetic is
-    `simulator.device_kernels.suite_step` (numba; the draws taken in blocks, the same numbers
-    in the same order); the device objects hold the draws made at construction."""
+    Its state is a row (`slot`) of a `DeviceArrays` (its own, of one row, unless a fleet's is
+    given): the truth's, the IMU's, the encoders' and the F/T sensor's per-step arithmetic is
+    `simulator.device_kernels.suite_step`, the estimator's `amcore.estimator`, both called by
+    `simulator.fleet_kernels.sense` over every AM of the arrays at once; the draws are taken in
+    blocks (the same numbers in the same order); the device objects hold the draws made at
+    construction."""
 
     def __init__(self, spec: DevicesSpec, n_joints: int, dt_s: float, g: float, seed: int, sysid: int,
-                 initial_values: list[float]) -> None:
+                 initial_values: list[float], arrays: DeviceArrays | None = None, slot: int = 0) -> None:
         rng = lambda sub: np.random.default_rng([seed, sysid, _STREAM, sub])  # noqa: E731
         self.n, self.dt = n_joints, dt_s
         self.imu = Imu(spec.imu, spec.scale, dt_s, g, rng(IMU))
@@ -159,24 +222,32 @@ class DeviceSuite:
         if self.mocap.lag >= e.history_steps:
             raise ValueError(f"[devices.mocap].latency_s is {self.mocap.lag} steps; [devices.estimator]."
                              f"history_steps ({e.history_steps}) must be longer")
+        a = DeviceArrays(1, n_joints, e.history_steps, dt_s, g) if arrays is None else arrays
+        if (a.n, a.est_hist.shape[1], a._dt, a._g) != (n_joints, e.history_steps, dt_s, g):
+            raise ValueError(f"device arrays for {a.n} joints, {a.est_hist.shape[1]} history steps, dt {a._dt} s "
+                             f"and g {a._g}, not {n_joints}, {e.history_steps}, {dt_s} and {g}")
+        self.arrays, self.slot = a, slot
+        a.suites[slot] = self
+        i = slot
         # the estimator is aligned on the ground before take-off, on a motion-capture pose
         p0 = np.array(initial_values[0:3]) + self.mocap.bias_p
         q0 = np.array(quat_mul(np.array(initial_values[3:7]), quat_exp(self.mocap.bias_R)))
-        self._frame = np.empty(N_OUT + 2 * n_joints + 6)  # a frame's values, written in place
+        self._frame = a.frames[i]  # a frame's values, written in place
         self.estimator = Estimator(p0, q0, dt_s, self.mocap.every * dt_s, g, e.attitude_bandwidth_radps,
                                    e.position_bandwidth_radps, e.gyro_cutoff_hz, e.history_steps,
-                                   out=self._frame[:N_OUT])
-        self._b_g_estimate = self.estimator.x[BG:BG + 3]  # a view: the estimator updates it in place
-        self._k = -1
+                                   out=self._frame[:N_OUT],
+                                   storage=(a.est_x[i:i + 1], a.est_hist[i], a.est_lpf[i], a.est_coef[i], a.est_gains[i]))
+        self.estimator.innovation = a.innovation[i]
+        self._b_g_estimate = a.est_x["b_g"][i]  # a view: the estimator updates it in place
+        a.k[i] = -1
         self._kernel_state()
 
     def _kernel_state(self) -> None:
         """The device objects' constants and state as `simulator.device_kernels.suite_step`
-        takes them (`CONSTANTS` and `STATE`, each a record in an array of one; the parts named
-        here are views of them)."""
-        imu, ft = self.imu, self.ft
-        self._c, self._s = np.zeros(1, dk.CONSTANTS), np.zeros(1, dk.STATE)
-        c, st = self._c[0], self._s[0]  # views of the records
+        takes them (`CONSTANTS` and `STATE`, rows of the arrays' records; the parts named here
+        are views of them), and the first blocks of draws."""
+        imu, ft, a, i = self.imu, self.ft, self.arrays, self.slot
+        c, st = a.constants[i], a.state[i]  # views of the records
         c["phi_g"], c["sigma_bg"], c["phi_a"], c["sigma_ba"] = imu.phi_g, imu.sigma_bg, imu.phi_a, imu.sigma_ba
         c["sigma_g"], c["sigma_a"] = imu.sigma_g, imu.sigma_a
         c["turn_on_g"], c["turn_on_a"] = imu.turn_on_g, imu.turn_on_a
@@ -185,11 +256,21 @@ class DeviceSuite:
         self._tare_pending = not ft.tared
         c["dt"], c["g"], c["dq"], c["dqdot"] = self.dt, imu.g, self.encoders.dq, self.encoders.dqdot
         st["b_g"], st["b_a"] = imu.b_g, imu.b_a
-        self._omega_m, self._f_m = self._s["omega_m"][0], self._s["f_m"][0]  # views: the kernel writes them
+        self._omega_m, self._f_m = a.state["omega_m"][i], a.state["f_m"][i]  # views: the kernel writes them
         st["ft_offset"], st["ft_tared"] = ft.offset, 1.0 if ft.tared else 0.0
         self._state = st
-        self._imu_noise, self._ft_noise = dk.NoiseBlock(imu.rng, 12), dk.NoiseBlock(ft.rng, 12)
-        self._tail = self._frame[N_OUT:]
+        rows = a.imu_noise.shape[1]
+        self._imu_noise = NoiseBlock(imu.rng, 12, rows, a.imu_noise[i])
+        self._ft_noise = NoiseBlock(ft.rng, 12, rows, a.ft_noise[i])
+        a.noise_row[i] = rows  # no draws yet: the first step takes the first blocks
+
+    def draw_noise(self) -> None:
+        """The next blocks of the IMU's and the F/T sensor's standard normal draws (12 a step
+        each, `simulator.noise.NoiseBlock`: the numbers, in the order, that a call per step
+        would give) into the arrays' rows; the compiled step takes them row after row."""
+        self._imu_noise.fill()
+        self._ft_noise.fill()
+        self.arrays.noise_row[self.slot] = 0
 
     @property
     def autopilot_rate(self) -> np.ndarray:
@@ -208,19 +289,23 @@ class DeviceSuite:
 
     def step(self, values: list[float], t: float) -> list[float]:
         """The sensor frame's values (p_WB, quat_WB, v_B, w_B from the estimator; q, qdot from
-        the encoders; wrench_E from the F/T sensor) after this physics step's exact values: one
-        call of `simulator.device_kernels.suite_step`, the motion capture, one of the
-        estimator's. `values` may be the base's alone (the first 13, `World.base_values`) on a step that
+        the encoders; wrench_E from the F/T sensor) after this physics step's exact values: this
+        AM's row of `DeviceArrays.step` (the devices, the motion capture, the estimator).
+        `values` may be the base's alone (the first 13, `World.base_values`) on a step that
         sends no frame and reads no F/T (`needs_reading` False): then only the odometry (the
         first 13 of a frame) is returned, and the encoders are not read; the devices' draws
         and drift advance as on any step."""
-        self._k = k = self._k + 1
-        x = np.array(values)
-        full = x.shape[0] > N_OUT
+        full = len(values) > N_OUT
         if not full and self.needs_reading(t):
             raise ValueError(f"t = {t} s: the F/T tare needs this step's reading; give the full values")
-        dk.suite_step(x, t, self._c, self._s, self._imu_noise.next(), self._ft_noise.next(), self._tail)
-        arrived = self.mocap.sample_values(x)
-        pose, lag = arrived if arrived is not None else (None, 0)
-        odo = self.estimator.step(k, self._omega_m, self._f_m, pose, lag)  # into self._frame's head
-        return self._frame.tolist() if full else odo.tolist()
+        a = self.arrays
+        a.load(values, self.slot)
+        a.step(t, self._slot_array)
+        return self._frame.tolist() if full else self._frame[:N_OUT].tolist()
+
+    @property
+    def _slot_array(self) -> np.ndarray:
+        s = self.__dict__.get("_slots")
+        if s is None:
+            s = self.__dict__["_slots"] = np.array([self.slot], np.int64)
+        return s

@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 
+from amcore.allocation_kernels import allocate
 from amcore.jit import kernel
 from amcore.quat_kernels import quat_canonical, quat_conj, quat_mul, quat_normalized, quat_z_axis
 
@@ -37,6 +38,16 @@ PARAMS = np.dtype([("gyro", np.float64, 6), ("dgyro", np.float64, 6), ("att_p", 
                    ("gain_p", *_AXES), ("gain_i", *_AXES), ("gain_d", *_AXES), ("gain_ff", *_AXES),
                    ("int_lim", *_AXES), ("yaw_weight", np.float64), ("dt", np.float64),
                    ("feedforward", np.float64), ("two", np.float64)])
+
+# where one autopilot stands between its loop periods (a numpy record, a row of
+# `simulator.flight_controller.AutopilotArrays`): physics steps taken, the loop period in
+# physics steps, whether it has an output (1 or 0), that output (rates_sp [rad/s], torque
+# [normalized], thrust), and the saturation its last allocation left: the unallocated control
+# (0 where the allocation met its request), per axis (roll, pitch, yaw, thrust) whether it fell
+# short (1 or 0), and whether any did; how many outputs it has made
+AUTOPILOT = np.dtype([("k", np.int64), ("every", np.int64), ("has_output", np.float64), ("outputs", np.int64),
+                      ("out", np.float64, 7),
+                      ("unallocated", np.float64, 4), ("saturated_axes", np.float64, 4), ("saturated", np.float64)])
 
 # ----------------------------------------------------------------------------- Python's min, max, **
 @kernel
@@ -171,6 +182,35 @@ def rate_loops(params, state, quat_WB, w, quat_d, ff, thrust, unallocated, satur
         if math.isfinite(r_i):
             lim = p.int_lim[ax]
             s.rate_int[ax] = _min(_max(r_i, -lim), lim)
+
+
+@kernel
+def autopilot_step(params, state, ap, quat_WB, w, quat_d, ff, thrust, alloc_c, tol, result):
+    """One physics step of one autopilot (`FlightController.step`): every `ap`'s `every` steps
+    (and at its first) steps 1 and 2 (`rate_loops`, on the saturation the last allocation left)
+    and step 3 (`amcore.allocation_kernels.allocate` with its constants record `alloc_c` into
+    its result record `result`; `tol`: the unallocated command above which an axis counts as
+    saturated); between, the output holds. params, state, ap: arrays of one record (`PARAMS`,
+    `STATE`, `AUTOPILOT`), as alloc_c and result. Returns whether the output is new."""
+    a = ap[0]
+    k = a.k
+    a.k = k + 1
+    if a.has_output != 0.0 and k % a.every != 0:
+        return False
+    unallocated = (a.unallocated[0], a.unallocated[1], a.unallocated[2], a.unallocated[3])
+    rate_loops(params, state, quat_WB, w, quat_d, ff, thrust, unallocated, a.saturated != 0.0, a.out)
+    allocate(alloc_c, a.out[3], a.out[4], a.out[5], a.out[6], result)
+    r = result[0]
+    a.saturated = 0.0
+    for ax in range(4):
+        u = r.unallocated[ax] if r.desaturated != 0.0 else 0.0
+        a.unallocated[ax] = u
+        a.saturated_axes[ax] = 1.0 if abs(u) > tol else 0.0
+        if abs(u) > tol:
+            a.saturated = 1.0
+    a.has_output = 1.0
+    a.outputs += 1
+    return True
 
 
 def new_state() -> np.ndarray:

@@ -47,7 +47,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from amcore.allocation import Allocation, AllocationResult, frozen_instance
+from amcore import allocation_kernels
+from amcore.allocation import SATURATION_TOL, Allocation, AllocationResult, frozen_instance
 from amcore.config import FlightControllerParams
 from amcore.rotors import RotorParams
 
@@ -81,9 +82,65 @@ class FcOutput:
     thrust_sp: float
 
 
-# what the rate loop takes for the allocation before the first (nothing unallocated)
-_NOT_SATURATED = AllocationResult(outputs=(), allocated=(0.0, 0.0, 0.0, 0.0), unallocated=(0.0, 0.0, 0.0, 0.0),
-                                  saturated=False)
+class AutopilotArrays:
+    """The emulated autopilots of `count` AMs of one vehicle type, stacked (one row per AM, its
+    slot), so that one compiled call (`simulator.fleet_kernels.fly`) steps every AM's loops and
+    allocation; each `FlightController` keeps views of its row. Besides each loop's constants,
+    state and output: the attitude and rates each flies on this step, its target, and its
+    allocation's result (`amcore.allocation_kernels.allocate`'s)."""
+
+    def __init__(self, count: int, rotors: RotorParams) -> None:
+        self.count = count
+        self.allocation = Allocation(rotors)
+        self.alloc_c = self.allocation.kernel_constants()
+        n = self.allocation.count
+        self.params, self.state = np.zeros(count, fc_kernels.PARAMS), np.zeros(count, fc_kernels.STATE)
+        self.ap = np.zeros(count, fc_kernels.AUTOPILOT)
+        self.attitude, self.rate = np.zeros((count, 4)), np.zeros((count, 3))  # quat_WB (w, x, y, z), w_B [rad/s]
+        self.target_q, self.target_w, self.target_thrust = np.zeros((count, 4)), np.zeros((count, 3)), np.zeros(count)
+        self.result = np.zeros(count, allocation_kernels.result_dtype(n))  # each AM's allocation record
+        self._thrusts = self.result["thrusts_n"]  # a view: per AM, its rotor thrusts [N]
+        self._results = [self.result[i:i + 1] for i in range(count)]  # each AM's, as `Allocation.read_result` takes it
+        self.saturated = self.ap["saturated"]  # a view: per AM, whether its last allocation fell short (1 or 0)
+        self.controllers: list[FlightController | None] = [None] * count
+        self._kernel = None
+
+    def set_target(self, slot: int, target) -> None:
+        """The held SET_ATTITUDE_TARGET AM `slot` flies (`amlink.types.AttitudeTarget`)."""
+        self.target_q[slot] = target.quat_wxyz
+        self.target_w[slot] = target.rates_rad_s
+        self.target_thrust[slot] = target.thrust_normalized
+
+    def fly_arrays(self) -> tuple:
+        """The arrays `simulator.fleet_kernels.fly` takes after the devices'."""
+        return (self.params, self.state, self.ap, self.attitude, self.rate, self.target_q, self.target_w,
+                self.target_thrust, self.alloc_c, SATURATION_TOL, self.result)
+
+    def step(self, slots: np.ndarray) -> None:
+        """One physics step of the autopilots in `slots`, on the attitude and rates in their rows
+        (`attitude`, `rate`) and their targets."""
+        if self._kernel is None:
+            from .fleet_kernels import fly_on
+            self._kernel = fly_on
+        self._kernel(slots, *self.fly_arrays())
+
+    def saturated_axes_of(self, slot: int) -> tuple[bool, bool, bool, bool]:
+        """Per axis (roll, pitch, yaw, thrust), whether AM `slot`'s last allocation fell short."""
+        return tuple([x != 0.0 for x in self.ap[slot]["saturated_axes"].tolist()])
+
+    def thrusts(self, slot: int) -> list[float]:
+        """AM `slot`'s rotor thrusts [N] of its last allocation."""
+        return self._thrusts[slot].tolist()
+
+    def output(self, slot: int) -> FcOutput | None:
+        """AM `slot`'s output (None before its first)."""
+        a = self.ap[slot]
+        if a["has_output"] == 0.0:
+            return None
+        out = a["out"].tolist()
+        allocation, thrusts = self.allocation.read_result(self._results[slot], *out[3:7])
+        return frozen_instance(FcOutput, rotor_thrusts_n=thrusts, allocation=allocation, rates_sp=tuple(out[0:3]),
+                               torque_sp=tuple(out[3:6]), thrust_sp=out[6])
 
 
 class FlightController:
@@ -91,15 +148,21 @@ class FlightController:
     physics step; it runs its loops every `physics rate / rate_hz` steps and holds its output
     between. `target` is the held SET_ATTITUDE_TARGET (`amlink.types.AttitudeTarget`, ENU/FLU).
 
-    Steps 1 and 2 run as `simulator.fc_kernels.rate_loops`, step 3 as `Allocation.allocate`
-    (both numba)."""
+    Its constants, state and output are a row (`slot`) of an `AutopilotArrays` (its own, of one
+    row, unless a fleet's is given): steps 1 and 2 run as `simulator.fc_kernels.rate_loops`,
+    step 3 as `amcore.allocation_kernels.allocate`, both in `fc_kernels.autopilot_step`, which
+    `simulator.fleet_kernels.fly` calls for every AM of the arrays at once."""
 
-    def __init__(self, fc: FlightControllerParams, rotors: RotorParams, physics_dt_s: float) -> None:
+    def __init__(self, fc: FlightControllerParams, rotors: RotorParams, physics_dt_s: float,
+                 arrays: AutopilotArrays | None = None, slot: int = 0) -> None:
         self.params = fc
         self.every = max(1, round(1.0 / (fc.rate_hz * physics_dt_s)))
         self.dt_s = self.every * physics_dt_s
         rate_hz = 1.0 / self.dt_s
-        self.allocation = Allocation(rotors)
+        self.arrays = a = AutopilotArrays(1, rotors) if arrays is None else arrays
+        self.slot = slot
+        a.controllers[slot] = self
+        self.allocation = a.allocation
         self.yaw_weight = fc.MC_YAW_WEIGHT
         w = fc.MC_YAW_WEIGHT
         # AttitudeControl::setProportionalGain: the yaw gain compensates the yaw weight's scaling
@@ -114,19 +177,38 @@ class FlightController:
         self.feedforward = fc.body_rate_feedforward
         self.gyro_filter = lowpass2p(rate_hz, fc.IMU_GYRO_CUTOFF)  # the rate, then its derivative
         self.dgyro_filter = lowpass2p(rate_hz, fc.IMU_DGYRO_CUTOFF)
-        self._k = 0
-        self.output: FcOutput | None = None
-        self._p, self._s, self._out = fc_kernels.constants(self), fc_kernels.new_state(), np.zeros(7)
-        self._rate_loops = fc_kernels.rate_loops
+        a.params[slot] = fc_kernels.constants(self)[0]
+        self._s = a.state[slot:slot + 1]  # views of the row
+        self._slots = np.array([slot], np.int64)
+        self.reset()
+
+    def reset(self) -> None:
+        """The loops afresh (not started, no output), as PX4's after a mode change or arming."""
+        a, i = self.arrays, self.slot
+        a.state[i] = np.zeros((), fc_kernels.STATE)
+        a.ap[i] = np.zeros((), fc_kernels.AUTOPILOT)
+        a.ap[i]["every"] = self.every
+        self._output: FcOutput | None = None
+        self._read = 0  # outputs made when `_output` was read
+
+    @property
+    def output(self) -> FcOutput | None:
+        """The output the autopilot holds (None before its first): read from the arrays when
+        they hold a newer one (a held output stays the same object)."""
+        made = int(self.arrays.ap[self.slot]["outputs"])
+        if made != self._read:
+            self._output, self._read = self.arrays.output(self.slot), made
+        return self._output
 
     def step(self, quat_WB_wxyz, w_B, target) -> FcOutput | None:
         """The output for this physics step (None until a target has arrived)."""
-        k, self._k = self._k, self._k + 1
         if target is None:
+            self.arrays.ap[self.slot]["k"] += 1
             return self.output
-        if self.output is not None and k % self.every:
-            return self.output
-        self.output = self._update(tuple(quat_WB_wxyz), tuple(w_B), target)
+        a, i = self.arrays, self.slot
+        a.attitude[i], a.rate[i] = quat_WB_wxyz, w_B
+        a.set_target(i, target)
+        a.step(self._slots)
         return self.output
 
     @property
@@ -139,15 +221,3 @@ class FlightController:
         """Set the integral (the free-running autopilot keeps it while landed, as PX4's
         RateControl::update(..., landed) does not integrate on the ground)."""
         self._s[0]["rate_int"] = [float(x) for x in values]
-
-    def _update(self, q, w, target) -> FcOutput:
-        """Steps 1 and 2 (simulator.fc_kernels), taking the last allocation's saturation there
-        (control_allocator_status); step 3, the allocation."""
-        last = _NOT_SATURATED if self.output is None else self.output.allocation
-        out = self._out
-        self._rate_loops(self._p, self._s, q, w, target.quat_wxyz, target.rates_rad_s, float(target.thrust_normalized),
-                         last.unallocated, last.saturated, out)
-        v = out.tolist()
-        a, thrusts = self.allocation.allocate_thrusts(v[3], v[4], v[5], v[6])
-        return frozen_instance(FcOutput, rotor_thrusts_n=thrusts, allocation=a, rates_sp=tuple(v[0:3]),
-                               torque_sp=tuple(v[3:6]), thrust_sp=v[6])

@@ -33,6 +33,7 @@ class Vehicle:
     """One AM's flight controller: what reaches it (`link`, the servo bus), what it flies with
     (the autopilot in attitude mode, the devices and their estimator), and its state."""
     sysid: int
+    slot: int  # its row in the simulator's stacked autopilots and devices (simulator.fleet_kernels)
     link: ImpairedLink  # the setpoint link as the flight controller sees it (amlink.impair)
     joints_on_bus: bool = False  # [link].joints = "servo_bus": the arm's torques bypass the link
     sensor: SensorModel | None = None  # [sensors] noise on the frames (None: exact, or [devices])
@@ -42,6 +43,7 @@ class Vehicle:
     odometry: list[float] | None = None  # the estimator's last values (odometry first)
     reported: list[float] | None = None  # the last frame's reported values (telemetry)
     values: list[float] | None = None  # the last frame's exact values (`SitlCore.snapshot`)
+    target_set: object = None  # the setpoint whose target its row of the autopilots' arrays holds
     bus_torques: np.ndarray | None = None  # the last joint torques on the servo bus (zero-order hold)
     failsafe: Failsafe | None = None  # companion lost, distrusted or offboard lost: hold, then land
     landing: Failsafe | None = None  # landing on a GCS command (companion ignored)

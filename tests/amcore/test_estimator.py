@@ -33,7 +33,7 @@ def run(lag, seconds=6.0, gyro_bias=np.zeros(3), accel_bias=np.zeros(3), fuse_la
     p0, q0, _, _ = truth(0.0)
     est = Estimator(p0, q0, DT, every * DT, G, 4.0, 8.0, cutoff, 64)
     # the velocity at rest is unknown to the filter at start; it starts at zero: give it the true one
-    est.x[3:6] = truth(0.0)[2]
+    est.x[0]["v"] = truth(0.0)[2]
     errs = []
     for k in range(int(seconds / DT)):
         t = k * DT

@@ -90,6 +90,7 @@ class ReferenceDeviceSuite(DeviceSuite):
         self.imu.__class__, self.ft.__class__, self.encoders.__class__ = (ReferenceImu, ReferenceForceTorque,
                                                                             ReferenceEncoders)
         self._v_W_prev: np.ndarray | None = None
+        self._k = -1  # the last IMU sample
 
     def needs_reading(self, t: float) -> bool:
         return True

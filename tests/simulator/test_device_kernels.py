@@ -20,6 +20,7 @@ from amcore.config import devices_from_table
 from amcore.quat_kernels import quat_exp, quat_mul, rotation
 from simulator import device_kernels as dk
 from simulator.devices import DeviceSuite
+from simulator.noise import NoiseBlock
 
 from .reference_devices import ReferenceDeviceSuite, truth_of
 
@@ -50,7 +51,7 @@ def moving_values(rng, k: int) -> list[list[float]]:
 
 def test_noise_blocks_give_the_draws_one_at_a_time_would():
     a, b = np.random.default_rng([1, 2, 3]), np.random.default_rng([1, 2, 3])
-    block = dk.NoiseBlock(a, 12, rows=7)
+    block = NoiseBlock(a, 12, rows=7)
     for _ in range(30):
         assert np.array_equal(block.next(), b.standard_normal(12))
 

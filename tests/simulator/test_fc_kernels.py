@@ -129,14 +129,14 @@ def test_the_warm_up_compiles_what_a_run_calls(name):
     from amcore import allocation_kernels
     from amcore.config import load_scenario
     from amcore.jit import kernels
-    from simulator import device_kernels
+    from simulator import device_kernels, fleet_kernels
     from simulator.core import warm_up_kernels
     from sitl.inprocess import run
 
     spec = load_scenario(Path(__file__).resolve().parents[2] / "configs" / "scenarios" / f"{name}.toml")
     spec = dataclasses.replace(spec, devices=dataclasses.replace(spec.devices, enabled=True))
     warm_up_kernels(spec)
-    ks = [k for m in (fk, device_kernels, allocation_kernels) for k in kernels(m)]
+    ks = [k for m in (fk, device_kernels, allocation_kernels, fleet_kernels) for k in kernels(m)]
     before = {k.py_func.__name__: len(k.signatures) for k in ks}
     run(spec, 0.2)
     assert {k.py_func.__name__: len(k.signatures) for k in ks} == before
