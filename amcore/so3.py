@@ -75,12 +75,16 @@ def quat_wxyz_normalized(q_wxyz) -> tuple[float, float, float, float]:
 def unit_quat_wxyz_to_R(q_wxyz) -> np.ndarray:
     """Rotation matrix R(q) (3, 3) of a quaternion (w, x, y, z) taken as unit: not normalised,
     so a slightly off norm gives a slightly non-orthogonal R (as quat_kernels.rotation)."""
-    w, x, y, z = q_wxyz.tolist() if isinstance(q_wxyz, np.ndarray) else q_wxyz  # Python floats
-    return np.array((
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    )).reshape(3, 3)  # a flat tuple: cheaper than nested lists
+    q = q_wxyz.tolist() if isinstance(q_wxyz, np.ndarray) else q_wxyz  # Python floats
+    return np.array(_R_entries(q)).reshape(3, 3)  # a flat tuple: cheaper than nested lists
+
+
+def _R_entries(q_wxyz) -> tuple[float, ...]:
+    """The nine entries of R(q), row by row, of a quaternion (w, x, y, z) taken as unit, on Python floats."""
+    w, x, y, z = q_wxyz
+    return (1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y),
+            2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x),
+            2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y))
 
 
 def quat_wxyz_to_R(qwxyz) -> np.ndarray:
@@ -182,21 +186,15 @@ def quat_wxyz_rotate_inverse(q_wxyz, v) -> tuple[float, float, float]:
 def quat_wxyz_R_times(q_wxyz, v) -> tuple[float, float, float]:
     """R(q) v for a unit quaternion q (w, x, y, z), through the entries of R (unit_quat_wxyz_to_R),
     row by row, on Python floats."""
-    w, x, y, z = q_wxyz
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _R_entries(q_wxyz)
     a, b, c = v
-    r00, r01, r02 = 1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)
-    r10, r11, r12 = 2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)
-    r20, r21, r22 = 2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)
     return (r00 * a + r01 * b + r02 * c, r10 * a + r11 * b + r12 * c, r20 * a + r21 * b + r22 * c)
 
 
 def quat_wxyz_R_T_times(q_wxyz, v) -> tuple[float, float, float]:
     """R(q)^T v for a unit quaternion q (w, x, y, z), through the entries of R, column by column."""
-    w, x, y, z = q_wxyz
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _R_entries(q_wxyz)
     a, b, c = v
-    r00, r01, r02 = 1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)
-    r10, r11, r12 = 2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)
-    r20, r21, r22 = 2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)
     return (r00 * a + r10 * b + r20 * c, r01 * a + r11 * b + r21 * c, r02 * a + r12 * b + r22 * c)
 
 
