@@ -104,13 +104,24 @@ def _set_quat(dst, q):
 
 
 @kernel
-def _snapshot(dst, src):
-    """p, v and q of record src into record dst (a state and a history step, either way)."""
+def _save(h, s):
+    """p, v and q of the state record s into the history record h."""
     for i in range(3):
-        dst.p[i] = src.p[i]
-        dst.v[i] = src.v[i]
+        h.p[i] = s.p[i]
+        h.v[i] = s.v[i]
     for i in range(4):
-        dst.q[i] = src.q[i]
+        h.q[i] = s.q[i]
+
+
+@kernel
+def _restore(s, h):
+    """p, v and q of the history record h into the state record s (a function apart from
+    `_save`: numba would otherwise take one record type for a subtype of the other)."""
+    for i in range(3):
+        s.p[i] = h.p[i]
+        s.v[i] = h.v[i]
+    for i in range(4):
+        s.q[i] = h.q[i]
 
 
 @kernel
@@ -129,7 +140,7 @@ def predict(x, hist, k, omega_m, f_m, dt, g):
     for i in range(3):
         s.p[i] += s.v[i] * dt + 0.5 * a_W[i] * dt * dt
         s.v[i] += a_W[i] * dt
-    _snapshot(hist[k % hist.shape[0]], s)
+    _save(hist[k % hist.shape[0]], s)
 
 
 @kernel
@@ -156,7 +167,7 @@ def fuse_pose(x, hist, k, lag, p_m, q_m, gains, dt):
             h.p[i] += dp[i] + a * dt * dv[i]
             h.v[i] += dv[i]
         _set_quat(h.q, quat_normalized(quat_mul(h.q, dq)))
-    _snapshot(s, hist[k % N])
+    _restore(s, hist[k % N])
     out = np.empty(6)
     out[0:3] = r
     out[3:6] = e

@@ -6,17 +6,16 @@
 A hold step does, per AM: read the base from PyBullet, run the devices and the estimator,
 hold the last setpoint (the link), run the emulated autopilot and its allocation, and set
 the rotors' and the joints' commands; then PyBullet steps the world. Their arithmetic is
-compiled already (four numba kernels per AM: `device_kernels.suite_step`,
-`estimator_update`, `fc_kernels.rate_loops`, `allocation_kernels.allocate`); what remains
-in Python is the glue between the calls. Three loops, each on its own `SitlCore` of the
+one compiled call over every AM (`simulator.fleet_kernels.hold`); what remains in Python is
+each AM's PyBullet calls, its link and state machine, and the glue around the call. Three loops, each on its own `SitlCore` of the
 same scenario (`bench_core.spec_for`: ten_am_attitude's object and quadrotor, N AMs,
 `[devices]` on), after 3 s of hovering setpoints, CPU time of this process per physics step:
 
 - "now": `SitlCore.hold` and `SitlCore.step` as a run calls them (the control steps between
   them run too, with hovering setpoints; they are timed apart, as "control step");
 - "stripped": per AM the same five PyBullet calls a hold step needs (two getters and the
-  rotation, two force setters and the joints' setter), the four kernels on the AM's own
-  arrays, and one array of the base's values between them: no link, no motion capture, no
+  rotation, two force setters and the joints' setter) and its base's values into its row,
+  and the one compiled call over every AM between them: no link, no motion capture, no
   effort sensor, no rotor lag, no result objects, no bookkeeping. It is a lower bound of
   what the step can cost with the kernels as they are: the glue a fused step would keep
   (the link's hold, the motion capture, the rotors) is left out, so "saved" overstates the
@@ -32,10 +31,9 @@ import time
 
 import numpy as np
 
-from amcore.estimator import estimator_update
 from amlink.types import AttitudeSetpoint, AttitudeTarget
 from benchmarks.bench_core import spec_for
-from simulator import device_kernels as dk
+from simulator import fleet_kernels
 from simulator.bullet import pb
 from simulator.core import SitlCore
 
@@ -82,27 +80,28 @@ def run_now(core: SitlCore, k0: int, steps: int) -> tuple[float, float]:
 
 
 def run_stripped(core: SitlCore, steps: int) -> float:
-    """CPU [s] per physics step of the hold step's PyBullet calls and kernels alone (module doc)."""
+    """CPU [s] per physics step of the hold step's PyBullet calls and its compiled call alone (module doc)."""
     w, c = core.world, core.world._client
     thrust_n = core.model.mass_kg * core.model.gravity_mps2
-    ams = [(w._ams[s].body_id, w._arm_ids[s], core.vehicles[s].devices, core.vehicles[s].fc, hover(core, s, 0).attitude)
-           for s in core.sysids]
-    t, k0 = core.time_s, core.world.step_index
+    dev, ap = core.device_arrays, core.autopilots
+    ams = [(w._ams[s].body_id, w._arm_ids[s], core.vehicles[s].slot) for s in core.sysids]
+    for s in core.sysids:
+        ap.set_target(core.vehicles[s].slot, hover(core, s, 0).attitude)
+    every = np.arange(len(ams), dtype=np.int64)
+    dev.full[:], dev.has_pose[:] = False, False  # the base's values; no motion capture
+    rows = dev.imu_noise.shape[1]
+    t = core.time_s
     c0 = time.process_time()
     for k in range(steps):
-        for body, arm, dev, fc, att in ams:
+        for body, arm, i in ams:
             p, q = pb.getBasePositionAndOrientation(body, physicsClientId=c)
             v, om = pb.getBaseVelocity(body, physicsClientId=c)
             pb.getMatrixFromQuaternion(q)
-            x = np.array((*p, q[3], q[0], q[1], q[2], *v, *om))
-            dk.suite_step(x, t, dev._c, dev._s, dev._imu_noise.next(), dev._ft_noise.next(), dev._tail)
-            e = dev.estimator
-            estimator_update(e.x, e.hist, e.lpf, e.coef, k0 + k, dev._omega_m, dev._f_m, e.dt, e.g, False, 0,
-                             e._none[0], e._none[1], e.gains, e.out, e.innovation)
-            fc._rate_loops(fc._p, fc._s, (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), att.quat_wxyz, att.rates_rad_s,
-                           att.thrust_normalized, (0.0, 0.0, 0.0, 0.0), False, fc._out)
-            o, a = fc._out, fc.allocation
-            a._kernel(a._c, o[3], o[4], o[5], o[6], a._result)
+            dev.values[i, :13] = (*p, q[3], q[0], q[1], q[2], *v, *om)
+            if dev.noise_row[i] == rows:
+                dev.suites[i].draw_noise()
+        fleet_kernels.hold(every, t, *dev.sense_arrays(), every, *ap.fly_arrays())
+        for body, arm, i in ams:
             pb.applyExternalForce(body, -1, (0.0, 0.0, thrust_n), (0.0, 0.0, 0.0), pb.LINK_FRAME, physicsClientId=c)
             pb.applyExternalTorque(body, -1, (0.0, 0.0, 0.0), pb.LINK_FRAME, physicsClientId=c)
             pb.setJointMotorControlArray(body, arm, pb.TORQUE_CONTROL, forces=[0.0] * len(arm), physicsClientId=c)

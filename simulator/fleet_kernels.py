@@ -32,6 +32,8 @@ def sense(slots, t, values, full, constants, state, imu_noise, ft_noise, noise_r
     for a in range(slots.shape[0]):
         i = slots[a]
         j = noise_row[i]
+        if j >= imu_noise.shape[1]:
+            raise IndexError("an AM without draws left: DeviceArrays.load draws its next blocks")
         frame = frames[i]
         if full[i]:
             suite_step(values[i], t, constants[i:i + 1], state[i:i + 1], imu_noise[i, j], ft_noise[i, j],
