@@ -104,24 +104,11 @@ def _set_quat(dst, q):
 
 
 @kernel
-def _save(h, s):
-    """p, v and q of the state record s into the history record h."""
-    for i in range(3):
-        h.p[i] = s.p[i]
-        h.v[i] = s.v[i]
-    for i in range(4):
-        h.q[i] = s.q[i]
-
-
-@kernel
-def _restore(s, h):
-    """p, v and q of the history record h into the state record s (a function apart from
-    `_save`: numba would otherwise take one record type for a subtype of the other)."""
-    for i in range(3):
-        s.p[i] = h.p[i]
-        s.v[i] = h.v[i]
-    for i in range(4):
-        s.q[i] = h.q[i]
+def _copy(dst, src):
+    """src's entries into dst (a record's field into another's: the state's p, v, q into a
+    history step and back)."""
+    for i in range(src.shape[0]):
+        dst[i] = src[i]
 
 
 @kernel
@@ -140,7 +127,10 @@ def predict(x, hist, k, omega_m, f_m, dt, g):
     for i in range(3):
         s.p[i] += s.v[i] * dt + 0.5 * a_W[i] * dt * dt
         s.v[i] += a_W[i] * dt
-    _save(hist[k % hist.shape[0]], s)
+    h = hist[k % hist.shape[0]]
+    _copy(h.p, s.p)
+    _copy(h.v, s.v)
+    _copy(h.q, s.q)
 
 
 @kernel
@@ -167,7 +157,10 @@ def fuse_pose(x, hist, k, lag, p_m, q_m, gains, dt):
             h.p[i] += dp[i] + a * dt * dv[i]
             h.v[i] += dv[i]
         _set_quat(h.q, quat_normalized(quat_mul(h.q, dq)))
-    _restore(s, hist[k % N])
+    h = hist[k % N]
+    _copy(s.p, h.p)
+    _copy(s.v, h.v)
+    _copy(s.q, h.q)
     out = np.empty(6)
     out[0:3] = r
     out[3:6] = e
