@@ -89,15 +89,14 @@ def warm_up_kernels(spec: ScenarioSpec) -> None:
     n = v.n_joints
     target = AttitudeTarget(0, quat_wxyz=np.array([1.0, 0.0, 0.0, 0.0]), rates_rad_s=np.zeros(3),
                             thrust_normalized=0.5)
-    FlightController(v.flight_controller, v.rotors, spec.dt_s).step((1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), target)
+    fc = FlightController(v.flight_controller, v.rotors, spec.dt_s)
+    fc.step((1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), target)
+    fc.allocation.allocate(0.0, 0.0, 0.0, 0.5)  # torque mode's allocation, from Python (simulator.world)
     values = [0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0] + [0.0] * (6 + 2 * n + 6)
     dev = DeviceSuite(DevicesSpec(enabled=True), n, spec.dt_s, v.gravity_mps2, 0, 2, values)
     dev.step(values, 0.0)
     if not dev.needs_reading(spec.dt_s):
         dev.step(values[:13], spec.dt_s)
-    fc = FlightController(v.flight_controller, v.rotors, spec.dt_s)
-    fc.allocation.allocate(0.0, 0.0, 0.0, 0.5)  # torque mode's allocation, from Python (simulator.world)
-    fc.arrays.set_target(0, target)
     one = np.zeros(1, np.int64)
     fleet_kernels.hold(one, 2 * spec.dt_s, *dev.arrays.sense_arrays(), one, *fc.arrays.fly_arrays())
     fleet_kernels.fly(one, dev.arrays.frames, dev.arrays.state, dev.arrays.est_x, *fc.arrays.fly_arrays())

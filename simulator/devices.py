@@ -39,6 +39,7 @@ from amcore.estimator import N_OUT, SNAPSHOT, STATE, Estimator
 from amcore.quat_kernels import quat_exp, quat_mul
 
 from . import device_kernels as dk
+from . import fleet_kernels
 from .noise import NoiseBlock
 
 _STREAM = 0xDE71  # distinguishes the devices' streams from the other seeded streams of an AM
@@ -165,7 +166,10 @@ class DeviceArrays:
         self.p_m, self.q_m = np.zeros((count, 3)), np.zeros((count, 4))
         self.suites: list[DeviceSuite | None] = [None] * count
         self._all = np.arange(count, dtype=np.int64)
-        self._kernel = None
+        self._sense_args = (self.values, self.full, self.constants, self.state, self.imu_noise, self.ft_noise,
+                            self.noise_row, self.k, self.frames, self.est_x, self.est_hist, self.est_lpf,
+                            self.est_coef, self.est_gains, self.has_pose, self.lag, self.p_m, self.q_m,
+                            self.innovation, dt_s, g)
 
     def load(self, values, slot: int) -> None:
         """AM `slot`'s exact values of this step (full, or the base's 13), its motion-capture
@@ -186,16 +190,12 @@ class DeviceArrays:
     def step(self, t: float, slots: np.ndarray | None = None) -> None:
         """One physics step of the loaded AMs (`slots`; None: all) in one compiled call; their
         frames into `frames`."""
-        if self._kernel is None:
-            from .fleet_kernels import sense
-            self._kernel = sense
-        self._kernel(self._all if slots is None else slots, t, *self.sense_arrays())
+        fleet_kernels.sense(self._all if slots is None else slots, t, *self._sense_args)
 
     def sense_arrays(self) -> tuple:
-        """The arrays `simulator.fleet_kernels.sense` takes after the slots and the time."""
-        return (self.values, self.full, self.constants, self.state, self.imu_noise, self.ft_noise, self.noise_row,
-                self.k, self.frames, self.est_x, self.est_hist, self.est_lpf, self.est_coef, self.est_gains,
-                self.has_pose, self.lag, self.p_m, self.q_m, self.innovation, self._dt, self._g)
+        """The arrays `simulator.fleet_kernels.sense` takes after the slots and the time (made
+        once: the arrays are filled in place, never replaced)."""
+        return self._sense_args
 
 
 class DeviceSuite:
@@ -227,6 +227,7 @@ class DeviceSuite:
             raise ValueError(f"device arrays for {a.n} joints, {a.est_hist.shape[1]} history steps, dt {a._dt} s "
                              f"and g {a._g}, not {n_joints}, {e.history_steps}, {dt_s} and {g}")
         self.arrays, self.slot = a, slot
+        self._slots = np.array([slot], np.int64)  # its row alone, as `DeviceArrays.step` takes it
         a.suites[slot] = self
         i = slot
         # the estimator is aligned on the ground before take-off, on a motion-capture pose
@@ -300,12 +301,5 @@ class DeviceSuite:
             raise ValueError(f"t = {t} s: the F/T tare needs this step's reading; give the full values")
         a = self.arrays
         a.load(values, self.slot)
-        a.step(t, self._slot_array)
+        a.step(t, self._slots)
         return self._frame.tolist() if full else self._frame[:N_OUT].tolist()
-
-    @property
-    def _slot_array(self) -> np.ndarray:
-        s = self.__dict__.get("_slots")
-        if s is None:
-            s = self.__dict__["_slots"] = np.array([self.slot], np.int64)
-        return s

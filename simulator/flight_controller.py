@@ -52,7 +52,7 @@ from amcore.allocation import SATURATION_TOL, Allocation, AllocationResult, froz
 from amcore.config import FlightControllerParams
 from amcore.rotors import RotorParams
 
-from . import fc_kernels
+from . import fc_kernels, fleet_kernels
 
 
 def lowpass2p(sample_hz: float, cutoff_hz: float) -> tuple[float, float, float, float, float, float]:
@@ -102,8 +102,8 @@ class AutopilotArrays:
         self._thrusts = self.result["thrusts_n"]  # a view: per AM, its rotor thrusts [N]
         self._results = [self.result[i:i + 1] for i in range(count)]  # each AM's, as `Allocation.read_result` takes it
         self.saturated = self.ap["saturated"]  # a view: per AM, whether its last allocation fell short (1 or 0)
-        self.controllers: list[FlightController | None] = [None] * count
-        self._kernel = None
+        self._fly_args = (self.params, self.state, self.ap, self.attitude, self.rate, self.target_q, self.target_w,
+                          self.target_thrust, self.alloc_c, SATURATION_TOL, self.result)
 
     def set_target(self, slot: int, target) -> None:
         """The held SET_ATTITUDE_TARGET AM `slot` flies (`amlink.types.AttitudeTarget`)."""
@@ -112,17 +112,14 @@ class AutopilotArrays:
         self.target_thrust[slot] = target.thrust_normalized
 
     def fly_arrays(self) -> tuple:
-        """The arrays `simulator.fleet_kernels.fly` takes after the devices'."""
-        return (self.params, self.state, self.ap, self.attitude, self.rate, self.target_q, self.target_w,
-                self.target_thrust, self.alloc_c, SATURATION_TOL, self.result)
+        """The arrays `simulator.fleet_kernels.fly` takes after the devices' (made once: the
+        arrays are filled in place, never replaced)."""
+        return self._fly_args
 
     def step(self, slots: np.ndarray) -> None:
         """One physics step of the autopilots in `slots`, on the attitude and rates in their rows
         (`attitude`, `rate`) and their targets."""
-        if self._kernel is None:
-            from .fleet_kernels import fly_on
-            self._kernel = fly_on
-        self._kernel(slots, *self.fly_arrays())
+        fleet_kernels.fly_on(slots, *self._fly_args)
 
     def saturated_axes_of(self, slot: int) -> tuple[bool, bool, bool, bool]:
         """Per axis (roll, pitch, yaw, thrust), whether AM `slot`'s last allocation fell short."""
@@ -161,7 +158,6 @@ class FlightController:
         rate_hz = 1.0 / self.dt_s
         self.arrays = a = AutopilotArrays(1, rotors) if arrays is None else arrays
         self.slot = slot
-        a.controllers[slot] = self
         self.allocation = a.allocation
         self.yaw_weight = fc.MC_YAW_WEIGHT
         w = fc.MC_YAW_WEIGHT
