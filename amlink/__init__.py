@@ -4,11 +4,9 @@
   generated with pymavlink's mavgen into a cache on first use.
 * :mod:`amlink.types` -- value types (numpy only): SensorFrame, TorqueSetpoint,
   AttitudeTarget, AttitudeSetpoint, ScenarioInfo.
-* :mod:`amlink.codec` -- value types <-> MAVLink frames via pymavlink message objects
-  (the reference; tools, tests and rare messages).
-* :mod:`amlink.fastcodec` -- the same for the lockstep batches with precompiled
-  structs (what the lockstep uses at 1 kHz); :mod:`amlink.layout` derives them
-  from the generated dialect.
+* :mod:`amlink.codec` -- value types <-> MAVLink payloads: the lockstep batches with
+  precompiled structs, which :mod:`amlink.layout` derives from the generated dialect, and
+  the messages sent once a run as pymavlink message objects.
 * :mod:`amlink.wire` -- datagram <-> frames (strict framing, MAVLink 2 signing).
 * :mod:`amlink.signing` -- signing keys: formats, derivation, scenario keys.
 * :mod:`amlink.limits` -- plausibility bounds on setpoints and sensor frames.

@@ -6,7 +6,7 @@ import re
 import time
 from collections import deque
 
-from amlink import codec, fastcodec
+from amlink import codec
 from amlink.codec import mav
 from amlink.endpoint import UDP_IN, UDP_OUT, Endpoint, as_destination, parse_endpoint
 from amlink.errors import CommandRejectedError, LinkError, SimulatorTimeoutError, SimulatorUnreachableError
@@ -126,8 +126,8 @@ class CompanionClient:
         self._sim_rx_addr: tuple[str, int] | None = None  # signing off: the only source we read
         self._encoder = codec.Encoder(sysid, compid, signing_key=signing_key, link_id=sysid)
         keys = None if signing_key is None else {SIM_SYSID: signing_key}
-        self._decoder = codec.Decoder(keys, accept=_ACCEPT, counters=self.stats, readers=fastcodec.READERS)
-        self._frames = fastcodec.SensorFrameAssembler()
+        self._decoder = codec.Decoder(keys, accept=_ACCEPT, counters=self.stats, readers=codec.READERS)
+        self._frames = codec.SensorFrameAssembler()
         self._inbox: deque[SensorFrame | codec.Shutdown] = deque()
         self._acks: deque = deque(maxlen=_MAX_ACKS)
         self._shutdown = False  # recv_frame has returned None
@@ -271,9 +271,9 @@ class CompanionClient:
         An :class:`AttitudeSetpoint` carries its own target (``attitude`` is not used)."""
         time_boot_ms = round(self._last_time_s * 1e3)
         if isinstance(setpoint, AttitudeSetpoint):
-            payloads = fastcodec.attitude_setpoint_payloads(setpoint, time_boot_ms, SIM_SYSID, SIM_COMPID)
+            payloads = codec.attitude_setpoint_payloads(setpoint, time_boot_ms, SIM_SYSID, SIM_COMPID)
         else:
-            payloads = fastcodec.setpoint_payloads(setpoint, attitude, time_boot_ms, SIM_SYSID, SIM_COMPID)
+            payloads = codec.setpoint_payloads(setpoint, attitude, time_boot_ms, SIM_SYSID, SIM_COMPID)
         self._send_payloads(payloads)
         self._answer = (setpoint.step, payloads)
 
@@ -303,7 +303,7 @@ class CompanionClient:
         self._out(self._encoder.pack(msgs))
 
     def _send_payloads(self, payloads) -> None:
-        """Send a batch of :mod:`amlink.fastcodec` payloads as one datagram."""
+        """Send a batch of :mod:`amlink.codec` payloads as one datagram."""
         self._out(self._encoder.pack_payloads(payloads))
 
     def _out(self, data: bytes) -> None:
@@ -342,7 +342,7 @@ class CompanionClient:
     def _on_message(self, record, addr) -> bool:
         """Handle one decoder record; True if it asks for the last answer again.
 
-        ``body`` is a :data:`amlink.fastcodec.READERS` tuple for the sensor batch
+        ``body`` is a :data:`amlink.codec.READERS` tuple for the sensor batch
         ids, a pymavlink message for the rest.
         """
         mid, sysid, _compid, body = record

@@ -26,18 +26,37 @@ is ENU <- FLU, so the codec converts at this edge (a fixed quaternion map).
 Floats: ODOMETRY and SET_ATTITUDE_TARGET force float32; amstack messages carry
 float64.  Decoding rejects non-finite values with :class:`NonFiniteValueError`.
 
-This module works with pymavlink message objects and is the reference
-implementation.  The lockstep itself (:mod:`amlink.server`, :mod:`amlink.client`)
-uses :mod:`amlink.fastcodec`, which writes the same bytes and reads them into the
-same values with the same errors without those objects; tests hold the two equal.
+How: encoding packs each payload with a ``struct.Struct`` derived from the generated dialect
+(:mod:`amlink.layout`) and frames it with :meth:`amlink.wire.Encoder.pack_payloads`; decoding
+takes the records of :meth:`amlink.wire.Decoder.feed_records` (built with :data:`READERS`) and
+assembles value types from plain tuples. The messages sent once a run (AM_SCENARIO,
+AM_OBJECT_POSE, the SHUTDOWN step) are pymavlink message objects, framed with
+:meth:`amlink.wire.Encoder.encode`. The readable twin of the batch codec, on pymavlink's message
+objects, is in the tests (``tests/amlink/codec_reference.py``): they check that both write the
+same bytes and read them into the same values with the same errors, and that pymavlink reads
+what this writes.
+
+Usage::
+
+    enc = wire.Encoder(1, 1, signing_key=key, link_id=2)
+    data = enc.pack_payloads(codec.sensor_frame_payloads(frame, scenario_id))
+    dec = wire.Decoder(keys, readers=codec.READERS)
+    asm = codec.SensorFrameAssembler()
+    for msgid, sysid, compid, body in dec.feed_records(data):
+        item = asm.push(msgid, body)        # SensorFrame | codec.Shutdown | None
+
+Errors: ``EncodeError``, ``NonFiniteValueError``, ``BatchMismatchError``,
+``FrameConventionError``, all ``CodecError``.
 """
 
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass
 
 from amlink import wire
+from amlink.layout import MessageLayout
 from amlink.px4 import q_enu_flu_to_ned_frd, q_ned_frd_to_enu_flu
 from amlink.types import (
     MAX_JOINTS,
@@ -47,6 +66,11 @@ from amlink.types import (
     SensorFrame,
     StepFlag,
     TorqueSetpoint,
+    attitude_setpoint_from_wire,
+    attitude_target_from_wire,
+    sensor_frame_from_wire,
+    torque_setpoint_from_wire,
+    with_autopilot_reports,
 )
 
 from amlink.wire import CodecError, Decoder, EncodeError, Encoder  # noqa: F401  (re-exported)
@@ -55,8 +79,6 @@ mav = wire.mav
 
 ODOM_FRAME_ID = mav.MAV_FRAME_LOCAL_ENU
 ODOM_CHILD_FRAME_ID = mav.MAV_FRAME_RESERVED_13  # formerly MAV_FRAME_BODY_FLU
-_UNKNOWN_COV = [math.nan] + [0.0] * 20  # MAVLink: NaN first element = unknown
-_ZEROS = [0.0] * MAX_JOINTS
 
 
 class NonFiniteValueError(CodecError):
@@ -83,88 +105,10 @@ def all_finite(values) -> bool:
     return all(map(math.isfinite, values))  # a finite sum can only overflow, recheck
 
 
-def _check_finite(msgname: str, field: str, values) -> None:
-    if not all_finite(values):
-        raise NonFiniteValueError(msgname, field)
-
-
-def _pad(values: list[float]) -> list[float]:
-    return values + _ZEROS[len(values) :]
-
-
 def _usec(time_s: float) -> int:
     if not (math.isfinite(time_s) and time_s >= 0.0):
         raise EncodeError(f"time_s must be finite and >= 0, got {time_s}")
     return round(time_s * 1e6)
-
-
-# -- message builders ---------------------------------------------------------
-
-
-def sensor_frame_messages(frame: SensorFrame, scenario_id: int = 0) -> list:
-    """The four messages of a sensor batch, AM_SIM_STEP last."""
-    t_us = _usec(frame.time_s)
-    p, qt = frame.p_WB.tolist(), frame.quat_WB_wxyz.tolist()
-    v, w = frame.v_B.tolist(), frame.w_B.tolist()
-    q, qdot, wr = frame.q.tolist(), frame.qdot.tolist(), frame.wrench_E.tolist()
-    if not all_finite(p + qt + v + w + q + qdot + wr):
-        raise EncodeError(f"non-finite value in SensorFrame step {frame.step}")
-    odom = mav.MAVLink_odometry_message(
-        t_us, ODOM_FRAME_ID, ODOM_CHILD_FRAME_ID, p[0], p[1], p[2], qt,
-        v[0], v[1], v[2], w[0], w[1], w[2],
-        _UNKNOWN_COV, _UNKNOWN_COV, 0, mav.MAV_ESTIMATOR_TYPE_NAIVE, 100,
-    )  # fmt: skip
-    effort = frame.joint_effort_nm
-    if effort is None:
-        joints = mav.MAVLink_am_joint_state_message(frame.step, len(q), _pad(q), _pad(qdot))
-    else:
-        e = effort.tolist()
-        if not all_finite(e):
-            raise EncodeError(f"non-finite value in SensorFrame step {frame.step}")
-        joints = mav.MAVLink_am_joint_state_message(frame.step, len(q), _pad(q), _pad(qdot), _pad(e), 1)
-    wrench = mav.MAVLink_am_wrench_message(frame.step, wr[:3], wr[3:])
-    step = mav.MAVLink_am_sim_step_message(frame.step, t_us, scenario_id, int(frame.flags))
-    if frame.attitude_target is None:
-        return [odom, joints, wrench, step]
-    return [odom, joints, wrench, attitude_report_message(frame.attitude_target, t_us // 1000), step]
-
-
-def attitude_report_message(att: AttitudeTarget, time_boot_ms: int = 0) -> object:
-    """ATTITUDE_TARGET: the target the autopilot flies (as PX4 reports it), NED/FRD, type_mask 0."""
-    quat, r = att.quat_wxyz.tolist(), att.rates_rad_s.tolist()
-    if not all_finite([*quat, *r, att.thrust_normalized]):
-        raise EncodeError(f"non-finite value in AttitudeTarget step {att.step}")
-    return mav.MAVLink_attitude_target_message(time_boot_ms & 0xFFFFFFFF, 0, list(q_enu_flu_to_ned_frd(quat)),
-                                               r[0], -r[1], -r[2], att.thrust_normalized)  # FLU -> FRD rates
-
-
-def shutdown_message(step: int, time_s: float, scenario_id: int = 0) -> object:
-    """A bare AM_SIM_STEP with the SHUTDOWN flag (the last message of a run)."""
-    return mav.MAVLink_am_sim_step_message(step, _usec(time_s), scenario_id, int(StepFlag.SHUTDOWN))
-
-
-def setpoint_messages(
-    sp: TorqueSetpoint, attitude: AttitudeTarget | None = None, time_boot_ms: int = 0,
-    target_system: int = 1, target_component: int = 1,
-) -> list:  # fmt: skip
-    """The messages of a setpoint batch, AM_TORQUE_SETPOINT last."""
-    tau_B, tau_q = sp.tau_B_nm.tolist(), sp.tau_q_nm.tolist()
-    if not all_finite([sp.thrust_n, *tau_B, *tau_q]):
-        raise EncodeError(f"non-finite value in TorqueSetpoint step {sp.step}")
-    out = []
-    if attitude is not None:
-        quat, r = attitude.quat_wxyz.tolist(), attitude.rates_rad_s.tolist()
-        if not all_finite([*quat, *r, attitude.thrust_normalized]):
-            raise EncodeError(f"non-finite value in AttitudeTarget step {attitude.step}")
-        # FLU -> FRD body rates: (p, q, r) -> (p, -q, -r)
-        out.append(mav.MAVLink_set_attitude_target_message(
-            time_boot_ms & 0xFFFFFFFF, target_system, target_component, 0,
-            list(q_enu_flu_to_ned_frd(quat)), r[0], -r[1], -r[2], attitude.thrust_normalized,
-        ))  # fmt: skip
-    out.append(mav.MAVLink_am_torque_setpoint_message(
-        sp.step, sp.thrust_n, tau_B, len(tau_q), _pad(tau_q), int(sp.flags),
-    ))  # fmt: skip
-    return out
 
 
 def attitude_setpoint_values(sp: AttitudeSetpoint) -> tuple[list[float], list[float], list[float]]:
@@ -179,20 +123,12 @@ def attitude_setpoint_values(sp: AttitudeSetpoint) -> tuple[list[float], list[fl
     return quat, r, tau_q
 
 
-def attitude_setpoint_messages(
-    sp: AttitudeSetpoint, time_boot_ms: int = 0, target_system: int = 1, target_component: int = 1,
-) -> list:  # fmt: skip
-    """The messages of an attitude-mode setpoint batch: SET_ATTITUDE_TARGET, then
-    AM_JOINT_TORQUE_SETPOINT (last: it carries the step)."""
-    att = sp.attitude
-    quat, r, tau_q = attitude_setpoint_values(sp)
-    return [
-        mav.MAVLink_set_attitude_target_message(
-            time_boot_ms & 0xFFFFFFFF, target_system, target_component, 0,
-            list(q_enu_flu_to_ned_frd(quat)), r[0], -r[1], -r[2], att.thrust_normalized,
-        ),  # FLU -> FRD body rates
-        mav.MAVLink_am_joint_torque_setpoint_message(sp.step, len(tau_q), _pad(tau_q), int(sp.flags)),
-    ]  # fmt: skip
+# -- the messages sent once a run (pymavlink message objects) ---------------------
+
+
+def shutdown_message(step: int, time_s: float, scenario_id: int = 0) -> object:
+    """A bare AM_SIM_STEP with the SHUTDOWN flag (the last message of a run)."""
+    return mav.MAVLink_am_sim_step_message(step, _usec(time_s), scenario_id, int(StepFlag.SHUTDOWN))
 
 
 def scenario_message(info: ScenarioInfo) -> object:
@@ -204,9 +140,6 @@ def scenario_message(info: ScenarioInfo) -> object:
 def object_pose_message(position_m, yaw_rad: float) -> object:
     """AM_OBJECT_POSE: the measured object's centre [m, W] and yaw [rad]."""
     return mav.MAVLink_am_object_pose_message([float(x) for x in position_m], float(yaw_rad))
-
-
-# -- decoders -------------------------------------------------------------------
 
 
 def scenario_from_message(msg) -> ScenarioInfo:
@@ -224,90 +157,6 @@ def object_pose_from_message(msg) -> tuple[tuple[float, float, float], float]:
     return (tuple(float(x) for x in msg.position_m), float(msg.yaw_rad))
 
 
-def sensor_frame_from_messages(odom, joints, wrench, step_msg, target=None) -> SensorFrame:
-    """Assemble a :class:`SensorFrame` from the four messages of one batch (and its
-    ATTITUDE_TARGET in attitude mode, `target`).
-
-    Raises BatchMismatchError if the steps (or ODOMETRY/AM_SIM_STEP times)
-    disagree, FrameConventionError on unexpected ODOMETRY frames, and
-    NonFiniteValueError on NaN/inf.
-    """
-    step = step_msg.step
-    if joints.step != step or wrench.step != step:
-        raise BatchMismatchError(
-            f"batch steps disagree: AM_SIM_STEP {step}, AM_JOINT_STATE {joints.step}, AM_WRENCH {wrench.step}"
-        )
-    if odom.time_usec != step_msg.time_usec:
-        raise BatchMismatchError(
-            f"step {step}: ODOMETRY time_usec {odom.time_usec} != AM_SIM_STEP time_usec {step_msg.time_usec}"
-        )
-    if odom.frame_id != ODOM_FRAME_ID or odom.child_frame_id != ODOM_CHILD_FRAME_ID:
-        raise FrameConventionError(
-            f"ODOMETRY frames ({odom.frame_id}, {odom.child_frame_id}) != (LOCAL_ENU, BODY_FLU)"
-            f" = ({ODOM_FRAME_ID}, {ODOM_CHILD_FRAME_ID})"
-        )
-    n = joints.n_joints
-    if n > MAX_JOINTS:
-        raise CodecError(f"AM_JOINT_STATE.n_joints={n} > {MAX_JOINTS}")
-    base = (odom.x, odom.y, odom.z, *odom.q, odom.vx, odom.vy, odom.vz,
-            odom.rollspeed, odom.pitchspeed, odom.yawspeed)  # fmt: skip
-    _check_finite("ODOMETRY", "pose/twist", base)
-    q, qdot = joints.position_rad[:n], joints.velocity_rad_s[:n]
-    _check_finite("AM_JOINT_STATE", "position_rad", q)
-    _check_finite("AM_JOINT_STATE", "velocity_rad_s", qdot)
-    wr = (*wrench.force_n, *wrench.torque_nm)
-    _check_finite("AM_WRENCH", "force_n/torque_nm", wr)
-    effort = None
-    if getattr(joints, "effort_valid", 0):
-        effort = joints.effort_nm[:n]
-        _check_finite("AM_JOINT_STATE", "effort_nm", effort)
-    return SensorFrame(
-        step=step, time_s=step_msg.time_usec / 1e6,
-        p_WB=base[0:3], quat_WB_wxyz=base[3:7], v_B=base[7:10], w_B=base[10:13],
-        q=q, qdot=qdot, wrench_E=wr, flags=step_msg.flags, joint_effort_nm=effort,
-        attitude_target=None if target is None else attitude_report_from_message(target, step),
-    )  # fmt: skip
-
-
-def attitude_report_from_message(msg, step: int) -> AttitudeTarget:
-    """The ATTITUDE_TARGET of a sensor batch, for the batch's step (the message carries none)."""
-    vals = (*msg.q, msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate, msg.thrust)
-    _check_finite("ATTITUDE_TARGET", "q/rates/thrust", vals)
-    return AttitudeTarget(step, q_ned_frd_to_enu_flu(vals[0:4]), (vals[4], -vals[5], -vals[6]), vals[7])
-
-
-def setpoint_from_message(msg) -> TorqueSetpoint:
-    n = msg.n_joints
-    if n > MAX_JOINTS:
-        raise CodecError(f"AM_TORQUE_SETPOINT.n_joints={n} > {MAX_JOINTS}")
-    if not math.isfinite(msg.thrust_n):
-        raise NonFiniteValueError("AM_TORQUE_SETPOINT", "thrust_n")
-    tau_B, tau_q = msg.body_torque_nm, msg.joint_torque_nm[:n]
-    _check_finite("AM_TORQUE_SETPOINT", "body_torque_nm", tau_B)
-    _check_finite("AM_TORQUE_SETPOINT", "joint_torque_nm", tau_q)
-    return TorqueSetpoint(msg.step, msg.thrust_n, tau_B, tau_q, msg.flags)
-
-
-def attitude_setpoint_from_messages(att_msg, joint_msg) -> AttitudeSetpoint:
-    """An attitude-mode setpoint from its SET_ATTITUDE_TARGET and AM_JOINT_TORQUE_SETPOINT."""
-    n = joint_msg.n_joints
-    if n > MAX_JOINTS:
-        raise CodecError(f"AM_JOINT_TORQUE_SETPOINT.n_joints={n} > {MAX_JOINTS}")
-    tau_q = joint_msg.joint_torque_nm[:n]
-    _check_finite("AM_JOINT_TORQUE_SETPOINT", "joint_torque_nm", tau_q)
-    return AttitudeSetpoint(joint_msg.step, attitude_from_message(att_msg, joint_msg.step), tau_q, joint_msg.flags)
-
-
-def attitude_from_message(msg, step: int) -> AttitudeTarget:
-    vals = (*msg.q, msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate, msg.thrust)
-    _check_finite("SET_ATTITUDE_TARGET", "q/rates/thrust", vals)
-    rates = (vals[4], -vals[5], -vals[6])  # FRD -> FLU
-    return AttitudeTarget(step, q_ned_frd_to_enu_flu(vals[0:4]), rates, vals[7])
-
-
-# -- stateful assemblers (one per connection) ---------------------------------
-
-
 @dataclass(frozen=True)
 class Shutdown:
     """The simulator announced the end of the run (AM_SIM_STEP with SHUTDOWN)."""
@@ -317,8 +166,260 @@ class Shutdown:
     flags: StepFlag
 
 
+# -- the lockstep batches --------------------------------------------------------
+ODOMETRY = MessageLayout.of(mav.MAVLink_odometry_message)
+JOINT_STATE = MessageLayout.of(mav.MAVLink_am_joint_state_message)
+WRENCH = MessageLayout.of(mav.MAVLink_am_wrench_message)
+SIM_STEP = MessageLayout.of(mav.MAVLink_am_sim_step_message)
+TORQUE_SETPOINT = MessageLayout.of(mav.MAVLink_am_torque_setpoint_message)
+ATTITUDE_TARGET = MessageLayout.of(mav.MAVLink_set_attitude_target_message)
+ATTITUDE_REPORT = MessageLayout.of(mav.MAVLink_attitude_target_message)  # ATTITUDE_TARGET: what the autopilot flies
+JOINT_TORQUE_SETPOINT = MessageLayout.of(mav.MAVLink_am_joint_torque_setpoint_message)
+_ODOMETRY_ID, _JOINT_STATE_ID, _WRENCH_ID = ODOMETRY.msgid, JOINT_STATE.msgid, WRENCH.msgid
+_SIM_STEP_ID, _TORQUE_SETPOINT_ID, _ATTITUDE_TARGET_ID = SIM_STEP.msgid, TORQUE_SETPOINT.msgid, ATTITUDE_TARGET.msgid
+_JOINT_TORQUE_SETPOINT_ID = JOINT_TORQUE_SETPOINT.msgid
+_ATTITUDE_REPORT_ID = ATTITUDE_REPORT.msgid
+
+_BASE = ("x", "y", "z", "q", "vx", "vy", "vz", "rollspeed", "pitchspeed", "yawspeed")  # 13 floats
+_UNKNOWN_COV = [math.nan] + [0.0] * 20  # MAVLink: NaN first element = unknown
+
+# -- packers: the fields we set, in wire order; the rest fixed ------------------------
+_pack_odometry = ODOMETRY.packer(
+    "time_usec", *_BASE, pose_covariance=_UNKNOWN_COV, velocity_covariance=_UNKNOWN_COV,
+    frame_id=ODOM_FRAME_ID, child_frame_id=ODOM_CHILD_FRAME_ID, reset_counter=0,
+    estimator_type=mav.MAV_ESTIMATOR_TYPE_NAIVE, quality=100,
+).pack  # fmt: skip
+_pack_joints = JOINT_STATE.packer("step", "position_rad", "velocity_rad_s", "n_joints").pack
+_pack_joints_effort = JOINT_STATE.packer("step", "position_rad", "velocity_rad_s", "n_joints", "effort_nm",
+                                         "effort_valid").pack
+_pack_report = ATTITUDE_REPORT.packer("time_boot_ms", "q", "body_roll_rate", "body_pitch_rate", "body_yaw_rate",
+                                      "thrust", "type_mask").pack
+_pack_wrench = WRENCH.packer("step", "force_n", "torque_nm").pack
+_pack_step = SIM_STEP.packer("step", "time_usec", "scenario_id", "flags").pack
+_pack_setpoint = TORQUE_SETPOINT.packer("step", "thrust_n", "body_torque_nm", "joint_torque_nm", "n_joints",
+                                        "flags").pack  # fmt: skip
+_pack_joint_setpoint = JOINT_TORQUE_SETPOINT.packer("step", "joint_torque_nm", "n_joints", "flags").pack
+_pack_attitude = ATTITUDE_TARGET.packer("time_boot_ms", "q", "body_roll_rate", "body_pitch_rate", "body_yaw_rate",
+                                        "thrust", "target_system", "target_component", type_mask=0).pack  # fmt: skip
+
+# -- readers: the fields we use, in wire order; values flattened -----------------------
+READERS = {
+    ODOMETRY.msgid: ODOMETRY.reader("time_usec", *_BASE, "frame_id", "child_frame_id").read,
+    JOINT_STATE.msgid: JOINT_STATE.reader("step", "position_rad", "velocity_rad_s", "n_joints", "effort_nm",
+                                          "effort_valid").read,
+    ATTITUDE_REPORT.msgid: ATTITUDE_REPORT.reader("q", "body_roll_rate", "body_pitch_rate", "body_yaw_rate",
+                                                  "thrust").read,
+    WRENCH.msgid: WRENCH.reader("step", "force_n", "torque_nm").read,
+    SIM_STEP.msgid: SIM_STEP.reader("step", "time_usec", "scenario_id", "flags").read,
+    TORQUE_SETPOINT.msgid: TORQUE_SETPOINT.reader(
+        "step", "thrust_n", "body_torque_nm", "joint_torque_nm", "n_joints", "flags"
+    ).read,
+    ATTITUDE_TARGET.msgid: ATTITUDE_TARGET.reader(
+        "q", "body_roll_rate", "body_pitch_rate", "body_yaw_rate", "thrust"
+    ).read,
+    JOINT_TORQUE_SETPOINT.msgid: JOINT_TORQUE_SETPOINT.reader("step", "joint_torque_nm", "n_joints", "flags").read,
+}
+"""``msgid -> read`` for :class:`amlink.wire.Decoder`; body tuples as documented on each assembler."""
+
+_ZEROS = (0.0,) * MAX_JOINTS
+_SHUTDOWN = int(StepFlag.SHUTDOWN)
+
+
+# -- encoders ---------------------------------------------------------------------------
+
+
+def sensor_frame_payloads(frame: SensorFrame, scenario_id: int = 0) -> tuple[tuple[int, bytes], ...]:
+    """``(msgid, payload)`` of a sensor batch."""
+    t_us = _usec(frame.time_s)
+    p, qt = frame.p_WB.tolist(), frame.quat_WB_wxyz.tolist()
+    v, w = frame.v_B.tolist(), frame.w_B.tolist()
+    q, qdot, wr = frame.q.tolist(), frame.qdot.tolist(), frame.wrench_E.tolist()
+    if not all_finite(p + qt + v + w + q + qdot + wr):
+        raise EncodeError(f"non-finite value in SensorFrame step {frame.step}")
+    n, step = len(q), frame.step
+    pad = _ZEROS[n:]
+    name = "ODOMETRY"  # the messages that can fail to pack (float32 range, uint32 scenario id)
+    try:
+        odom = _pack_odometry(t_us, *p, *qt, *v, *w)
+        name = "AM_SIM_STEP"
+        sim_step = _pack_step(step, t_us, scenario_id, int(frame.flags))
+    except (struct.error, OverflowError) as exc:  # worded as amlink.wire.Encoder.pack does
+        raise EncodeError(f"cannot pack {name}: {exc}") from exc
+    if frame.joint_effort_nm is None:
+        joints = _pack_joints(step, *q, *pad, *qdot, *pad, n)
+    else:
+        e = frame.joint_effort_nm.tolist()
+        if not all_finite(e):
+            raise EncodeError(f"non-finite value in SensorFrame step {frame.step}")
+        joints = _pack_joints_effort(step, *q, *pad, *qdot, *pad, n, *e, *pad, 1)
+    if frame.attitude_target is None:
+        return (
+            (_ODOMETRY_ID, odom),
+            (_JOINT_STATE_ID, joints),
+            (_WRENCH_ID, _pack_wrench(step, *wr)),
+            (_SIM_STEP_ID, sim_step),
+        )
+    return (
+        (_ODOMETRY_ID, odom),
+        (_JOINT_STATE_ID, joints),
+        (_WRENCH_ID, _pack_wrench(step, *wr)),
+        attitude_report_payload(frame.attitude_target, t_us // 1000),
+        (_SIM_STEP_ID, sim_step),
+    )
+
+
+def attitude_report_payload(att: AttitudeTarget, time_boot_ms: int = 0) -> tuple[int, bytes]:
+    """``(msgid, payload)`` of ATTITUDE_TARGET."""
+    quat, r = att.quat_wxyz.tolist(), att.rates_rad_s.tolist()
+    if not all_finite([*quat, *r, att.thrust_normalized]):
+        raise EncodeError(f"non-finite value in AttitudeTarget step {att.step}")
+    try:  # FLU -> FRD body rates: (p, q, r) -> (p, -q, -r)
+        return _ATTITUDE_REPORT_ID, _pack_report(time_boot_ms & 0xFFFFFFFF, *q_enu_flu_to_ned_frd(quat), r[0], -r[1],
+                                                 -r[2], att.thrust_normalized, 0)  # fmt: skip
+    except (struct.error, OverflowError) as exc:
+        raise EncodeError(f"cannot pack ATTITUDE_TARGET: {exc}") from exc
+
+
+def attitude_report_from_fields(fields: tuple, step: int) -> AttitudeTarget:
+    """``fields`` = (q[4], roll, pitch, yaw rates, thrust)."""
+    if not all_finite(fields):
+        raise NonFiniteValueError("ATTITUDE_TARGET", "q/rates/thrust")
+    return attitude_target_from_wire(step, (*q_ned_frd_to_enu_flu(fields[0:4]), fields[4], -fields[5], -fields[6],
+                                            fields[7]))  # fmt: skip
+
+
+def setpoint_payloads(
+    sp: TorqueSetpoint, attitude: AttitudeTarget | None = None, time_boot_ms: int = 0,
+    target_system: int = 1, target_component: int = 1,
+) -> tuple[tuple[int, bytes], ...]:  # fmt: skip
+    """``(msgid, payload)`` of a setpoint batch."""
+    tau_B, tau_q = sp.tau_B_nm.tolist(), sp.tau_q_nm.tolist()
+    if not all_finite([sp.thrust_n, *tau_B, *tau_q]):
+        raise EncodeError(f"non-finite value in TorqueSetpoint step {sp.step}")
+    n = len(tau_q)
+    setpoint = (_TORQUE_SETPOINT_ID, _pack_setpoint(sp.step, sp.thrust_n, *tau_B, *tau_q, *_ZEROS[n:], n,
+                                                      int(sp.flags)))  # fmt: skip
+    if attitude is None:
+        return (setpoint,)
+    quat, r = attitude.quat_wxyz.tolist(), attitude.rates_rad_s.tolist()
+    if not all_finite([*quat, *r, attitude.thrust_normalized]):
+        raise EncodeError(f"non-finite value in AttitudeTarget step {attitude.step}")
+    # FLU -> FRD body rates: (p, q, r) -> (p, -q, -r)
+    try:
+        att = _pack_attitude(time_boot_ms & 0xFFFFFFFF, *q_enu_flu_to_ned_frd(quat), r[0], -r[1], -r[2],
+                             attitude.thrust_normalized, target_system, target_component)  # fmt: skip
+    except (struct.error, OverflowError) as exc:
+        raise EncodeError(f"cannot pack SET_ATTITUDE_TARGET: {exc}") from exc
+    return (_ATTITUDE_TARGET_ID, att), setpoint
+
+
+def attitude_setpoint_payloads(
+    sp: AttitudeSetpoint, time_boot_ms: int = 0, target_system: int = 1, target_component: int = 1,
+) -> tuple[tuple[int, bytes], ...]:  # fmt: skip
+    """``(msgid, payload)`` of an attitude-mode batch."""
+    att = sp.attitude
+    quat, r, tau_q = attitude_setpoint_values(sp)
+    try:  # FLU -> FRD body rates: (p, q, r) -> (p, -q, -r)
+        payload = _pack_attitude(time_boot_ms & 0xFFFFFFFF, *q_enu_flu_to_ned_frd(quat), r[0], -r[1], -r[2],
+                                 att.thrust_normalized, target_system, target_component)  # fmt: skip
+    except (struct.error, OverflowError) as exc:
+        raise EncodeError(f"cannot pack SET_ATTITUDE_TARGET: {exc}") from exc
+    n = len(tau_q)
+    return ((_ATTITUDE_TARGET_ID, payload),
+            (_JOINT_TORQUE_SETPOINT_ID, _pack_joint_setpoint(sp.step, *tau_q, *_ZEROS[n:], n, int(sp.flags))))
+
+
+# -- decoders (bodies are READERS tuples) --------------------------------------------------
+
+
+def sensor_frame_from_fields(odom: tuple, joints: tuple, wrench: tuple, step_fields: tuple,
+                             target: tuple | None = None) -> SensorFrame:
+    """A :class:`SensorFrame` from the reader tuples of one batch (and its ATTITUDE_TARGET in attitude mode,
+    ``target``); BatchMismatchError if the steps (or ODOMETRY/AM_SIM_STEP times) disagree,
+    FrameConventionError on other ODOMETRY frames, NonFiniteValueError on NaN/inf.
+
+    ``odom`` = (time_usec, x, y, z, q[4], vx, vy, vz, rollspeed, pitchspeed, yawspeed,
+    frame_id, child_frame_id); ``joints`` = (step, position[8], velocity[8], n_joints, effort[8],
+    effort_valid); ``target``: an ATTITUDE_TARGET's reader tuple, or None;
+    ``wrench`` = (step, force[3], torque[3]); ``step_fields`` = (step, time_usec, scenario_id, flags).
+    """
+    step, time_usec, _, flags = step_fields
+    if joints[0] != step or wrench[0] != step:
+        raise BatchMismatchError(
+            f"batch steps disagree: AM_SIM_STEP {step}, AM_JOINT_STATE {joints[0]}, AM_WRENCH {wrench[0]}"
+        )
+    if odom[0] != time_usec:
+        raise BatchMismatchError(f"step {step}: ODOMETRY time_usec {odom[0]} != AM_SIM_STEP time_usec {time_usec}")
+    frame_id, child_frame_id = odom[14], odom[15]
+    if frame_id != ODOM_FRAME_ID or child_frame_id != ODOM_CHILD_FRAME_ID:
+        raise FrameConventionError(
+            f"ODOMETRY frames ({frame_id}, {child_frame_id}) != (LOCAL_ENU, BODY_FLU)"
+            f" = ({ODOM_FRAME_ID}, {ODOM_CHILD_FRAME_ID})"
+        )
+    n = joints[17]
+    if n > MAX_JOINTS:
+        raise CodecError(f"AM_JOINT_STATE.n_joints={n} > {MAX_JOINTS}")
+    base = odom[1:14]
+    if not all_finite(base):
+        raise NonFiniteValueError("ODOMETRY", "pose/twist")
+    q, qdot = joints[1 : 1 + n], joints[9 : 9 + n]
+    if not all_finite(q):
+        raise NonFiniteValueError("AM_JOINT_STATE", "position_rad")
+    if not all_finite(qdot):
+        raise NonFiniteValueError("AM_JOINT_STATE", "velocity_rad_s")
+    wr = wrench[1:7]
+    if not all_finite(wr):
+        raise NonFiniteValueError("AM_WRENCH", "force_n/torque_nm")
+    frame = sensor_frame_from_wire(step, time_usec / 1e6, base + q + qdot + wr, n, flags)
+    if not joints[26] and target is None:
+        return frame
+    effort = None
+    if joints[26]:
+        effort = joints[18 : 18 + n]
+        if not all_finite(effort):
+            raise NonFiniteValueError("AM_JOINT_STATE", "effort_nm")
+    return with_autopilot_reports(frame, effort, None if target is None else attitude_report_from_fields(target, step))
+
+
+def setpoint_from_fields(fields: tuple) -> TorqueSetpoint:
+    """``fields`` = (step, thrust, tau_B[3], tau_q[8], n, flags)."""
+    n = fields[13]
+    if n > MAX_JOINTS:
+        raise CodecError(f"AM_TORQUE_SETPOINT.n_joints={n} > {MAX_JOINTS}")
+    thrust = fields[1]
+    if not math.isfinite(thrust):
+        raise NonFiniteValueError("AM_TORQUE_SETPOINT", "thrust_n")
+    if not all_finite(fields[2:5]):
+        raise NonFiniteValueError("AM_TORQUE_SETPOINT", "body_torque_nm")
+    if not all_finite(fields[5 : 5 + n]):
+        raise NonFiniteValueError("AM_TORQUE_SETPOINT", "joint_torque_nm")
+    return torque_setpoint_from_wire(fields[0], thrust, fields[2 : 5 + n], n, fields[14])
+
+
+def attitude_from_fields(fields: tuple, step: int) -> AttitudeTarget:
+    """``fields`` = (q[4], roll, pitch, yaw rates, thrust), NED/FRD."""
+    if not all_finite(fields):
+        raise NonFiniteValueError("SET_ATTITUDE_TARGET", "q/rates/thrust")
+    # FRD -> FLU rates; the quaternion map is an involution
+    return attitude_target_from_wire(step, (*q_ned_frd_to_enu_flu(fields[0:4]), fields[4], -fields[5], -fields[6],
+                                            fields[7]))  # fmt: skip
+
+
+def attitude_setpoint_from_fields(att_fields: tuple, joint_fields: tuple) -> AttitudeSetpoint:
+    """``joint_fields`` = (step, tau_q[8], n, flags)."""
+    n = joint_fields[9]
+    if n > MAX_JOINTS:
+        raise CodecError(f"AM_JOINT_TORQUE_SETPOINT.n_joints={n} > {MAX_JOINTS}")
+    if not all_finite(joint_fields[1 : 1 + n]):
+        raise NonFiniteValueError("AM_JOINT_TORQUE_SETPOINT", "joint_torque_nm")
+    step = joint_fields[0]
+    return attitude_setpoint_from_wire(step, attitude_from_fields(att_fields, step), joint_fields[1:9], n,
+                                       joint_fields[10])  # fmt: skip
+
+
 class SensorFrameAssembler:
-    """Collects the parts of a sensor batch; emits when its AM_SIM_STEP arrives.
+    """Collects the parts of a sensor batch, fed ``(msgid, body)`` of reader records; emits when
+    its AM_SIM_STEP arrives.
 
     Parts may arrive across several datagrams. A batch with missing parts raises
     BatchMismatchError; a SHUTDOWN step emits :class:`Shutdown` whatever came before.
@@ -331,32 +432,33 @@ class SensorFrameAssembler:
         """Forget parts received so far (a new datagram starts a new batch)."""
         self._odom = self._joints = self._wrench = self._target = None
 
-    def push(self, msg) -> SensorFrame | Shutdown | None:
-        mid = msg.get_msgId()  # not msg.id: STATUSTEXT has a field named "id"
-        if mid == mav.MAVLINK_MSG_ID_ODOMETRY:
-            self._odom = msg
-        elif mid == mav.MAVLINK_MSG_ID_ATTITUDE_TARGET:
-            self._target = msg
-        elif mid == mav.MAVLINK_MSG_ID_AM_JOINT_STATE:
-            self._joints = msg
-        elif mid == mav.MAVLINK_MSG_ID_AM_WRENCH:
-            self._wrench = msg
-        elif mid == mav.MAVLINK_MSG_ID_AM_SIM_STEP:
+    def push(self, msgid: int, body) -> SensorFrame | Shutdown | None:
+        if msgid == _ODOMETRY_ID:
+            self._odom = body
+        elif msgid == _ATTITUDE_REPORT_ID:
+            self._target = body
+        elif msgid == _JOINT_STATE_ID:
+            self._joints = body
+        elif msgid == _WRENCH_ID:
+            self._wrench = body
+        elif msgid == _SIM_STEP_ID:
             odom, joints, wrench, target = self._odom, self._joints, self._wrench, self._target
             self._odom = self._joints = self._wrench = self._target = None
-            if msg.flags & StepFlag.SHUTDOWN:
-                return Shutdown(msg.step, msg.time_usec / 1e6, StepFlag(msg.flags))
+            step, time_usec, _, flags = body
+            if flags & _SHUTDOWN:
+                return Shutdown(step, time_usec / 1e6, StepFlag(flags))
             if odom is None or joints is None or wrench is None:
                 missing = [n for n, m in (("ODOMETRY", odom), ("AM_JOINT_STATE", joints), ("AM_WRENCH", wrench))
                            if m is None]  # fmt: skip
-                raise BatchMismatchError(f"step {msg.step}: batch incomplete, missing {', '.join(missing)}")
-            return sensor_frame_from_messages(odom, joints, wrench, msg, target)
+                raise BatchMismatchError(f"step {step}: batch incomplete, missing {', '.join(missing)}")
+            return sensor_frame_from_fields(odom, joints, wrench, body, target)
         return None
 
 
 class SetpointAssembler:
-    """Pairs a SET_ATTITUDE_TARGET with the setpoint message that follows it: optional before
-    AM_TORQUE_SETPOINT, required before AM_JOINT_TORQUE_SETPOINT (CodecError without)."""
+    """Pairs a SET_ATTITUDE_TARGET with the setpoint message that follows it, fed ``(msgid, body)``
+    of reader records: optional before AM_TORQUE_SETPOINT, required before
+    AM_JOINT_TORQUE_SETPOINT (BatchMismatchError without)."""
 
     def __init__(self) -> None:
         self._attitude = None
@@ -364,18 +466,18 @@ class SetpointAssembler:
     def reset(self) -> None:
         self._attitude = None
 
-    def push(self, msg) -> tuple[TorqueSetpoint | AttitudeSetpoint, AttitudeTarget | None] | None:
-        mid = msg.get_msgId()  # not msg.id: STATUSTEXT has a field named "id"
-        if mid == mav.MAVLINK_MSG_ID_SET_ATTITUDE_TARGET:
-            self._attitude = msg
-        elif mid == mav.MAVLINK_MSG_ID_AM_TORQUE_SETPOINT:
-            att_msg, self._attitude = self._attitude, None
-            sp = setpoint_from_message(msg)
-            return sp, (attitude_from_message(att_msg, sp.step) if att_msg is not None else None)
-        elif mid == mav.MAVLINK_MSG_ID_AM_JOINT_TORQUE_SETPOINT:
-            att_msg, self._attitude = self._attitude, None
-            if att_msg is None:
-                raise BatchMismatchError(f"step {msg.step}: AM_JOINT_TORQUE_SETPOINT without SET_ATTITUDE_TARGET")
-            asp = attitude_setpoint_from_messages(att_msg, msg)
+    def push(self, msgid: int, body) -> tuple[TorqueSetpoint | AttitudeSetpoint, AttitudeTarget | None] | None:
+        if msgid == _ATTITUDE_TARGET_ID:
+            self._attitude = body
+        elif msgid == _TORQUE_SETPOINT_ID:
+            att, self._attitude = self._attitude, None
+            sp = setpoint_from_fields(body)
+            return sp, (attitude_from_fields(att, sp.step) if att is not None else None)
+        elif msgid == _JOINT_TORQUE_SETPOINT_ID:
+            att, self._attitude = self._attitude, None
+            if att is None:
+                raise BatchMismatchError(f"step {body[0]}: AM_JOINT_TORQUE_SETPOINT without SET_ATTITUDE_TARGET")
+            asp = attitude_setpoint_from_fields(att, body)
             return asp, asp.attitude
         return None
+

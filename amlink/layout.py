@@ -6,7 +6,7 @@ by MAVLink 2 rules), the field order it follows (``ordered_fieldnames``),
 ``crc_extra`` and the id.  :class:`MessageLayout` turns that into per-field
 offsets, and builds precompiled :class:`struct.Struct` objects that pack or
 read just the fields a caller names -- so the fast codec
-(:mod:`amlink.fastcodec`) copies no layout by hand.  A caller names fields in
+(:mod:`amlink.codec`) copies no layout by hand.  A caller names fields in
 wire order; if a dialect change reorders them, building the packer or reader
 raises :class:`LayoutError` at import instead of corrupting frames.
 """

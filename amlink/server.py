@@ -6,7 +6,7 @@ import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
-from amlink import codec, fastcodec
+from amlink import codec
 from amlink.codec import mav
 from amlink.endpoint import UDP_OUT, Endpoint, parse_endpoint
 from amlink.errors import PeerMissingError, PeerTimeoutError
@@ -159,7 +159,7 @@ class SimServer:
         self._peers = {
             s: _Peer(s, codec.Encoder(SIM_SYSID, SIM_COMPID, signing_key=keys.get(s), link_id=s)) for s in self.sysids
         }
-        self._decoder = codec.Decoder(self._keys, accept=_ACCEPT, counters=self.stats, readers=fastcodec.READERS)
+        self._decoder = codec.Decoder(self._keys, accept=_ACCEPT, counters=self.stats, readers=codec.READERS)
         return self.address
 
     @property
@@ -369,7 +369,7 @@ class SimServer:
                     raise PeerMissingError([sysid], 0.0, "HEARTBEAT (call wait_for_peers first)")
         for sysid, frame in pairs:
             peer = self._peer(sysid)
-            peer.batch = fastcodec.sensor_frame_payloads(frame, self.scenario.scenario_id)
+            peer.batch = codec.sensor_frame_payloads(frame, self.scenario.scenario_id)
             expected[sysid] = frame.step
             if peer.addr is not None:
                 link.send(peer.addr, peer.encoder.pack_payloads(peer.batch))
@@ -457,7 +457,7 @@ class SimServer:
         # SET_ATTITUDE_TARGET pairs with the setpoint of its datagram; on a stream, with the next setpoint
         stream = type(addr) is StreamPeer
         attitude: dict[int, tuple] = {}
-        # bodies: fastcodec.READERS tuples for the lockstep ids, pymavlink messages for the rest
+        # bodies: codec.READERS tuples for the lockstep ids, pymavlink messages for the rest
         for mid, sysid, compid, body in self._decoder.feed_records(data):
             peer = self._peers.get(sysid)
             if peer is None:
@@ -535,11 +535,11 @@ class SimServer:
                 if att_fields is None:
                     raise codec.BatchMismatchError(f"step {fields[0]}: AM_JOINT_TORQUE_SETPOINT without "
                                                    f"SET_ATTITUDE_TARGET")  # fmt: skip
-                sp = fastcodec.attitude_setpoint_from_fields(att_fields, fields)
+                sp = codec.attitude_setpoint_from_fields(att_fields, fields)
                 att = sp.attitude
             else:
-                sp = fastcodec.setpoint_from_fields(fields)
-                att = fastcodec.attitude_from_fields(att_fields, sp.step) if att_fields is not None else None
+                sp = codec.setpoint_from_fields(fields)
+                att = codec.attitude_from_fields(att_fields, sp.step) if att_fields is not None else None
             reason = self.limits.violation(sp)
         except codec.NonFiniteValueError as exc:
             self.stats.nonfinite_values += 1

@@ -11,7 +11,7 @@ Two ways out of the same checks.  :meth:`Decoder.feed` returns pymavlink
 message objects (``MAVLink.decode``), for tools, tests and rare messages.
 :meth:`Decoder.feed_records` returns ``(msgid, sysid, compid, body)`` records
 whose ``body``, for the ids it was given *readers* for (the lockstep batches,
-:mod:`amlink.fastcodec`), is a plain tuple unpacked by a precompiled
+:mod:`amlink.codec`), is a plain tuple unpacked by a precompiled
 ``struct.Struct`` -- no message object on the 1 kHz path -- and a pymavlink
 message otherwise.  Likewise :meth:`Encoder.pack` frames pymavlink messages and
 :meth:`Encoder.pack_payloads` frames ready payloads, bit for bit as pymavlink
@@ -229,7 +229,7 @@ class Decoder:
             ``ignored``) are incremented, e.g. a :class:`amlink.udp.LinkStats`;
             default: this decoder's own attributes.
         readers: ``msgid -> read(datagram, payload_start, payload_len) -> tuple``
-            used by :meth:`feed_records` (e.g. :data:`amlink.fastcodec.READERS`).
+            used by :meth:`feed_records` (e.g. :data:`amlink.codec.READERS`).
     """
 
     bad_frames = unknown_sysid = unsigned = bad_signature = replayed = ignored = 0

@@ -1,9 +1,10 @@
-"""Benchmark: encode + decode of the lockstep batches, pymavlink path vs fast path, in one run.
+"""Benchmark: encode + decode of the lockstep batches, pymavlink's message objects vs the codec, in one run.
 
 Run ``python -m benchmarks.bench_codec``; prints median microseconds per operation
-for the old path (:mod:`amlink.codec`: pymavlink message objects, ``Encoder.pack``
-/ ``Decoder.feed``) next to the new one (:mod:`amlink.fastcodec`:
-``Encoder.pack_payloads`` / ``Decoder.feed_records``) and their ratio.  The two
+for the batches built and read as pymavlink message objects (the readable twin,
+``tests/amlink/codec_reference.py``: ``Encoder.pack`` / ``Decoder.feed``) next to
+:mod:`amlink.codec`'s precompiled structs (``Encoder.pack_payloads`` /
+``Decoder.feed_records``) and their ratio.  The two
 are timed in alternating rounds so machine load hits both alike.  Not a test:
 timings depend on the machine.  The loop budget is 1 ms per step per vehicle
 (1 kHz), shared with physics and control.
@@ -17,9 +18,10 @@ import time
 
 import numpy as np
 
-from amlink import codec, fastcodec
+from amlink import codec
 from amlink.signing import now_timestamp
 from amlink.types import AttitudeTarget, SensorFrame, TorqueSetpoint
+from tests.amlink import codec_reference as ref
 
 KEY = bytes(range(32))
 ROUNDS = 10  # old and new alternate this many times per row
@@ -76,7 +78,7 @@ class _Batch:
         if signed:  # same signing clock on both, so that the bytes can be compared
             ahead = now_timestamp() + 10**7  # 100 s ahead: pack() keeps it
             self.enc_old.mavlink.signing.timestamp = self.enc_new.mavlink.signing.timestamp = ahead
-        assert self.encode_old() == self.encode_new(), "fast path is not bit-identical"
+        assert self.encode_old() == self.encode_new(), "the codec is not bit-identical to its twin on message objects"
         keys = {sysid: KEY} if signed else None
         # signed: every datagram once (a repeat is a replay); each decoder reads the list once
         data = [self.encode_new() for _ in range(count)] if signed else None
@@ -84,7 +86,7 @@ class _Batch:
         old_asm, new_asm = assemblers
         self.decode_old = _old_decode(codec.Decoder(keys), old_asm,
                                       iter(data) if signed else _forever(self.encode_old()))  # fmt: skip
-        self.decode_new = _new_decode(codec.Decoder(keys, readers=fastcodec.READERS), new_asm,
+        self.decode_new = _new_decode(codec.Decoder(keys, readers=codec.READERS), new_asm,
                                       iter(data) if signed else _forever(self.encode_new()))  # fmt: skip
 
 
@@ -112,13 +114,13 @@ def main(argv: list[str] | None = None) -> None:
     count = args.repeats + 2 * 200  # enough distinct signed datagrams for warm-up and timing
 
     def sensor(signed):
-        old, new = lambda: codec.sensor_frame_messages(frame), lambda: fastcodec.sensor_frame_payloads(frame)
-        assemblers = (codec.SensorFrameAssembler(), fastcodec.SensorFrameAssembler())
+        old, new = lambda: ref.sensor_frame_messages(frame), lambda: codec.sensor_frame_payloads(frame)
+        assemblers = (ref.SensorFrameAssembler(), codec.SensorFrameAssembler())
         return _Batch(old, new, 1, 1, assemblers, signed, count)
 
     def setpoint(signed, attitude):
-        old, new = lambda: codec.setpoint_messages(sp, attitude), lambda: fastcodec.setpoint_payloads(sp, attitude)
-        assemblers = (codec.SetpointAssembler(), fastcodec.SetpointAssembler())
+        old, new = lambda: ref.setpoint_messages(sp, attitude), lambda: codec.setpoint_payloads(sp, attitude)
+        assemblers = (ref.SetpointAssembler(), codec.SetpointAssembler())
         return _Batch(old, new, 2, 191, assemblers, signed, count)
 
     batches = [
@@ -129,7 +131,7 @@ def main(argv: list[str] | None = None) -> None:
         ("TorqueSetpoint+AttitudeTarget", setpoint(False, att)),
         ("TorqueSetpoint+AttitudeTarget, signed", setpoint(True, att)),
     ]
-    print(f"{'median us per batch (one datagram)':52s} {'old':>8s} {'new':>8s} {'speedup':>8s}")
+    print(f"{'median us per batch (one datagram)':52s} {'objects':>8s} {'structs':>8s} {'speedup':>8s}")
     results = {}
     for name, b in batches:
         for what, old, new in (("encode", b.encode_old, b.encode_new), ("decode", b.decode_old, b.decode_new)):

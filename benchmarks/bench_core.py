@@ -16,7 +16,7 @@ run leaves them, not back to back), summed over the run and divided by AMs x phy
   (`simulator.fleet_kernels`), that time is in frame (control steps) and apply (the steps
   between, fused with the autopilots), and estimate reads 0: compare "lockstep work";
 - frame: the frame's value type and the autopilot's reports (`SitlCore.iter_frames` less the above);
-- sign: the sensor batch packed and signed (`fastcodec.sensor_frame_payloads`, `Encoder.pack_payloads`);
+- sign: the sensor batch packed and signed (`codec.sensor_frame_payloads`, `Encoder.pack_payloads`);
 - verify: the answer verified and decoded (`Decoder.feed_records`, `SetpointAssembler`);
 - apply: the flight controllers (attitude mode: the emulated autopilot and allocation every
   physics step) and the world's actuation (`SitlCore.actuate` / `hold`);
@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from amcore.config import load_scenario
-from amlink import fastcodec, wire
+from amlink import codec, wire
 from amlink.types import AttitudeSetpoint, AttitudeTarget, TorqueSetpoint
 from amlink.udp import SIM_COMPID, SIM_SYSID
 from simulator.core import SitlCore
@@ -76,9 +76,9 @@ def answers(core: SitlCore, s: int, mode: str) -> list[bytes]:
             att = AttitudeTarget(k, quat_wxyz=np.array([1.0, 0.0, 0.0, 0.0]), rates_rad_s=np.zeros(3),
                                  thrust_normalized=hover / core.vehicles[s].fc.allocation.thrust_scale_n)
             sp = AttitudeSetpoint(step=k, attitude=att, tau_q_nm=np.zeros(n))
-            return enc.pack_payloads(fastcodec.attitude_setpoint_payloads(sp))
+            return enc.pack_payloads(codec.attitude_setpoint_payloads(sp))
         sp = TorqueSetpoint(step=k, thrust_n=hover, tau_B_nm=np.zeros(3), tau_q_nm=np.zeros(n))
-        return enc.pack_payloads(fastcodec.setpoint_payloads(sp, None))
+        return enc.pack_payloads(codec.setpoint_payloads(sp, None))
     return one, steps
 
 
@@ -119,8 +119,8 @@ def run(mode: str, n: int, duration_s: float, devices: bool) -> dict[str, float]
             t_truth[0] += pc() - t0
         core._truth = timed_truth
     encs = {s: wire.Encoder(SIM_SYSID, SIM_COMPID, signing_key=KEY, link_id=1) for s in core.sysids}
-    dec = wire.Decoder({s: KEY for s in core.sysids}, readers=fastcodec.READERS)
-    asm = {s: fastcodec.SetpointAssembler() for s in core.sysids}
+    dec = wire.Decoder({s: KEY for s in core.sysids}, readers=codec.READERS)
+    asm = {s: codec.SetpointAssembler() for s in core.sysids}
     makers = {s: answers(core, s, mode)[0] for s in core.sysids}
     steps = int(round(duration_s * spec.rate_hz))
     # the answers are made before the run (they are the companions' work)
@@ -135,7 +135,7 @@ def run(mode: str, n: int, duration_s: float, devices: bool) -> dict[str, float]
                 sent = []
                 for s, f in core.iter_frames(k):
                     t1 = pc()
-                    sent.append(encs[s].pack_payloads(fastcodec.sensor_frame_payloads(f, 0)))
+                    sent.append(encs[s].pack_payloads(codec.sensor_frame_payloads(f, 0)))
                     t["sign"] += pc() - t1
                 t["frame"] += pc() - t0 - (t["sense"] + t["estimate"] - before) - 0.0
                 t0 = pc()

@@ -31,7 +31,7 @@ from itertools import cycle
 import numpy as np
 
 from amcore.config import SCENARIOS_DIR, ScenarioSpec, load_scenario
-from amlink import fastcodec, wire
+from amlink import codec, wire
 from amlink.types import AttitudeTarget, TorqueSetpoint, sensor_frame_from_wire
 from amlink.udp import SIM_COMPID, SIM_SYSID
 from simulator.bullet import pb
@@ -94,9 +94,9 @@ def per_am(spec: ScenarioSpec) -> dict[str, float]:
         att = AttitudeTarget(7, quat_wxyz=np.array([1.0, 0.0, 0.0, 0.0]), rates_rad_s=np.zeros(3),
                              thrust_normalized=0.5)
         am_enc = wire.Encoder(s, 191, signing_key=KEY, link_id=2)
-        answers = cycle([am_enc.pack_payloads(fastcodec.setpoint_payloads(sp, att)) for _ in range(50000)])
-        dec = wire.Decoder({s: KEY}, readers=fastcodec.READERS)
-        asm = fastcodec.SetpointAssembler()
+        answers = cycle([am_enc.pack_payloads(codec.setpoint_payloads(sp, att)) for _ in range(50000)])
+        dec = wire.Decoder({s: KEY}, readers=codec.READERS)
+        asm = codec.SetpointAssembler()
 
         def receive():
             for mid, _sysid, _compid, body in dec.feed_records(next(answers)):
@@ -123,7 +123,7 @@ def per_am(spec: ScenarioSpec) -> dict[str, float]:
 
         out = {
             "sense": _us(lambda: sensor_frame_from_wire(7, 0.007, world.sensor_values(s), n, 0)),
-            "frame and sign": _us(lambda: enc.pack_payloads(fastcodec.sensor_frame_payloads(frame))),
+            "frame and sign": _us(lambda: enc.pack_payloads(codec.sensor_frame_payloads(frame))),
             "verify and decode": _us(receive),
             "apply": _us(lambda: (world.apply(s, T, np.zeros(3), np.zeros(n)), reapply())),
         }

@@ -31,7 +31,7 @@ SIMULATOR_PARTS = [
     ("amlink.server", "SimServer.send_frames", "send frames (sense, devices, encode, sign)"),
     ("amlink.server", "SimServer.collect", "collect setpoints"),
     ("amlink.server", "SimServer._handle", "decode and verify a datagram"),
-    ("amlink.fastcodec", "sensor_frame_payloads", "encode a frame"),
+    ("amlink.codec", "sensor_frame_payloads", "encode a frame"),
     ("simulator.world", "World.sensor_values", "sense: PyBullet's getters (one AM)"),
     ("simulator.core", "sensor_frame_from_wire", "the frame from its values (one AM)"),
     ("simulator.core", "with_autopilot_reports", "the autopilot's reports in the frame (one AM)"),

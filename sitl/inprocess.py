@@ -22,7 +22,7 @@ import numpy as np
 
 from amcore import cliargs, preflight
 from amcore.config import ConfigError, ScenarioSpec, check_duration, load_scenario
-from amlink import fastcodec
+from amlink import codec
 from amlink.limits import SetpointLimits
 from amlink.types import (AttitudeSetpoint, SensorFrame, TorqueSetpoint, frame_values, sensor_frame_of_array,
                           with_autopilot_reports)
@@ -45,8 +45,8 @@ def as_on_the_wire(f: SensorFrame) -> SensorFrame:
         return out
     target = f.attitude_target
     if target is not None:  # ATTITUDE_TARGET: float32, NED/FRD and back, for the frame's step
-        msgid, payload = fastcodec.attitude_report_payload(target)
-        target = fastcodec.attitude_report_from_fields(fastcodec.READERS[msgid](payload, 0, len(payload)), f.step)
+        msgid, payload = codec.attitude_report_payload(target)
+        target = codec.attitude_report_from_fields(codec.READERS[msgid](payload, 0, len(payload)), f.step)
     return with_autopilot_reports(out, f.joint_effort_nm, target)
 
 
@@ -55,9 +55,9 @@ def setpoint_as_on_the_wire(sp: TorqueSetpoint | AttitudeSetpoint) -> TorqueSetp
     setpoint's target goes through SET_ATTITUDE_TARGET (float32, NED/FRD and back)."""
     if not isinstance(sp, AttitudeSetpoint):
         return sp
-    (att_id, att), (joint_id, joints) = fastcodec.attitude_setpoint_payloads(sp)
-    read = fastcodec.READERS
-    return fastcodec.attitude_setpoint_from_fields(read[att_id](att, 0, len(att)), read[joint_id](joints, 0, len(joints)))
+    (att_id, att), (joint_id, joints) = codec.attitude_setpoint_payloads(sp)
+    read = codec.READERS
+    return codec.attitude_setpoint_from_fields(read[att_id](att, 0, len(att)), read[joint_id](joints, 0, len(joints)))
 
 
 class Companions:

@@ -14,6 +14,7 @@ from amlink import codec, px4
 from amlink.codec import mav
 from amlink.types import (AttitudeSetpoint, AttitudeTarget, ScenarioInfo, SensorFrame, SetpointFlag, StepFlag,
                           TorqueSetpoint)
+from tests.amlink import codec_reference as ref
 
 F64 = st.floats(allow_nan=False, allow_infinity=False)  # any finite double
 F32 = st.floats(min_value=-1e30, max_value=1e30, allow_nan=False)  # representable range of float32 fields
@@ -56,7 +57,7 @@ def f32(x):
 
 
 def decode_frame(data: bytes):
-    asm, out = codec.SensorFrameAssembler(), []
+    asm, out = ref.SensorFrameAssembler(), []
     for m in codec.Decoder().feed(data):
         item = asm.push(m)
         if item is not None:
@@ -65,7 +66,7 @@ def decode_frame(data: bytes):
 
 
 def decode_setpoints(data: bytes):
-    asm, out = codec.SetpointAssembler(), []
+    asm, out = ref.SetpointAssembler(), []
     for m in codec.Decoder().feed(data):
         item = asm.push(m)
         if item is not None:
@@ -76,7 +77,7 @@ def decode_setpoints(data: bytes):
 @settings(max_examples=150, deadline=None, database=None)
 @given(sensor_frames(), st.integers(0, 2**32 - 1))
 def test_sensor_frame_round_trip(frame, scenario_id):
-    data = codec.Encoder(1, 1).pack(codec.sensor_frame_messages(frame, scenario_id))
+    data = codec.Encoder(1, 1).pack(ref.sensor_frame_messages(frame, scenario_id))
     [got] = decode_frame(data)
     assert got.step == frame.step and got.time_s == frame.time_s and got.flags == frame.flags
     # float32 on the wire (ODOMETRY): exactly the float32 rounding of what was sent
@@ -104,7 +105,7 @@ def test_sensor_frame_round_trip(frame, scenario_id):
 @settings(max_examples=150, deadline=None, database=None)
 @given(setpoints())
 def test_setpoint_round_trip_is_exact(sp):
-    [(got, att)] = decode_setpoints(codec.Encoder(2, 191).pack(codec.setpoint_messages(sp)))
+    [(got, att)] = decode_setpoints(codec.Encoder(2, 191).pack(ref.setpoint_messages(sp)))
     assert att is None
     assert (got.step, got.thrust_n, got.flags) == (sp.step, sp.thrust_n, sp.flags)
     np.testing.assert_array_equal(got.tau_B_nm, sp.tau_B_nm)
@@ -124,7 +125,7 @@ def test_attitude_conversion_is_the_enu_flu_to_ned_frd_change_of_frames(q):
 @given(setpoints(), vec(4, st.floats(-1, 1)), vec(3, st.floats(-50, 50)), st.floats(0, 1))
 def test_attitude_target_rides_with_setpoint(sp, quat, rates, thrust):
     att = AttitudeTarget(sp.step, quat, rates, thrust)
-    data = codec.Encoder(2, 191).pack(codec.setpoint_messages(sp, att, time_boot_ms=1234))
+    data = codec.Encoder(2, 191).pack(ref.setpoint_messages(sp, att, time_boot_ms=1234))
     [(got_sp, got)] = decode_setpoints(data)
     assert got_sp.step == sp.step and got.step == sp.step
     np.testing.assert_allclose(got.quat_wxyz, quat, atol=1e-6)  # float32 + conversion
@@ -140,7 +141,7 @@ def test_scenario_round_trip():
 
 def test_batch_is_one_datagram_in_order_with_step_marker_last():
     frame = SensorFrame(7, 0.007, [0, 0, 1], [1, 0, 0, 0], [0] * 3, [0] * 3, [0.5], [0.0], [0] * 6)
-    msgs = codec.Decoder().feed(codec.Encoder(1, 1).pack(codec.sensor_frame_messages(frame)))
+    msgs = codec.Decoder().feed(codec.Encoder(1, 1).pack(ref.sensor_frame_messages(frame)))
     assert [m.get_type() for m in msgs] == ["ODOMETRY", "AM_JOINT_STATE", "AM_WRENCH", "AM_SIM_STEP"]
     odom = msgs[0]
     assert (odom.frame_id, odom.child_frame_id) == (mav.MAV_FRAME_LOCAL_ENU, 13)
@@ -206,15 +207,15 @@ def test_decode_rejects_non_finite_setpoint(field, bad):
 def test_encode_rejects_non_finite_and_negative_time():
     f = SensorFrame(0, 0.0, [0, 0, math.nan], [1, 0, 0, 0], [0] * 3, [0] * 3, [], [], [0] * 6)
     with pytest.raises(codec.EncodeError):
-        codec.sensor_frame_messages(f)
+        ref.sensor_frame_messages(f)
     with pytest.raises(codec.EncodeError):
-        codec.setpoint_messages(TorqueSetpoint(0, math.inf, [0] * 3, []))
+        ref.setpoint_messages(TorqueSetpoint(0, math.inf, [0] * 3, []))
     g = SensorFrame(0, -1e-3, [0] * 3, [1, 0, 0, 0], [0] * 3, [0] * 3, [], [], [0] * 6)
     with pytest.raises(codec.EncodeError):
-        codec.sensor_frame_messages(g)
+        ref.sensor_frame_messages(g)
     big = SensorFrame(0, 0.0, [1e39, 0, 0], [1, 0, 0, 0], [0] * 3, [0] * 3, [], [], [0] * 6)
     with pytest.raises(codec.EncodeError):  # does not fit the float32 of ODOMETRY
-        codec.Encoder(1, 1).pack(codec.sensor_frame_messages(big))
+        codec.Encoder(1, 1).pack(ref.sensor_frame_messages(big))
 
 
 def test_mismatched_steps_times_frames_and_missing_parts_are_rejected():
@@ -232,13 +233,13 @@ def test_mismatched_steps_times_frames_and_missing_parts_are_rejected():
 
 
 def test_batch_split_over_datagrams_assembles():
-    enc, dec, asm = codec.Encoder(1, 1), codec.Decoder(), codec.SensorFrameAssembler()
+    enc, dec, asm = codec.Encoder(1, 1), codec.Decoder(), ref.SensorFrameAssembler()
     out = [asm.push(m) for msg in _batch() for m in dec.feed(enc.pack([msg]))]
     assert out[:3] == [None] * 3 and isinstance(out[3], SensorFrame)
 
 
 def test_shutdown_step_emits_shutdown_even_without_parts():
-    asm = codec.SensorFrameAssembler()
+    asm = ref.SensorFrameAssembler()
     [m] = codec.Decoder().feed(codec.Encoder(1, 1).pack([codec.shutdown_message(9, 0.5)]))
     item = asm.push(m)
     assert isinstance(item, codec.Shutdown) and item.step == 9 and item.time_s == 0.5
@@ -268,7 +269,7 @@ def attitude_setpoints(draw):
 @given(attitude_setpoints())
 def test_attitude_setpoint_round_trip(sp):
     """Attitude mode: SET_ATTITUDE_TARGET (float32, NED/FRD) + AM_JOINT_TORQUE_SETPOINT (float64, exact)."""
-    [(got, att)] = decode_setpoints(codec.Encoder(2, 191).pack(codec.attitude_setpoint_messages(sp, 1234)))
+    [(got, att)] = decode_setpoints(codec.Encoder(2, 191).pack(ref.attitude_setpoint_messages(sp, 1234)))
     assert isinstance(got, AttitudeSetpoint) and att is got.attitude
     assert (got.step, got.flags, att.step) == (sp.step, sp.flags, sp.step)
     np.testing.assert_array_equal(got.tau_q_nm, sp.tau_q_nm)
@@ -280,7 +281,7 @@ def test_attitude_setpoint_round_trip(sp):
 def test_joint_torques_without_their_attitude_target_are_an_error():
     enc = codec.Encoder(2, 191)
     sp = AttitudeSetpoint(3, AttitudeTarget(3, [1, 0, 0, 0], [0, 0, 0], 0.5), [0.1, 0.2])
-    att_msg, joint_msg = codec.attitude_setpoint_messages(sp)
+    att_msg, joint_msg = ref.attitude_setpoint_messages(sp)
     with pytest.raises(codec.BatchMismatchError, match="without SET_ATTITUDE_TARGET"):
         decode_setpoints(enc.pack([joint_msg]))
     with pytest.raises(ValueError, match="step 4 in the setpoint of step 3"):

@@ -6,9 +6,9 @@ import math
 
 import pytest
 
-from amlink import codec
 from amlink.limits import SensorLimits, SetpointLimits
 from amlink.types import AttitudeSetpoint, AttitudeTarget, SensorFrame, TorqueSetpoint
+from tests.amlink import codec_reference as ref
 from tests.amlink.kit import answer, linked, make_frame
 
 
@@ -58,7 +58,7 @@ def test_companion_drops_an_implausible_frame_and_takes_the_next_valid_one():
         c = clients[2]
         peer = server._peers[2]
         huge = SensorFrame(**{**make_frame(2, 0).__dict__, "wrench_E": [0, 0, 1e9, 0, 0, 0]})
-        server._link.send(peer.addr, peer.encoder.pack(codec.sensor_frame_messages(huge, 7)))
+        server._link.send(peer.addr, peer.encoder.pack(ref.sensor_frame_messages(huge, 7)))
         c.send_setpoint(answer(make_frame(2, 0), 2))
         server.exchange({2: make_frame(2, 0)})
         got = c.recv_frame(1.0)

@@ -20,6 +20,7 @@ from amlink.errors import (
 )
 from amlink.lockstep import CompanionClient, SimServer
 from amlink.types import AttitudeSetpoint, AttitudeTarget, SensorFrame, StepFlag, TorqueSetpoint
+from tests.amlink import codec_reference as ref
 from tests.amlink.kit import SCENARIO, answer, key_for, linked, make_frame, server_for, url
 
 
@@ -260,7 +261,7 @@ def test_stale_duplicate_wrong_step_and_unknown_sysid_are_ignored_and_counted():
             sp = lambda step, thrust: TorqueSetpoint(step, thrust, [0, 0, 0], [])  # noqa: E731
             c.send_setpoint(sp(4, -1.0))  # stale
             c.send_setpoint(sp(6, -2.0))  # a step not sent yet
-            raw.sendto(enc9.pack(codec.setpoint_messages(sp(5, -3.0))), server.address)  # sysid 9: unknown
+            raw.sendto(enc9.pack(ref.setpoint_messages(sp(5, -3.0))), server.address)  # sysid 9: unknown
             c.send_setpoint(sp(5, 55.0))  # the real answer
             c.send_setpoint(sp(5, -4.0))  # duplicate
             got = server.exchange({2: make_frame(2, 5)})
@@ -375,11 +376,11 @@ def test_server_follows_a_peer_to_its_latest_address():
             moved.bind(("127.0.0.1", 0))
             moved.settimeout(1.0)
             enc = codec.Encoder(2, 191, signing_key=key_for(2), link_id=2)
-            moved.sendto(enc.pack(codec.setpoint_messages(answer(make_frame(2, 0), 2))), server.address)
+            moved.sendto(enc.pack(ref.setpoint_messages(answer(make_frame(2, 0), 2))), server.address)
             server.exchange({2: make_frame(2, 0)})  # step 0 went out to the old address
             assert old.recv_frame(1.0).step == 0
             assert server.peer_address(2) == moved.getsockname()
-            moved.sendto(enc.pack(codec.setpoint_messages(answer(make_frame(2, 1), 2))), server.address)
+            moved.sendto(enc.pack(ref.setpoint_messages(answer(make_frame(2, 1), 2))), server.address)
             server.exchange({2: make_frame(2, 1)})  # step 1 goes to the new address
             msgs = codec.Decoder({1: key_for(2)}).feed(moved.recv(65535))
             assert [m.get_type() for m in msgs][-1] == "AM_SIM_STEP" and msgs[-1].step == 1
@@ -399,13 +400,13 @@ def test_signing_off_only_heartbeat_from_a_silent_peer_moves_it_and_a_rejoin_dis
             moved.bind(("127.0.0.1", 0))
             enc = codec.Encoder(2, 191)
             moved.sendto(enc.pack([heartbeat]), server.address)  # the peer was heard just now: refused
-            moved.sendto(enc.pack(codec.setpoint_messages(answer(make_frame(2, 0), 2))), server.address)
+            moved.sendto(enc.pack(ref.setpoint_messages(answer(make_frame(2, 0), 2))), server.address)
             with pytest.raises(PeerTimeoutError):
                 server.exchange({2: make_frame(2, 0)})
             assert server.peer_address(2) == before and server.stats.wrong_address == 2
             time.sleep(0.25)  # silent long enough: a restarted companion may take its sysid
             moved.sendto(enc.pack([heartbeat]), server.address)
-            moved.sendto(enc.pack(codec.setpoint_messages(answer(make_frame(2, 1), 2))), server.address)
+            moved.sendto(enc.pack(ref.setpoint_messages(answer(make_frame(2, 1), 2))), server.address)
             assert server.exchange({2: make_frame(2, 1)})[2].step == 1
             assert server.peer_address(2) == moved.getsockname()
             assert (server.stats.rejoins, server.stats.address_changes) == (1, 1)

@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from amlink import codec
 from amlink.codec import mav
 from amlink.tlog import TlogWriter
 from amlink.wire import Encoder
+from tests.amlink import codec_reference as ref
 from tests.amlink.kit import make_frame
 
 REPO = Path(__file__).resolve().parents[2]
@@ -43,7 +43,7 @@ def test_mavlogdump_decodes_our_messages_with_dialect_amstack(tmp_path):
     with TlogWriter(log) as w:
         w.write(enc.pack([mav.MAVLink_heartbeat_message(mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_PX4, 129,
                                                         6 << 16, mav.MAV_STATE_ACTIVE, 3)]))
-        w.write(enc.pack(codec.sensor_frame_messages(make_frame(2, 3), 7)))  # one datagram, four records
+        w.write(enc.pack(ref.sensor_frame_messages(make_frame(2, 3), 7)))  # one datagram, four records
         w.write(enc.pack([mav.MAVLink_command_long_message(4, 1, mav.MAV_CMD_AM_ABORT_MISSION, 0, 0, 0, 0, 0, 0, 0,
                                                            0)]))
     assert w.records == 6

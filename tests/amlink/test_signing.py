@@ -12,13 +12,14 @@ from amlink.codec import mav
 from amlink.errors import PeerMissingError, PeerTimeoutError, SimulatorUnreachableError
 from amlink.lockstep import CompanionClient
 from amlink.types import TorqueSetpoint
+from tests.amlink import codec_reference as ref
 from tests.amlink.kit import SCENARIO, answer, client_for, key_for, linked, make_frame, server_for
 
 KEY, OTHER = key_for(2), key_for(9)
 
 
 def setpoint_datagram(enc: codec.Encoder, step: int = 1, thrust: float = 5.0) -> bytes:
-    return enc.pack(codec.setpoint_messages(TorqueSetpoint(step, thrust, [0, 0, 0], [])))
+    return enc.pack(ref.setpoint_messages(TorqueSetpoint(step, thrust, [0, 0, 0], [])))
 
 
 def stock_parser(key: bytes):
@@ -61,7 +62,7 @@ def test_encoder_timestamp_follows_the_wall_clock_and_grows_per_frame():
     enc = codec.Encoder(2, 191, signing_key=KEY, link_id=2)
     enc.mavlink.signing.timestamp = 0  # e.g. a long-running process whose counter fell behind
     before = signing.now_timestamp()
-    data = enc.pack(codec.setpoint_messages(TorqueSetpoint(1, 5.0, [0, 0, 0], []), None) * 2)
+    data = enc.pack(ref.setpoint_messages(TorqueSetpoint(1, 5.0, [0, 0, 0], []), None) * 2)
     stamps, i = [], 0
     while i < len(data):
         end = i + 12 + data[i + 1] + 13
@@ -144,7 +145,7 @@ def test_signed_lockstep_runs_and_rejects_replays_and_strangers():
                 for s, c in clients.items():
                     c.send_setpoint(answer(frames[s], s))
                 if k == 10:  # a replay of an earlier genuine answer, and a forged one
-                    spy.sendto(codec.Encoder(2, 191).pack(codec.setpoint_messages(answer(frames[2], 2))),
+                    spy.sendto(codec.Encoder(2, 191).pack(ref.setpoint_messages(answer(frames[2], 2))),
                                server.address)  # fmt: skip
                     forged = codec.Encoder(2, 191, signing_key=OTHER, link_id=2)
                     spy.sendto(setpoint_datagram(forged, k, 1e3), server.address)

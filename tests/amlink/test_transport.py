@@ -14,12 +14,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from amlink import codec
 from amlink.lockstep import CompanionClient, SimServer
 from amlink.stream import MAX_BACKLOG, _socket_stream, resolve
 from amlink.types import AttitudeTarget
 from amlink.udp import LinkStats
 from amlink.wire import SIGNATURE_LEN, Encoder, StreamFramer, split_frames
+from tests.amlink import codec_reference as ref
 from tests.amlink.kit import SCENARIO, answer, key_for, make_frame
 from tests.amlink.ptys import pty_pair
 
@@ -29,8 +29,8 @@ def _genuine_frames(n: int, signed: bool) -> list[bytes]:
     enc = Encoder(1, 1, signing_key=key_for(2) if signed else None, link_id=2)
     out = []
     for k in range(n):
-        out += split_frames(enc.pack(codec.sensor_frame_messages(make_frame(2, k), 7)))
-        out += split_frames(enc.pack(codec.setpoint_messages(answer(make_frame(2, k), 2))))
+        out += split_frames(enc.pack(ref.sensor_frame_messages(make_frame(2, k), 7)))
+        out += split_frames(enc.pack(ref.setpoint_messages(answer(make_frame(2, k), 2))))
     return out
 
 

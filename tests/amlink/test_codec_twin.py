@@ -1,9 +1,9 @@
-"""Fast codec against the pymavlink path (amlink.codec): same bytes, same values, same rejections.
+"""The codec (amlink.codec) against its twin on pymavlink's message objects
+(tests/amlink/codec_reference.py): same bytes, same values, same rejections.
 
-amlink.codec is the slow, literal reference.  Checked here: the datagrams are
-bit-identical (signed and unsigned), stock pymavlink reads what the fast path
-writes and the fast path reads what pymavlink writes, and on a fuzz corpus
-both decoders count, return and raise exactly the same.
+Checked here: the datagrams are bit-identical (signed and unsigned), stock pymavlink
+reads what the codec writes and the codec reads what pymavlink writes, and on a fuzz
+corpus both decoders count, return and raise exactly the same.
 """
 
 from __future__ import annotations
@@ -16,9 +16,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from amlink import codec, fastcodec, signing
+from amlink import codec, signing
 from amlink.codec import mav
 from amlink.types import AttitudeSetpoint, AttitudeTarget, ScenarioInfo, SensorFrame, StepFlag, TorqueSetpoint
+from tests.amlink import codec_reference as ref
 from tests.amlink.fuzz import Fuzzer
 from tests.amlink.kit import key_for, make_frame
 from tests.amlink.test_codec import F32, F64, attitude_setpoints, sensor_frames, setpoints, vec
@@ -72,8 +73,8 @@ def outcome(fn):
 def test_sensor_batch_bytes_are_pymavlinks(key, frame, scenario_id):
     old, new = twins(1, 1, key)
     for _ in range(2):  # sequence number and signing timestamp advance alike
-        assert new.pack_payloads(fastcodec.sensor_frame_payloads(frame, scenario_id)) == old.pack(
-            codec.sensor_frame_messages(frame, scenario_id))
+        assert new.pack_payloads(codec.sensor_frame_payloads(frame, scenario_id)) == old.pack(
+            ref.sensor_frame_messages(frame, scenario_id))
 
 
 @pytest.mark.parametrize("key", [None, KEY], ids=["unsigned", "signed"])
@@ -84,13 +85,13 @@ def test_setpoint_batch_bytes_are_pymavlinks(key, sp, att, time_boot_ms, target)
     old, new = twins(2, 191, key)
     args = (sp, att, time_boot_ms, target, 255 - target)
     try:
-        expected = old.pack(codec.setpoint_messages(*args))
+        expected = old.pack(ref.setpoint_messages(*args))
     except codec.EncodeError as exc:  # e.g. a double beyond float32 in the attitude
         with pytest.raises(codec.EncodeError) as err:
-            new.pack_payloads(fastcodec.setpoint_payloads(*args))
+            new.pack_payloads(codec.setpoint_payloads(*args))
         assert str(err.value) == str(exc)
         return
-    assert new.pack_payloads(fastcodec.setpoint_payloads(*args)) == expected
+    assert new.pack_payloads(codec.setpoint_payloads(*args)) == expected
 
 
 @pytest.mark.parametrize("key", [None, KEY], ids=["unsigned", "signed"])
@@ -99,14 +100,14 @@ def test_setpoint_batch_bytes_are_pymavlinks(key, sp, att, time_boot_ms, target)
 def test_attitude_setpoint_batch_bytes_are_pymavlinks_and_read_back_alike(key, sp, time_boot_ms, target):
     old, new = twins(2, 191, key)
     args = (sp, time_boot_ms, target, 255 - target)
-    data = new.pack_payloads(fastcodec.attitude_setpoint_payloads(*args))
-    assert data == old.pack(codec.attitude_setpoint_messages(*args))
+    data = new.pack_payloads(codec.attitude_setpoint_payloads(*args))
+    assert data == old.pack(ref.attitude_setpoint_messages(*args))
     assert [m.get_type() for m in stock_messages(data, key)] == ["SET_ATTITUDE_TARGET", "AM_JOINT_TORQUE_SETPOINT"]
     keys = None if key is None else {2: key}
-    slow_asm, fast_asm = codec.SetpointAssembler(), fastcodec.SetpointAssembler()
+    slow_asm, fast_asm = ref.SetpointAssembler(), codec.SetpointAssembler()
     slow = [slow_asm.push(m) for m in codec.Decoder(keys).feed(data)][-1]
     fast = [fast_asm.push(mid, body) for mid, _, _, body in
-            codec.Decoder(keys, readers=fastcodec.READERS).feed_records(data)][-1]  # fmt: skip
+            codec.Decoder(keys, readers=codec.READERS).feed_records(data)][-1]  # fmt: skip
     assert isinstance(fast[0], AttitudeSetpoint) and summary(fast) == summary(slow)
 
 
@@ -115,14 +116,14 @@ def test_attitude_setpoint_errors_are_the_same():
     for sp in (AttitudeSetpoint(3, att, [math.inf]), AttitudeSetpoint(3, AttitudeTarget(3, [1, 0, 0, 0], [0, 0, 0], math.nan), []),
                AttitudeSetpoint(3, AttitudeTarget(3, [1, 0, 0, 0], [0, 4e38, 0], 0.5), [])):
         with pytest.raises(codec.EncodeError) as want:
-            codec.Encoder(2, 191).pack(codec.attitude_setpoint_messages(sp))
+            codec.Encoder(2, 191).pack(ref.attitude_setpoint_messages(sp))
         with pytest.raises(codec.EncodeError) as got:
-            fastcodec.attitude_setpoint_payloads(sp)
+            codec.attitude_setpoint_payloads(sp)
         assert str(got.value) == str(want.value)
-    joint_only = codec.Encoder(2, 191).pack(codec.attitude_setpoint_messages(AttitudeSetpoint(3, att, [0.1]))[1:])
-    slow = outcome(lambda: [codec.SetpointAssembler().push(m) for m in codec.Decoder().feed(joint_only)])
-    fast = outcome(lambda: [fastcodec.SetpointAssembler().push(mid, body) for mid, _, _, body in
-                            codec.Decoder(readers=fastcodec.READERS).feed_records(joint_only)])  # fmt: skip
+    joint_only = codec.Encoder(2, 191).pack(ref.attitude_setpoint_messages(AttitudeSetpoint(3, att, [0.1]))[1:])
+    slow = outcome(lambda: [ref.SetpointAssembler().push(m) for m in codec.Decoder().feed(joint_only)])
+    fast = outcome(lambda: [codec.SetpointAssembler().push(mid, body) for mid, _, _, body in
+                            codec.Decoder(readers=codec.READERS).feed_records(joint_only)])  # fmt: skip
     assert slow == fast and slow[0] == "error" and "without SET_ATTITUDE_TARGET" in slow[2]
 
 
@@ -133,8 +134,8 @@ def test_sequence_wraps_and_both_paths_share_one_link_state():
     for k in range(140):
         frame = make_frame(2, k)
         assert new.pack([heartbeat]) == old.pack([heartbeat])
-        assert new.pack_payloads(fastcodec.sensor_frame_payloads(frame, 7)) == old.pack(
-            codec.sensor_frame_messages(frame, 7))
+        assert new.pack_payloads(codec.sensor_frame_payloads(frame, 7)) == old.pack(
+            ref.sensor_frame_messages(frame, 7))
     assert new.mavlink.seq == old.mavlink.seq == (140 * 5) % 256
     assert new.mavlink.signing.timestamp == old.mavlink.signing.timestamp
     assert (new.mavlink.total_packets_sent, new.mavlink.total_bytes_sent) == (
@@ -160,9 +161,9 @@ def test_encode_errors_are_the_same():
     ]
     for f, scenario_id in cases:
         with pytest.raises(codec.EncodeError) as want:
-            codec.Encoder(1, 1).pack(codec.sensor_frame_messages(f, scenario_id))
+            codec.Encoder(1, 1).pack(ref.sensor_frame_messages(f, scenario_id))
         with pytest.raises(codec.EncodeError) as got:
-            fastcodec.sensor_frame_payloads(f, scenario_id)
+            codec.sensor_frame_payloads(f, scenario_id)
         assert str(got.value) == str(want.value)
     sp = TorqueSetpoint(3, 1.0, [0, 0, 0], [0.5])
     for args in [
@@ -172,9 +173,9 @@ def test_encode_errors_are_the_same():
         (sp, AttitudeTarget(3, [1, 0, 0, 0], [0, 0, 0], 0.5), 0, 256),  # target_system beyond uint8
     ]:
         with pytest.raises(codec.EncodeError) as want:
-            codec.Encoder(2, 191).pack(codec.setpoint_messages(*args))
+            codec.Encoder(2, 191).pack(ref.setpoint_messages(*args))
         with pytest.raises(codec.EncodeError) as got:
-            fastcodec.setpoint_payloads(*args)
+            codec.setpoint_payloads(*args)
         assert str(got.value) == str(want.value)
 
 
@@ -197,38 +198,38 @@ def stock_messages(data: bytes, key: bytes | None) -> list:
 @pytest.mark.parametrize("key", [None, KEY], ids=["unsigned", "signed"])
 @settings(max_examples=30, deadline=None, database=None)
 @given(frame=sensor_frames(), sp=setpoints(), quat=vec(4, st.floats(-1, 1)), rates=vec(3, st.floats(-50, 50)))
-def test_stock_pymavlink_reads_the_fast_path_and_the_fast_path_reads_pymavlink(key, frame, sp, quat, rates):
+def test_stock_pymavlink_reads_the_codec_and_the_codec_reads_pymavlink(key, frame, sp, quat, rates):
     att = AttitudeTarget(sp.step, quat, rates, 0.5)
     batches = [
-        (1, 1, lambda e: e.pack_payloads(fastcodec.sensor_frame_payloads(frame, 7)),
-         lambda e: e.pack(codec.sensor_frame_messages(frame, 7)),
-         codec.SensorFrameAssembler, fastcodec.SensorFrameAssembler),
-        (2, 191, lambda e: e.pack_payloads(fastcodec.setpoint_payloads(sp, att, 5)),
-         lambda e: e.pack(codec.setpoint_messages(sp, att, 5)),
-         codec.SetpointAssembler, fastcodec.SetpointAssembler),
+        (1, 1, lambda e: e.pack_payloads(codec.sensor_frame_payloads(frame, 7)),
+         lambda e: e.pack(ref.sensor_frame_messages(frame, 7)),
+         ref.SensorFrameAssembler, codec.SensorFrameAssembler),
+        (2, 191, lambda e: e.pack_payloads(codec.setpoint_payloads(sp, att, 5)),
+         lambda e: e.pack(ref.setpoint_messages(sp, att, 5)),
+         ref.SetpointAssembler, codec.SetpointAssembler),
     ]  # fmt: skip
     for sysid, compid, fast_enc, slow_enc, Slow, Fast in batches:
         enc = codec.Encoder(sysid, compid, signing_key=key, link_id=sysid)
         fast_bytes, slow_bytes = fast_enc(enc), slow_enc(enc)
-        # pymavlink decodes fast-path bytes into the messages the pymavlink path would have sent
+        # pymavlink decodes the codec's bytes into the messages the pymavlink path would have sent
         got, want = stock_messages(fast_bytes, key), stock_messages(slow_bytes, key)
         parts = 4 + (frame.attitude_target is not None) if sysid == 1 else 2
         assert [str(m) for m in got] == [str(m) for m in want] and len(got) == parts  # NaN-safe
         assert all(m.get_srcSystem() == sysid and m.get_signed() == (key is not None) for m in got)
-        # the fast decoder reads pymavlink-encoded bytes into what the pymavlink path assembles
+        # the codec reads pymavlink-encoded bytes into what the pymavlink path assembles
         keys = None if key is None else {sysid: key}
         slow_asm, fast_asm = Slow(), Fast()
         slow = [slow_asm.push(m) for m in codec.Decoder(keys).feed(slow_bytes)][-1]
         fast = [fast_asm.push(mid, body) for mid, _, _, body in
-                codec.Decoder(keys, readers=fastcodec.READERS).feed_records(slow_bytes)][-1]  # fmt: skip
+                codec.Decoder(keys, readers=codec.READERS).feed_records(slow_bytes)][-1]  # fmt: skip
         assert slow is not None and summary(fast) == summary(slow)
 
 
 def test_records_carry_ids_and_rare_messages_stay_pymavlink_objects():
     enc = codec.Encoder(1, 1)
     data = enc.pack([mav.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3)]) + enc.pack_payloads(
-        fastcodec.sensor_frame_payloads(make_frame(2, 4), 7))
-    recs = codec.Decoder(readers=fastcodec.READERS).feed_records(data)
+        codec.sensor_frame_payloads(make_frame(2, 4), 7))
+    recs = codec.Decoder(readers=codec.READERS).feed_records(data)
     assert [(r[0], r[1], r[2]) for r in recs] == [(mid, 1, 1) for mid in (
         mav.MAVLINK_MSG_ID_HEARTBEAT, mav.MAVLINK_MSG_ID_ODOMETRY, mav.MAVLINK_MSG_ID_AM_JOINT_STATE,
         mav.MAVLINK_MSG_ID_AM_WRENCH, mav.MAVLINK_MSG_ID_AM_SIM_STEP)]  # fmt: skip
@@ -239,19 +240,19 @@ def test_records_carry_ids_and_rare_messages_stay_pymavlink_objects():
 def test_a_payload_longer_than_the_message_is_read_as_pymavlink_reads_it():
     """MAVLink 2 receivers ignore payload bytes past the message's size (newer extensions)."""
     enc = codec.Encoder(2, 191)
-    [(mid, payload)] = fastcodec.setpoint_payloads(TorqueSetpoint(8, 3.0, [1, 2, 3], [4.0]))
+    [(mid, payload)] = codec.setpoint_payloads(TorqueSetpoint(8, 3.0, [1, 2, 3], [4.0]))
     long = payload + b"\x5a" * 7
     data = bytearray(enc.pack_payloads([(mid, long)]))
     assert data[1] == len(long)
-    slow = codec.SetpointAssembler().push(codec.Decoder().feed(bytes(data))[0])
-    [(_, _, _, body)] = codec.Decoder(readers=fastcodec.READERS).feed_records(bytes(data))
-    assert summary(fastcodec.SetpointAssembler().push(mid, body)) == summary(slow)
+    slow = ref.SetpointAssembler().push(codec.Decoder().feed(bytes(data))[0])
+    [(_, _, _, body)] = codec.Decoder(readers=codec.READERS).feed_records(bytes(data))
+    assert summary(codec.SetpointAssembler().push(mid, body)) == summary(slow)
 
 
 def test_frames_from_the_wire_are_read_only_and_cannot_be_made_writable():
-    data = codec.Encoder(1, 1).pack_payloads(fastcodec.sensor_frame_payloads(make_frame(3, 2), 7))
-    asm = fastcodec.SensorFrameAssembler()
-    [frame] = [x for mid, _, _, b in codec.Decoder(readers=fastcodec.READERS).feed_records(data)
+    data = codec.Encoder(1, 1).pack_payloads(codec.sensor_frame_payloads(make_frame(3, 2), 7))
+    asm = codec.SensorFrameAssembler()
+    [frame] = [x for mid, _, _, b in codec.Decoder(readers=codec.READERS).feed_records(data)
                if (x := asm.push(mid, b)) is not None]  # fmt: skip
     assert frame.n_joints == 3 and frame.flags is StepFlag.NONE
     for name in ARRAYS[SensorFrame]:
@@ -270,7 +271,7 @@ def test_frames_from_the_wire_are_read_only_and_cannot_be_made_writable():
 def _sensor_forge(encoders):
     def forge(rng: random.Random, step: int) -> bytes:
         enc = rng.choice(encoders)
-        msgs = codec.sensor_frame_messages(make_frame(rng.choice((2, 3)), max(0, step + rng.randrange(-1, 2))), 7)
+        msgs = ref.sensor_frame_messages(make_frame(rng.choice((2, 3)), max(0, step + rng.randrange(-1, 2))), 7)
         kind = rng.randrange(9)
         if kind == 0:
             target = rng.choice((msgs[1].position_rad, msgs[1].velocity_rad_s, msgs[2].force_n))
@@ -300,7 +301,7 @@ def _setpoint_forge(encoders):
         n = rng.randrange(0, 9)
         sp = TorqueSetpoint(step, rng.uniform(-50, 50), [rng.uniform(-1, 1)] * 3, [rng.uniform(-1, 1)] * n)
         att = AttitudeTarget(step, [1, 0, 0, 0], [0.1, 0.2, 0.3], 0.5) if rng.random() < 0.5 else None
-        msgs = codec.setpoint_messages(sp, att)
+        msgs = ref.setpoint_messages(sp, att)
         kind = rng.randrange(7)
         last = msgs[-1]
         if kind == 0:
@@ -328,7 +329,7 @@ def _run(decoder, assembler, data: bytes, fast: bool) -> list:
         (m.get_msgId(), m.get_srcSystem(), m.get_srcComponent(), m) for m in decoder.feed(data)]  # fmt: skip
     for mid, sysid, compid, body in records:
         item = outcome(lambda: assembler.push(mid, body) if fast else assembler.push(body))  # noqa: B023
-        rare = None if isinstance(body, tuple) or mid in fastcodec.READERS else bytes(body.get_msgbuf())
+        rare = None if isinstance(body, tuple) or mid in codec.READERS else bytes(body.get_msgbuf())
         out.append((mid, sysid, compid, item, rare))
     return out
 
@@ -338,10 +339,10 @@ def _run(decoder, assembler, data: bytes, fast: bool) -> list:
 def test_fuzz_both_decoders_accept_reject_and_count_the_same(direction, signed):
     if direction == "sensor":  # simulator -> companion
         sysid, compid, make = 1, 1, _sensor_forge
-        Slow, Fast = codec.SensorFrameAssembler, fastcodec.SensorFrameAssembler
+        Slow, Fast = ref.SensorFrameAssembler, codec.SensorFrameAssembler
     else:  # companion -> simulator
         sysid, compid, make = 2, 191, _setpoint_forge
-        Slow, Fast = codec.SetpointAssembler, fastcodec.SetpointAssembler
+        Slow, Fast = ref.SetpointAssembler, codec.SetpointAssembler
     keys = {sysid: KEY} if signed else None
     # the right key, none, a wrong one, an unknown sysid; and the right key on another link id
     encoders = [codec.Encoder(s, compid, signing_key=k, link_id=s) for s in (sysid, 9) for k in (None, KEY, OTHER)]
@@ -349,7 +350,7 @@ def test_fuzz_both_decoders_accept_reject_and_count_the_same(direction, signed):
     rng = random.Random(2024 + signed + 2 * (direction == "sensor"))
     forge = make(encoders)
     fuzzer = Fuzzer(rng, [forge(rng, 0) for _ in range(50)], forge, tamper_steps=True)
-    slow_dec, fast_dec = codec.Decoder(keys), codec.Decoder(keys, readers=fastcodec.READERS)
+    slow_dec, fast_dec = codec.Decoder(keys), codec.Decoder(keys, readers=codec.READERS)
     slow_asm, fast_asm = Slow(), Fast()
     seen = {"ok": 0, "error": 0}
     for step in range(100):
