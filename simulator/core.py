@@ -437,12 +437,12 @@ class SitlCore:
             fleet_kernels.fly(slots, dev.frames, dev.state, dev.est_x, *ap.fly_arrays())
         else:
             fleet_kernels.fly_on(slots, *ap.fly_arrays())
-        saturated = ap.saturated
+        saturated, thrusts, apply_rotors = ap.saturated.tolist(), ap.all_thrusts(), self.world.apply_rotors
         for ve, tau_q in flying:
             i = ve.slot
             rotors = saturated[i] != 0.0
             axes = ap.saturated_axes_of(i) if rotors else _NO_AXES
-            joints = self.world.apply_rotors(ve.sysid, ap.thrusts(i), tau_q, axes)
+            joints = apply_rotors(ve.sysid, thrusts[i], tau_q, axes)
             if rotors or joints.saturated:
                 self._saturated(ve.sysid, ve.link.hold.command, rotors, joints.saturated, axes)
 

@@ -129,6 +129,10 @@ class AutopilotArrays:
         """AM `slot`'s rotor thrusts [N] of its last allocation."""
         return self._thrusts[slot].tolist()
 
+    def all_thrusts(self) -> list[list[float]]:
+        """Every AM's rotor thrusts [N] of its last allocation, by slot (one conversion for all)."""
+        return self._thrusts.tolist()
+
     def output(self, slot: int) -> FcOutput | None:
         """AM `slot`'s output (None before its first)."""
         a = self.ap[slot]

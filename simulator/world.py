@@ -185,7 +185,7 @@ class World:
         self._arm_ids: dict[int, list[int]] = {}
         self._sensed_links: dict[int, list[int]] = {}
         self._sensed_joints: dict[int, list[int]] = {}  # the arm's joints, then the wrist sensor's
-        self._last_limited: dict[int, tuple[np.ndarray, JointTorqueResult]] = {}  # `_limited`'s last, per AM
+        self._last_limited: dict[int, tuple[np.ndarray, JointTorqueResult, list[float]]] = {}  # `_limited`'s last, per AM
         self._tool_weights: dict[int, tuple[tuple[float, int], ...]] = {}  # per tool link: its mass share, its row
 
     # ------------------------------------------------------------------ lifecycle
@@ -298,34 +298,38 @@ class World:
 
     def apply_rotors(self, sysid: int, rotor_thrusts_n, tau_q_nm,
                      saturated_axes: tuple[bool, bool, bool, bool] = (False, False, False, False)) -> JointTorqueResult:
-        """Command each rotor's thrust [N] (the rotor table's order, within the rotor limits:
-        a flight controller that allocates itself, and says per axis (roll, pitch, yaw,
-        thrust) whether its allocation fell short) and the joint torques [N m] (limited
-        here); they act from the next `step()` until replaced."""
+        """Command each rotor's thrust [N] (the rotor table's order, within the rotor limits: a
+        flight controller that allocates itself, and says per axis (roll, pitch, yaw, thrust)
+        whether its allocation fell short) and the joint torques [N m] (limited here); they act
+        from the next `step()` until replaced. A list of Python floats is kept as given (the
+        caller hands it over)."""
         self._am(sysid)
-        joints = self._limited(sysid, tau_q_nm)
-        self._count_saturation(sysid, saturated_axes, joints.saturated)
-        f = [float(x) for x in rotor_thrusts_n]
+        joints, applied = self._limited(sysid, tau_q_nm)
+        if joints.saturated or True in saturated_axes:
+            self._count_saturation(sysid, saturated_axes, joints.saturated)
+        if type(rotor_thrusts_n) is not list:  # e.g. an array's or a tuple's
+            rotor_thrusts_n = [float(x) for x in rotor_thrusts_n]
         if self._lags:
-            self._rotor_commands[sysid] = f
-            self._joint_commands[sysid] = joints.applied_nm.tolist()
+            self._rotor_commands[sysid] = rotor_thrusts_n
+            self._joint_commands[sysid] = applied
         else:
-            force, tau_B = self._alloc.wrench(f)
-            self._commands[sysid] = (force, tau_B, joints.applied_nm.tolist())
-            self._rotors_now[sysid] = f
+            force, tau_B = self._alloc.wrench(rotor_thrusts_n)
+            self._commands[sysid] = (force, tau_B, applied)
+            self._rotors_now[sysid] = rotor_thrusts_n
         return joints
 
-    def _limited(self, sysid: int, tau_q_nm) -> JointTorqueResult:
-        """`limit_joint_torques` of tau_q_nm; the last result again if given the same array
-        object (a held setpoint's joint torques, re-applied every physics step)."""
+    def _limited(self, sysid: int, tau_q_nm) -> tuple[JointTorqueResult, list[float]]:
+        """`limit_joint_torques` of tau_q_nm and its applied torques as a list; the last again if
+        given the same array object (a held setpoint's joint torques, re-applied every physics step)."""
         last = self._last_limited.get(sysid)
         if last is not None and last[0] is tau_q_nm:
-            return last[1]
+            return last[1], last[2]
         joints = limit_joint_torques(tau_q_nm, self._tau_q_max)
+        applied = joints.applied_nm.tolist()
         # a frozen setpoint's array (read-only, owning its data: amlink.types) cannot change under us
         if isinstance(tau_q_nm, np.ndarray) and not tau_q_nm.flags.writeable and tau_q_nm.base is None:
-            self._last_limited[sysid] = (tau_q_nm, joints)
-        return joints
+            self._last_limited[sysid] = (tau_q_nm, joints, applied)
+        return joints, applied
 
     def _count_saturation(self, sysid: int, axes: tuple[bool, bool, bool, bool], joints: bool) -> None:
         rotors = any(axes)
