@@ -56,32 +56,44 @@ _F8 = np.float64
 STATE = np.dtype([("p", _F8, 3), ("v", _F8, 3), ("q", _F8, 4), ("b_g", _F8, 3), ("b_a", _F8, 3)])
 # one step of the history (an array of these records, one per step of the delayed-fusion horizon)
 SNAPSHOT = np.dtype([("p", _F8, 3), ("v", _F8, 3), ("q", _F8, 4)])
+# the gyro low-pass's coefficients (a numpy record, in an array of one: `biquad_coefficients`):
+# the numerator b0, b1, b2 and the denominator a1, a2 (a0 = 1)
+BIQUAD = np.dtype([("b0", _F8), ("b1", _F8), ("b2", _F8), ("a1", _F8), ("a2", _F8)])
+# the fusion's gains (a numpy record, in an array of one: `loop_gains`), each times the frame
+# period: position k_p, velocity k_v, accelerometer bias k_a, attitude k_R, gyroscope bias k_g
+LOOP_GAINS = np.dtype([("k_p", _F8), ("k_v", _F8), ("k_a", _F8), ("k_R", _F8), ("k_g", _F8)])
 # indices into the output (one odometry frame): p_WB, quat_WB (w, x, y, z; w >= 0), v_B, w_B
 N_OUT = 13
 
 
 # ----------------------------------------------------------------------------- gyro low-pass
 def biquad_coefficients(sample_hz: float, cutoff_hz: float) -> np.ndarray:
-    """(b0, b1, b2, a1, a2) of PX4's math::LowPassFilter2p (2nd-order Butterworth by the
-    bilinear transform); cutoff 0 gives the pass-through (1, 0, 0, 0, 0)."""
+    """The `BIQUAD` record (in an array of one) of PX4's math::LowPassFilter2p (2nd-order
+    Butterworth by the bilinear transform); cutoff 0 gives the pass-through (b0 = 1, the rest 0)."""
+    coef = np.zeros(1, BIQUAD)
+    c = coef[0]
     if cutoff_hz <= 0.0:
-        return np.array([1.0, 0.0, 0.0, 0.0, 0.0])
+        c["b0"] = 1.0
+        return coef
     if not cutoff_hz < 0.5 * sample_hz:
         raise ValueError(f"gyro cutoff {cutoff_hz} Hz must be below half the IMU rate {sample_hz} Hz")
     ohm = math.tan(math.pi * cutoff_hz / sample_hz)
-    c = 1.0 + 2.0 * math.cos(math.pi / 4.0) * ohm + ohm * ohm
-    b0 = ohm * ohm / c
-    return np.array([b0, 2.0 * b0, b0, 2.0 * (ohm * ohm - 1.0) / c,
-                     (1.0 - 2.0 * math.cos(math.pi / 4.0) * ohm + ohm * ohm) / c])
+    a0 = 1.0 + 2.0 * math.cos(math.pi / 4.0) * ohm + ohm * ohm
+    b0 = ohm * ohm / a0
+    c["b0"], c["b1"], c["b2"] = b0, 2.0 * b0, b0
+    c["a1"], c["a2"] = 2.0 * (ohm * ohm - 1.0) / a0, (1.0 - 2.0 * math.cos(math.pi / 4.0) * ohm + ohm * ohm) / a0
+    return coef
 
 
 @kernel
 def biquad_step(d, coef, x):
-    """One step of the biquad (direct form II) per axis; d (2, 3) its delay state, updated."""
+    """One step of the biquad (direct form II) per axis; d (2, 3) its delay state, updated;
+    coef the `BIQUAD` record in an array of one."""
+    c = coef[0]
     y = np.empty(3)
     for i in range(3):
-        d0 = x[i] - d[0, i] * coef[3] - d[1, i] * coef[4]
-        y[i] = d0 * coef[0] + d[0, i] * coef[1] + d[1, i] * coef[2]
+        d0 = x[i] - d[0, i] * c.a1 - d[1, i] * c.a2
+        y[i] = d0 * c.b0 + d[0, i] * c.b1 + d[1, i] * c.b2
         d[1, i] = d[0, i]
         d[0, i] = d0
     return y
@@ -89,8 +101,9 @@ def biquad_step(d, coef, x):
 
 @kernel
 def biquad_reset(d, coef, x):
-    """Delay state at steady state on input x (PX4's reset(sample))."""
-    s = coef[0] + coef[1] + coef[2]
+    """Delay state at steady state on input x (PX4's reset(sample)); coef as `biquad_step`'s."""
+    c = coef[0]
+    s = c.b0 + c.b1 + c.b2
     for i in range(3):
         d[0, i] = x[i] / s
         d[1, i] = x[i] / s
@@ -136,21 +149,22 @@ def predict(x, hist, k, omega_m, f_m, dt, g):
 @kernel
 def fuse_pose(x, hist, k, lag, p_m, q_m, gains, dt):
     """Fuse a pose measured at step k - lag (lag < N) into the state of step k and into the
-    history after the measurement (module doc). gains: (k_p, k_v, k_a, k_R, k_g), already
-    times the frame period. Returns the innovations (r [m], e [rad]) as one (6,) array."""
+    history after the measurement (module doc). gains: the `LOOP_GAINS` record in an array of
+    one. Returns the innovations (r [m], e [rad]) as one (6,) array."""
     s = x[0]
+    gn = gains[0]
     N = hist.shape[0]
     past = hist[(k - lag) % N]
     p_past, q_past = past.p, past.q
     r = p_m - p_past
     e = np.array(quat_log(quat_mul(quat_conj(q_past), q_m)))
     R_past = rotation(q_past)
-    dp = gains[0] * r
-    dv = gains[1] * r
-    dq = quat_exp(gains[3] * e)
+    dp = gn.k_p * r
+    dv = gn.k_v * r
+    dq = quat_exp(gn.k_R * e)
     for i in range(3):
-        s.b_a[i] -= gains[2] * (R_past[0, i] * r[0] + R_past[1, i] * r[1] + R_past[2, i] * r[2])
-        s.b_g[i] -= gains[4] * e[i]
+        s.b_a[i] -= gn.k_a * (R_past[0, i] * r[0] + R_past[1, i] * r[1] + R_past[2, i] * r[2])
+        s.b_g[i] -= gn.k_g * e[i]
     for a in range(lag + 1):  # the history from the measurement's step to now
         h = hist[(k - lag + a) % N]
         for i in range(3):
@@ -217,9 +231,15 @@ def estimator_step(x, hist, lpf, coef, k, omega_m, f_m, dt, g, has_pose, lag, p_
 
 # ----------------------------------------------------------------------------- set-up (Python)
 def loop_gains(attitude_bandwidth_radps: float, position_bandwidth_radps: float, frame_period_s: float) -> np.ndarray:
-    """(k_p, k_v, k_a, k_R, k_g) of the module doc for frames every frame_period_s."""
+    """The `LOOP_GAINS` record (in an array of one) of the module doc for frames every
+    frame_period_s: k_p = 3 omega_p T_m, k_v = 3 omega_p^2 T_m, k_a = omega_p^3 T_m,
+    k_R = 2 omega_R T_m, k_g = omega_R^2 T_m."""
     wp, wR, T = position_bandwidth_radps, attitude_bandwidth_radps, frame_period_s
-    return np.array([3.0 * wp * T, 3.0 * wp * wp * T, wp ** 3 * T, 2.0 * wR * T, wR * wR * T])
+    gains = np.zeros(1, LOOP_GAINS)
+    g = gains[0]
+    g["k_p"], g["k_v"], g["k_a"] = 3.0 * wp * T, 3.0 * wp * wp * T, wp ** 3 * T
+    g["k_R"], g["k_g"] = 2.0 * wR * T, wR * wR * T
+    return gains
 
 
 class Estimator:
@@ -233,13 +253,17 @@ class Estimator:
                  storage: tuple[np.ndarray, ...] | None = None) -> None:
         """out: where `step` writes the odometry (N_OUT,), e.g. the head of a caller's larger
         array (a view); None: an array of its own. storage: (x (1,) `STATE`, hist (history_steps,)
-        `SNAPSHOT`, lpf (2, 3), coef (5,), gains (5,)) to hold the filter in, e.g. views of a
-        fleet's arrays (simulator.devices.DeviceArrays); None: arrays of its own."""
+        `SNAPSHOT`, lpf (2, 3), coef (1,) `BIQUAD`, gains (1,) `LOOP_GAINS`) to hold the filter in,
+        e.g. views of a fleet's arrays (simulator.devices.DeviceArrays); None: arrays of its own."""
         x, hist, lpf, coef, gains = storage if storage is not None else (
-            np.zeros(1, STATE), np.zeros(history_steps, SNAPSHOT), np.zeros((2, 3)), np.zeros(5), np.zeros(5))
+            np.zeros(1, STATE), np.zeros(history_steps, SNAPSHOT), np.zeros((2, 3)), np.zeros(1, BIQUAD),
+            np.zeros(1, LOOP_GAINS))
         if hist.shape != (history_steps,) or hist.dtype != SNAPSHOT or x.shape != (1,) or x.dtype != STATE:
             raise ValueError(f"the estimator's storage: a state {x.dtype} {x.shape} and a history {hist.dtype} "
                              f"{hist.shape}, not STATE (1,) and SNAPSHOT ({history_steps},)")
+        if coef.shape != (1,) or coef.dtype != BIQUAD or gains.shape != (1,) or gains.dtype != LOOP_GAINS:
+            raise ValueError(f"the estimator's storage: coefficients {coef.dtype} {coef.shape} and gains "
+                             f"{gains.dtype} {gains.shape}, not BIQUAD (1,) and LOOP_GAINS (1,)")
         self.x, self.hist, self.lpf, self.coef, self.gains = x, hist, lpf, coef, gains
         s = x[0]
         s["p"], s["v"], s["q"], s["b_g"], s["b_a"] = p_WB, 0.0, quat_WB_wxyz, 0.0, 0.0

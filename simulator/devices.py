@@ -35,7 +35,7 @@ from collections import deque
 import numpy as np
 
 from amcore.config import DevicesSpec, EncoderSpec, ForceTorqueSpec, ImuSpec, MocapSpec
-from amcore.estimator import N_OUT, SNAPSHOT, STATE, Estimator
+from amcore.estimator import BIQUAD, LOOP_GAINS, N_OUT, SNAPSHOT, STATE, Estimator
 from amcore.quat_kernels import quat_exp, quat_mul
 
 from . import device_kernels as dk
@@ -160,7 +160,8 @@ class DeviceArrays:
         self.full = np.zeros(count, np.bool_)  # whether a row holds the arm's and the wrist's values too
         self.frames = np.zeros((count, N_OUT + 2 * n_joints + 6))  # each AM's frame values, odometry first
         self.est_x, self.est_hist = np.zeros(count, STATE), np.zeros((count, history_steps), SNAPSHOT)
-        self.est_lpf, self.est_coef, self.est_gains = np.zeros((count, 2, 3)), np.zeros((count, 5)), np.zeros((count, 5))
+        self.est_lpf = np.zeros((count, 2, 3))
+        self.est_coef, self.est_gains = np.zeros(count, BIQUAD), np.zeros(count, LOOP_GAINS)
         self.innovation = np.zeros((count, 6))
         self.has_pose, self.lag = np.zeros(count, np.bool_), np.zeros(count, np.int64)
         self.p_m, self.q_m = np.zeros((count, 3)), np.zeros((count, 4))
@@ -237,7 +238,8 @@ class DeviceSuite:
         self.estimator = Estimator(p0, q0, dt_s, self.mocap.every * dt_s, g, e.attitude_bandwidth_radps,
                                    e.position_bandwidth_radps, e.gyro_cutoff_hz, e.history_steps,
                                    out=self._frame[:N_OUT],
-                                   storage=(a.est_x[i:i + 1], a.est_hist[i], a.est_lpf[i], a.est_coef[i], a.est_gains[i]))
+                                   storage=(a.est_x[i:i + 1], a.est_hist[i], a.est_lpf[i], a.est_coef[i:i + 1],
+                                            a.est_gains[i:i + 1]))
         self.estimator.innovation = a.innovation[i]
         self._b_g_estimate = a.est_x["b_g"][i]  # a view: the estimator updates it in place
         a.k[i] = -1

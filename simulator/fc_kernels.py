@@ -4,7 +4,8 @@ equations in plain Python, is tests/simulator/reference_flight_controller.py, wh
 tests/simulator/test_fc_kernels.py compares them with.
 
 `FlightController` keeps its loops' state and its constants in two numpy records, their fields
-named (`STATE`, `PARAMS`; numba reads and writes them by name); `rate_loops` runs steps 1 and 2 of the module doc of
+named (`STATE`, `PARAMS`, with a `LOWPASS2P` record per filter; numba reads and writes them by
+name), and its output in an `OUTPUT` record; `rate_loops` runs steps 1 and 2 of the module doc of
 `simulator.flight_controller` (attitude P loop, rate PID with the gyro filters); the
 allocation (step 3) stays in `amcore.allocation`, shared with torque mode.
 
@@ -31,22 +32,29 @@ _AXES = (np.float64, 3)
 STATE = np.dtype([("gyro_d1", *_AXES), ("gyro_d2", *_AXES), ("dgyro_d1", *_AXES), ("dgyro_d2", *_AXES),
                   ("rate_int", *_AXES), ("w_prev", *_AXES), ("sat_pos", *_AXES), ("sat_neg", *_AXES),
                   ("started", np.float64)])
-# the loops' constants (a numpy record, `constants`): each low-pass filter's (active, b0, b1, b2,
-# a1, a2), the gains and limits per axis, the yaw weight, the loop period [s], whether the
+# one LowPass2p's coefficients (`simulator.flight_controller.lowpass2p`): whether it filters
+# (1 or 0; 0 passes the input through), the numerator b0, b1, b2 and the denominator a1, a2
+LOWPASS2P = np.dtype([("active", np.float64), ("b0", np.float64), ("b1", np.float64), ("b2", np.float64),
+                      ("a1", np.float64), ("a2", np.float64)])
+# the loops' constants (a numpy record, `constants`): the rate's and its derivative's low-pass
+# filters, the gains and limits per axis, the yaw weight, the loop period [s], whether the
 # target's rates feed forward (1 or 0), and 2.0 (`_square`'s exponent, read at run time)
-PARAMS = np.dtype([("gyro", np.float64, 6), ("dgyro", np.float64, 6), ("att_p", *_AXES), ("rate_max", *_AXES),
+PARAMS = np.dtype([("gyro", LOWPASS2P), ("dgyro", LOWPASS2P), ("att_p", *_AXES), ("rate_max", *_AXES),
                    ("gain_p", *_AXES), ("gain_i", *_AXES), ("gain_d", *_AXES), ("gain_ff", *_AXES),
                    ("int_lim", *_AXES), ("yaw_weight", np.float64), ("dt", np.float64),
                    ("feedforward", np.float64), ("two", np.float64)])
 
+# one loop period's output (`rate_loops`): the body-rate setpoint [rad/s], the normalized
+# torque per axis and the thrust within [0, 1], the last two what the allocation takes
+OUTPUT = np.dtype([("rates_sp", *_AXES), ("torque", *_AXES), ("thrust", np.float64)])
 # where one autopilot stands between its loop periods (a numpy record, a row of
 # `simulator.flight_controller.AutopilotArrays`): physics steps taken, the loop period in
-# physics steps, whether it has an output (1 or 0), that output (rates_sp [rad/s], torque
-# [normalized], thrust), and the saturation its last allocation left: the unallocated control
-# (0 where the allocation met its request), per axis (roll, pitch, yaw, thrust) whether it fell
-# short (1 or 0), and whether any did; how many outputs it has made
+# physics steps, whether it has an output (1 or 0), how many outputs it has made, the last
+# (`OUTPUT`), and the saturation its last allocation left: the unallocated control (0 where the
+# allocation met its request), per axis (roll, pitch, yaw, thrust) whether it fell short (1 or
+# 0), and whether any did
 AUTOPILOT = np.dtype([("k", np.int64), ("every", np.int64), ("has_output", np.float64), ("outputs", np.int64),
-                      ("out", np.float64, 7),
+                      ("out", OUTPUT),
                       ("unallocated", np.float64, 4), ("saturated_axes", np.float64, 4), ("saturated", np.float64)])
 
 # ----------------------------------------------------------------------------- Python's min, max, **
@@ -108,11 +116,11 @@ def attitude_error(q, q_d, yaw_weight):
 # ----------------------------------------------------------------------------- filters
 @kernel
 def lowpass2p_apply(c, d1, d2, started, i, x):
-    """One sample x through PX4's LowPass2p of axis i: coefficients c (active, b0, b1, b2, a1,
-    a2), delays d1[i], d2[i] (reset to x's steady state when `started` is 0)."""
-    if c[0] == 0.0:
+    """One sample x through PX4's LowPass2p of axis i: coefficients c (a `LOWPASS2P` record),
+    delays d1[i], d2[i] (reset to x's steady state when `started` is 0)."""
+    if c.active == 0.0:
         return x
-    b0, b1, b2, a1, a2 = c[1], c[2], c[3], c[4], c[5]
+    b0, b1, b2, a1, a2 = c.b0, c.b1, c.b2, c.a1, c.a2
     if started == 0.0:
         d1[i] = d2[i] = x / (b0 + b1 + b2)
     d0 = x - d1[i] * a1 - d2[i] * a2
@@ -138,13 +146,13 @@ def rate_loops(params, state, quat_WB, w, quat_d, ff, thrust, unallocated, satur
     (`PARAMS`) and the state (`STATE`), each an array of one record (numba takes an array
     from Python at a third of a bare record's cost): quat_WB the vehicle's attitude and quat_d the
     target's ((w, x, y, z), normalized here), w the body rates [rad/s], ff the target's body
-    rates [rad/s], thrust its normalized thrust. Writes (rates_sp [rad/s], torque
-    [normalized], the thrust within [0, 1] for step 3) into out (7,); updates the integral
+    rates [rad/s], thrust its normalized thrust. Writes the rate setpoint, the torque and the
+    thrust for step 3 into out (an `OUTPUT` record); updates the integral
     with the saturation of the last allocation (its unallocated control (4,) and whether it
     fell short: `allocator_status`)."""
     p, s = params[0], state[0]
     allocator_status(s, unallocated, saturated)
-    out[6] = _min(_max(thrust, 0.0), 1.0)  # `_update`'s min(max(thrust, 0), 1)
+    out.thrust = _min(_max(thrust, 0.0), 1.0)  # `_update`'s min(max(thrust, 0), 1)
     dt = p.dt
     q = quat_normalized(quat_WB)
     q_d = quat_normalized((quat_d[0], quat_d[1], quat_d[2], quat_d[3]))
@@ -165,13 +173,13 @@ def rate_loops(params, state, quat_WB, w, quat_d, ff, thrust, unallocated, satur
     for ax in range(3):
         f = ff[ax] if p.feedforward != 0.0 else 0.0
         m = p.rate_max[ax]
-        out[ax] = _min(_max(p.att_p[ax] * e[ax] + f, -m), m)
+        out.rates_sp[ax] = _min(_max(p.att_p[ax] * e[ax] + f, -m), m)
 
     # 2. rate PID, the integral updated after the output (RateControl::update)
     for ax in range(3):
-        err = out[ax] - rate[ax]
-        out[3 + ax] = (p.gain_p[ax] * err + s.rate_int[ax] - p.gain_d[ax] * accel[ax]
-                       + p.gain_ff[ax] * out[ax])
+        err = out.rates_sp[ax] - rate[ax]
+        out.torque[ax] = (p.gain_p[ax] * err + s.rate_int[ax] - p.gain_d[ax] * accel[ax]
+                          + p.gain_ff[ax] * out.rates_sp[ax])
         ei = err
         if s.sat_pos[ax] != 0.0:
             ei = _min(ei, 0.0)
@@ -199,7 +207,8 @@ def autopilot_step(params, state, ap, quat_WB, w, quat_d, ff, thrust, alloc_c, t
         return False
     unallocated = (a.unallocated[0], a.unallocated[1], a.unallocated[2], a.unallocated[3])
     rate_loops(params, state, quat_WB, w, quat_d, ff, thrust, unallocated, a.saturated != 0.0, a.out)
-    allocate(alloc_c, a.out[3], a.out[4], a.out[5], a.out[6], result)
+    o = a.out
+    allocate(alloc_c, o.torque[0], o.torque[1], o.torque[2], o.thrust, result)
     r = result[0]
     a.saturated = 0.0
     for ax in range(4):
@@ -222,8 +231,14 @@ def constants(fc) -> np.ndarray:
     """The `PARAMS` record of a `simulator.flight_controller.FlightController`, in an array of one."""
     a = np.zeros(1, PARAMS)
     p = a[0]
-    p["gyro"], p["dgyro"] = fc.gyro_filter, fc.dgyro_filter
+    _set_lowpass2p(p["gyro"], fc.gyro_filter)
+    _set_lowpass2p(p["dgyro"], fc.dgyro_filter)
     p["att_p"], p["rate_max"], p["gain_p"], p["gain_i"] = fc.att_p, fc.rate_max, fc.gain_p, fc.gain_i
     p["gain_d"], p["gain_ff"], p["int_lim"] = fc.gain_d, fc.gain_ff, fc.int_lim
     p["yaw_weight"], p["dt"], p["feedforward"], p["two"] = fc.yaw_weight, fc.dt_s, 1.0 if fc.feedforward else 0.0, 2.0
     return a
+
+
+def _set_lowpass2p(c, coefficients) -> None:
+    """The `LOWPASS2P` record c (a view) from `simulator.flight_controller.lowpass2p`'s tuple."""
+    c["active"], c["b0"], c["b1"], c["b2"], c["a1"], c["a2"] = coefficients

@@ -44,8 +44,9 @@ def sense(slots, t, values, full, constants, state, imu_noise, ft_noise, noise_r
         noise_row[i] = j + 1
         s = state[i]
         k[i] += 1
-        estimator_sample(est_x[i:i + 1], est_hist[i], est_lpf[i], est_coef[i], k[i], k[i] == 0, s.omega_m, s.f_m,
-                         dt, g, has_pose[i], lag[i], p_m[i], q_m[i], est_gains[i], frame[:N_OUT], innovation[i])
+        estimator_sample(est_x[i:i + 1], est_hist[i], est_lpf[i], est_coef[i:i + 1], k[i], k[i] == 0, s.omega_m,
+                         s.f_m, dt, g, has_pose[i], lag[i], p_m[i], q_m[i], est_gains[i:i + 1], frame[:N_OUT],
+                         innovation[i])
 
 
 @kernel

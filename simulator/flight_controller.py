@@ -57,7 +57,8 @@ from . import fc_kernels, fleet_kernels
 
 def lowpass2p(sample_hz: float, cutoff_hz: float) -> tuple[float, float, float, float, float, float]:
     """(active, b0, b1, b2, a1, a2) of a 2nd-order Butterworth low-pass by the bilinear transform
-    (PX4's math::LowPassFilter2p::set_cutoff_frequency); cutoff 0 passes the input through
+    (PX4's math::LowPassFilter2p::set_cutoff_frequency; the fields of `fc_kernels.LOWPASS2P`,
+    which `fc_kernels.constants` fills from it by name); cutoff 0 passes the input through
     (active 0). The filter starts at its first input, as PX4's reset(sample)."""
     if not cutoff_hz > 0.0:
         return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
@@ -102,6 +103,9 @@ class AutopilotArrays:
         self._thrusts = self.result["thrusts_n"]  # a view: per AM, its rotor thrusts [N]
         self._results = [self.result[i:i + 1] for i in range(count)]  # each AM's, as `Allocation.read_result` takes it
         self.saturated = self.ap["saturated"]  # a view: per AM, whether its last allocation fell short (1 or 0)
+        out = self.ap["out"]  # views: per AM, whether it has an output and that output's fields (`output`)
+        self._has_output, self._rates_sp, self._torque, self._thrust = (
+            self.ap["has_output"], out["rates_sp"], out["torque"], out["thrust"])
         self._fly_args = (self.params, self.state, self.ap, self.attitude, self.rate, self.target_q, self.target_w,
                           self.target_thrust, self.alloc_c, SATURATION_TOL, self.result)
 
@@ -135,13 +139,13 @@ class AutopilotArrays:
 
     def output(self, slot: int) -> FcOutput | None:
         """AM `slot`'s output (None before its first)."""
-        a = self.ap[slot]
-        if a["has_output"] == 0.0:
+        if self._has_output[slot] == 0.0:
             return None
-        out = a["out"].tolist()
-        allocation, thrusts = self.allocation.read_result(self._results[slot], *out[3:7])
-        return frozen_instance(FcOutput, rotor_thrusts_n=thrusts, allocation=allocation, rates_sp=tuple(out[0:3]),
-                               torque_sp=tuple(out[3:6]), thrust_sp=out[6])
+        rates_sp, torque = tuple(self._rates_sp[slot].tolist()), tuple(self._torque[slot].tolist())
+        thrust = self._thrust[slot].item()
+        allocation, thrusts = self.allocation.read_result(self._results[slot], *torque, thrust)
+        return frozen_instance(FcOutput, rotor_thrusts_n=thrusts, allocation=allocation, rates_sp=rates_sp,
+                               torque_sp=torque, thrust_sp=thrust)
 
 
 class FlightController:

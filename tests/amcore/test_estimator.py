@@ -63,16 +63,38 @@ def test_quaternion_exp_and_log_invert_each_other():
 
 def test_gyro_lowpass_is_px4s_butterworth():
     c = biquad_coefficients(1000.0, 40.0)
-    assert c[0] + c[1] + c[2] == pytest.approx(1.0 + c[3] + c[4])  # unit gain at DC
+    b0, b1, b2, a1, a2 = (c[0][name] for name in ("b0", "b1", "b2", "a1", "a2"))
+    assert b0 + b1 + b2 == pytest.approx(1.0 + a1 + a2)  # unit gain at DC
     d = np.zeros((2, 3))
     biquad_reset(d, c, np.zeros(3))
     # the gain at the cutoff is 1/sqrt(2): drive it with a sine and measure the steady amplitude
     ys = [biquad_step(d, c, np.full(3, math.sin(2 * math.pi * 40.0 * k / 1000.0)))[0] for k in range(4000)]
     assert max(ys[2000:]) == pytest.approx(1.0 / math.sqrt(2.0), rel=0.01)
-    assert np.array_equal(biquad_coefficients(1000.0, 0.0), [1.0, 0.0, 0.0, 0.0, 0.0])
+    through = biquad_coefficients(1000.0, 0.0)[0]
+    assert [through[name] for name in ("b0", "b1", "b2", "a1", "a2")] == [1.0, 0.0, 0.0, 0.0, 0.0]
     with pytest.raises(ValueError):
         biquad_coefficients(1000.0, 600.0)
 
+
+
+def test_the_gyro_lowpass_is_its_recursion_by_name():
+    """biquad_reset and biquad_step against the direct form II written out on the coefficients'
+    names, bit for bit; the Butterworth's numerator is b0 (1 + z^-1)^2."""
+    coef = biquad_coefficients(1000.0, 40.0)
+    c = {name: float(coef[0][name]) for name in ("b0", "b1", "b2", "a1", "a2")}
+    assert c["b1"] == 2.0 * c["b0"] and c["b2"] == c["b0"] and c["a1"] != c["a2"]
+    rng = np.random.default_rng(7)
+    xs = rng.normal(size=(200, 3))
+    d = np.zeros((2, 3))
+    biquad_reset(d, coef, xs[0])
+    d1 = [x / (c["b0"] + c["b1"] + c["b2"]) for x in xs[0].tolist()]
+    d2 = list(d1)
+    for x in xs:
+        y = biquad_step(d, coef, x)
+        for i in range(3):
+            d0 = x[i] - d1[i] * c["a1"] - d2[i] * c["a2"]
+            assert y[i] == d0 * c["b0"] + d1[i] * c["b1"] + d2[i] * c["b2"]
+            d2[i], d1[i] = d1[i], d0
 
 def test_exact_sensors_give_the_truth():
     e, _ = run(lag=10)
