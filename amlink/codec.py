@@ -70,7 +70,6 @@ from amlink.types import (
     attitude_target_from_wire,
     sensor_frame_from_wire,
     torque_setpoint_from_wire,
-    with_autopilot_reports,
 )
 
 from amlink.wire import CodecError, Decoder, EncodeError, Encoder  # noqa: F401  (re-exported)
@@ -370,15 +369,13 @@ def sensor_frame_from_fields(odom: tuple, joints: tuple, wrench: tuple, step_fie
     wr = wrench[1:7]
     if not all_finite(wr):
         raise NonFiniteValueError("AM_WRENCH", "force_n/torque_nm")
-    frame = sensor_frame_from_wire(step, time_usec / 1e6, base + q + qdot + wr, n, flags)
-    if not joints[26] and target is None:
-        return frame
     effort = None
     if joints[26]:
         effort = joints[18 : 18 + n]
         if not all_finite(effort):
             raise NonFiniteValueError("AM_JOINT_STATE", "effort_nm")
-    return with_autopilot_reports(frame, effort, None if target is None else attitude_report_from_fields(target, step))
+    return sensor_frame_from_wire(step, time_usec / 1e6, base + q + qdot + wr, n, flags, effort,
+                                  None if target is None else attitude_report_from_fields(target, step))
 
 
 def setpoint_from_fields(fields: tuple) -> TorqueSetpoint:

@@ -245,23 +245,29 @@ def _assemble(cls, **fields):
     return obj
 
 
-def sensor_frame_from_wire(step: int, time_s: float, values, n: int, flags: int) -> SensorFrame:
-    """SensorFrame of wire values: ``values`` = p_WB, quat_WB_wxyz, v_B, w_B, q[:n], qdot[:n], wrench_E.
+def sensor_frame_from_wire(step: int, time_s: float, values, n: int, flags: int, joint_effort_nm=None,
+                           attitude_target: AttitudeTarget | None = None) -> SensorFrame:
+    """SensorFrame of wire values: ``values`` = p_WB, quat_WB_wxyz, v_B, w_B, q[:n], qdot[:n], wrench_E;
+    the flight controller's reports where it has them (`with_autopilot_reports`).
 
     For decoders: the caller guarantees 0 <= step < 2**64, 0 <= n <= MAX_JOINTS,
     0 <= flags < 256 and ``len(values) == 19 + 2 n``.
     """
-    return sensor_frame_of_array(step, time_s, np.array(values, dtype=np.float64), n, flags)
+    return sensor_frame_of_array(step, time_s, np.array(values, dtype=np.float64), n, flags, joint_effort_nm,
+                                 attitude_target)
 
 
-def sensor_frame_of_array(step: int, time_s: float, a: np.ndarray, n: int, flags: int) -> SensorFrame:
+def sensor_frame_of_array(step: int, time_s: float, a: np.ndarray, n: int, flags: int, joint_effort_nm=None,
+                          attitude_target: AttitudeTarget | None = None) -> SensorFrame:
     """`sensor_frame_from_wire` of a float64 array of the values, which the frame takes over
-    (made read-only, not copied: the caller must hold no other reference that writes to it)."""
+    (made read-only, not copied: the caller must hold no other reference that writes to it),
+    with the flight controller's reports where it has them (`with_autopilot_reports`)."""
     a.setflags(write=False)
     j = 13 + n
+    effort = None if joint_effort_nm is None else _frozen_f64(joint_effort_nm)
     return _assemble(SensorFrame, step=step, time_s=float(time_s), p_WB=a[0:3], quat_WB_wxyz=a[3:7],
                      v_B=a[7:10], w_B=a[10:13], q=a[13:j], qdot=a[j : j + n], wrench_E=a[j + n : j + n + 6],
-                     flags=_STEP_FLAGS[flags], joint_effort_nm=None, attitude_target=None)  # fmt: skip
+                     flags=_STEP_FLAGS[flags], joint_effort_nm=effort, attitude_target=attitude_target)  # fmt: skip
 
 
 def frame_values(frame: SensorFrame) -> np.ndarray:

@@ -39,8 +39,7 @@ from amcore.mission import ObjectPose, am_mission
 from amcore.model import AmState, build_model
 from amcore.so3 import Rz
 from amlink.impair import ImpairedLink, LinkImpairment
-from amlink.types import (AttitudeSetpoint, AttitudeTarget, SensorFrame, TorqueSetpoint, sensor_frame_from_wire,
-                          with_autopilot_reports)
+from amlink.types import AttitudeSetpoint, AttitudeTarget, SensorFrame, TorqueSetpoint, sensor_frame_of_array
 
 from . import fleet_kernels
 from .failsafe import Failsafe, FailsafeGains
@@ -254,12 +253,16 @@ class SitlCore:
         for s, ve in self.vehicles.items():
             v = values[s]
             if devices is not None:
-                ve.odometry = reported = devices.frames[ve.slot].tolist()
+                row = devices.frames[ve.slot]
+                ve.odometry = reported = row.tolist()
+                a = row.copy()
             else:  # no sensor: exact frames
                 reported = v if ve.sensor is None else ve.sensor(v)
-            f = sensor_frame_from_wire(k, t, reported, n, 0)
+                a = np.array(reported, dtype=np.float64)
             if ve.effort is not None:  # attitude mode: what the autopilot flies and the servos measure
-                f = with_autopilot_reports(f, ve.effort.last, ve.flown_target())
+                f = sensor_frame_of_array(k, t, a, n, 0, ve.effort.last, ve.flown_target())
+            else:
+                f = sensor_frame_of_array(k, t, a, n, 0)
             out[s] = f
             ve.reported = reported
             yield s, f

@@ -24,8 +24,7 @@ from amcore import cliargs, preflight
 from amcore.config import ConfigError, ScenarioSpec, check_duration, load_scenario
 from amlink import codec
 from amlink.limits import SetpointLimits
-from amlink.types import (AttitudeSetpoint, SensorFrame, TorqueSetpoint, frame_values, sensor_frame_of_array,
-                          with_autopilot_reports)
+from amlink.types import AttitudeSetpoint, SensorFrame, TorqueSetpoint, frame_values, sensor_frame_of_array
 from amruntime import jitcache
 from companion.pilot import Pilot
 from simulator.core import SitlCore, kernel_group
@@ -40,14 +39,12 @@ def as_on_the_wire(f: SensorFrame) -> SensorFrame:
     joint torques (float64, exact)."""
     values = np.array(frame_values(f))  # a copy, which the new frame takes over
     values[:13] = values[:13].astype(np.float32)  # the base state: to float32 and back, exactly
-    out = sensor_frame_of_array(f.step, round(f.time_s * 1e6) / 1e6, values, f.q.shape[0], int(f.flags))
-    if f.joint_effort_nm is None and f.attitude_target is None:
-        return out
     target = f.attitude_target
     if target is not None:  # ATTITUDE_TARGET: float32, NED/FRD and back, for the frame's step
         msgid, payload = codec.attitude_report_payload(target)
         target = codec.attitude_report_from_fields(codec.READERS[msgid](payload, 0, len(payload)), f.step)
-    return with_autopilot_reports(out, f.joint_effort_nm, target)
+    return sensor_frame_of_array(f.step, round(f.time_s * 1e6) / 1e6, values, f.q.shape[0], int(f.flags),
+                                 f.joint_effort_nm, target)
 
 
 def setpoint_as_on_the_wire(sp: TorqueSetpoint | AttitudeSetpoint) -> TorqueSetpoint | AttitudeSetpoint:
