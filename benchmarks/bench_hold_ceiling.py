@@ -15,11 +15,10 @@ same scenario (`bench_core.spec_for`: ten_am_attitude's object and quadrotor, N 
   them run too, with hovering setpoints; they are timed apart, as "control step");
 - "stripped": per AM the same five PyBullet calls a hold step needs (two getters and the
   rotation, two force setters and the joints' setter) and its base's values into its row,
-  and the one compiled call over every AM between them: no link, no motion capture, no
-  effort sensor, no rotor lag, no result objects, no bookkeeping. It is a lower bound of
-  what the step can cost with the kernels as they are: the glue a fused step would keep
-  (the link's hold, the motion capture, the rotors) is left out, so "saved" overstates the
-  gain;
+  and the one compiled call over every AM between them (the motion capture inside it): no
+  link, no effort sensor, no rotor lag, no result objects, no bookkeeping. It is a lower
+  bound of what the step can cost with the kernels as they are: the glue a fused step would
+  keep (the link's hold, the rotors) is left out, so "saved" overstates the gain;
 - "floor": PyBullet's step with the three setters per AM alone.
 
 "per AM above the floor" is (step - floor) / N: the simulator's own per-AM work on a hold step.
@@ -88,8 +87,7 @@ def run_stripped(core: SitlCore, steps: int) -> float:
     for s in core.sysids:
         ap.set_target(core.vehicles[s].slot, hover(core, s, 0).attitude)
     every = np.arange(len(ams), dtype=np.int64)
-    dev.full[:], dev.has_pose[:] = False, False  # the base's values; no motion capture
-    rows = dev.imu_noise.shape[1]
+    dev.full[:] = False  # the base's values
     t = core.time_s
     c0 = time.process_time()
     for k in range(steps):
@@ -98,8 +96,7 @@ def run_stripped(core: SitlCore, steps: int) -> float:
             v, om = pb.getBaseVelocity(body, physicsClientId=c)
             pb.getMatrixFromQuaternion(q)
             dev.values[i, :13] = (*p, q[3], q[0], q[1], q[2], *v, *om)
-            if dev.noise_row[i] == rows:
-                dev.suites[i].draw_noise()
+            dev.refill(i)
         fleet_kernels.hold(every, t, *dev.sense_arrays(), every, *ap.fly_arrays())
         for body, arm, i in ams:
             pb.applyExternalForce(body, -1, (0.0, 0.0, thrust_n), (0.0, 0.0, 0.0), pb.LINK_FRAME, physicsClientId=c)

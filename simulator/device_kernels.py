@@ -1,6 +1,6 @@
 """The devices' per-step arithmetic (numba, as amcore.law): the base's truth as the IMU sees
 it, the IMU's biases and noise, the F/T sensor's drift, noise and tare, the encoders'
-quantization. Their readable reference, in plain Python and numpy, is
+quantization, the motion capture's frames (noise, biases, drops, latency). Their readable reference, in plain Python and numpy, is
 tests/simulator/reference_devices.py (compared in tests/simulator/test_device_kernels.py).
 
 The truth's two 3x3 products (R_WB v_B and R_WB^T (a_W + g e_3)) are made with fused
@@ -8,11 +8,12 @@ multiply-adds in the order OpenBLAS's dgemv kernels use (`mat_vec`, `mat_t_vec`)
 they round as numpy's products do on a machine whose numpy calls OpenBLAS; everywhere, the
 kernels give the same numbers, whatever BLAS numpy has.
 
-What stays in Python: the random draws (`simulator.noise.NoiseBlock`: a block of a device's
-stream at once, the same numbers in the same order) and the motion capture (one frame in ten
-steps). `simulator.fleet_kernels.sense` calls `suite_step` and the estimator for every AM at once.
+What stays in Python: the random draws (`simulator.noise`: a block of a device's stream at
+once, the same numbers in the same order). `simulator.fleet_kernels.sense` calls `suite_step`,
+`mocap_step` and the estimator for every AM at once.
 
-State and constants travel in two numpy records, their fields named (`STATE`, `CONSTANTS`).
+State and constants travel in numpy records, their fields named (`STATE`, `CONSTANTS`; the
+motion capture's `MOCAP_CONSTANTS`, `MOCAP_STATE` and its frames in flight, `MOCAP_PENDING`).
 The quaternion helpers are amcore.quat_kernels'.
 """
 from __future__ import annotations
@@ -24,7 +25,7 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from amcore.jit import kernel
-from amcore.quat_kernels import rotation
+from amcore.quat_kernels import quat_exp, quat_mul, rotation
 
 
 _F8 = np.float64
@@ -44,6 +45,17 @@ CONSTANTS = np.dtype([("phi_g", _F8), ("sigma_bg", _F8), ("phi_a", _F8), ("sigma
 STATE = np.dtype([("v_W", _F8, 3), ("started", _F8), ("b_g", _F8, 3), ("b_a", _F8, 3), ("omega_m", _F8, 3),
                   ("f_m", _F8, 3), ("ft_offset", _F8, 6), ("ft_tare", _F8, 6), ("ft_sum", _F8, 6),
                   ("ft_count", _F8), ("ft_tared", _F8)])
+# `mocap_step`'s: the constants (a frame every `every` steps, `lag` steps late; the white-noise
+# deviations sigma_p [m] and sigma_R [rad]; the drop probability; the fixed position bias [m]
+# and body-frame attitude bias [rad]), the state (the last step, frames captured and dropped so
+# far), and a frame in flight (its pose, the step it arrives at, -1 if lost), one per capture
+# in a ring indexed by capture number
+_I8 = np.int64
+MOCAP_CONSTANTS = np.dtype([("every", _I8), ("lag", _I8), ("sigma_p", _F8), ("sigma_R", _F8), ("drop", _F8),
+                            ("bias_p", _F8, 3), ("bias_R", _F8, 3)])
+MOCAP_STATE = np.dtype([("k", _I8), ("captured", _I8), ("dropped", _I8)])
+MOCAP_PENDING = np.dtype([("p", _F8, 3), ("q", _F8, 4), ("arrives", _I8)])
+MOCAP_DRAWS = 7  # a capture's draws: 6 standard normals (position, attitude), then a uniform (the drop)
 
 
 # ----------------------------------------------------------------------------- the truth
@@ -177,3 +189,56 @@ def suite_step(x, t, constants, state, imu_n, ft_n, out):
         devices_sample(x, (out.shape[0] - 6) // 2, f_B, c, s, imu_n, t, ft_n, out)
     else:
         devices_advance(x, f_B, c, s, imu_n, ft_n)
+
+
+# ----------------------------------------------------------------------------- the motion capture
+@kernel
+def mocap_capture(c, x, n, e):
+    """One frame of the base's pose x (p_WB, quat_WB first) into e (a `MOCAP_PENDING`):
+    p_m = p_WB + b_p + sigma_p n[0:3], q_m = quat_WB (x) exp(b_R + sigma_R n[3:6])."""
+    for i in range(3):
+        e.p[i] = x[i] + c.bias_p[i] + c.sigma_p * n[i]
+    dq = quat_exp((c.bias_R[0] + c.sigma_R * n[3], c.bias_R[1] + c.sigma_R * n[4], c.bias_R[2] + c.sigma_R * n[5]))
+    q = quat_mul((x[3], x[4], x[5], x[6]), dq)
+    for i in range(4):
+        e.q[i] = q[i]
+
+
+@kernel
+def mocap_step(constants, state, pending, x, draws, draw_row, p_m, q_m):
+    """One physics step of the motion capture from the base's exact values x (p_WB, quat_WB
+    first: all it sees): on every `every`-th step (from the first) a frame is captured, taking
+    the next row of `draws` (`draw_row`, an array of one; `MOCAP_DRAWS` a row) and lost if its
+    uniform is below the drop probability (> 0), else in flight in `pending` (a ring of
+    `MOCAP_PENDING`, at least lag // every + 1 long) until `lag` steps later. Whether a frame
+    arrives this step; if so, its pose into p_m and q_m (w, x, y, z). constants, state: the
+    `MOCAP_CONSTANTS` and `MOCAP_STATE` records, each in an array of one."""
+    c, s = constants[0], state[0]
+    s.k += 1
+    k = s.k
+    ring = pending.shape[0]
+    if k % c.every == 0:
+        j = draw_row[0]
+        if j >= draws.shape[0]:
+            raise IndexError("a motion capture without draws left: its next block is drawn before the step")
+        n = draws[j]
+        draw_row[0] = j + 1
+        e = pending[(k // c.every) % ring]
+        s.captured += 1
+        if c.drop > 0.0 and n[6] < c.drop:
+            s.dropped += 1
+            e.arrives = -1
+        else:
+            mocap_capture(c, x, n, e)
+            e.arrives = k + c.lag
+    taken = k - c.lag
+    if taken < 0 or taken % c.every != 0:
+        return False
+    e = pending[(taken // c.every) % ring]
+    if e.arrives != k:
+        return False
+    for i in range(3):
+        p_m[i] = e.p[i]
+    for i in range(4):
+        q_m[i] = e.q[i]
+    return True

@@ -18,9 +18,11 @@ parameters under the names of its reference model ([devices] in a scenario,
 
 The classes here hold each device's constants and the draws made when it is switched on (turn-on
 biases, offsets); the per-step arithmetic of the truth, the IMU, the encoders and the F/T
-sensor is `simulator.device_kernels` (numba; one call a step), the motion capture's is
-`Mocap.sample_values`. The readable reference of the compiled steps, in plain Python and
-numpy, is tests/simulator/reference_devices.py.
+sensor is `simulator.device_kernels.suite_step`, the motion capture's
+`simulator.device_kernels.mocap_step` (numba; with the estimator, one call a step for every
+AM: `simulator.fleet_kernels.sense`; `Mocap.sample_values` calls `mocap_step` alone, for a
+motion capture outside a fleet's arrays, as simulator.object_mocap's). The readable reference
+of the compiled steps, in plain Python and numpy, is tests/simulator/reference_devices.py.
 
 `DeviceSuite` holds one AM's devices and its `amcore.estimator.Estimator` (it runs where PX4
 runs EKF2, in the flight controller, and its output is the frame's odometry, as PX4 streams
@@ -30,7 +32,6 @@ ODOMETRY). `step(values, k)` takes the AM's exact values (the order of
 from __future__ import annotations
 
 import math
-from collections import deque
 
 import numpy as np
 
@@ -40,10 +41,12 @@ from amcore.quat_kernels import quat_exp, quat_mul
 
 from . import device_kernels as dk
 from . import fleet_kernels
-from .noise import NoiseBlock
+from .noise import CaptureDraws, NoiseBlock
 
 _STREAM = 0xDE71  # distinguishes the devices' streams from the other seeded streams of an AM
 IMU, MOCAP, FT = 1, 2, 3  # each device's sub-stream
+NOISE_ROWS = 256  # physics steps of draws taken at once (`DeviceSuite.draw_noise`)
+MOCAP_ROWS = 64  # motion-capture frames' draws taken at once (`Mocap.draw`)
 
 
 def _gauss_markov(sigma_rw: float, tau_s: float, dt_s: float) -> tuple[float, float]:
@@ -76,9 +79,15 @@ class Imu:
 
 class Mocap:
     """Motion capture (module doc); `sample_values(x)` once per physics step -> a pose
-    (p_m, q_m (w, x, y, z)) and its age in steps when a frame arrives this step, else None."""
+    (p_m, q_m (w, x, y, z)) and its age in steps when a frame arrives this step, else None.
 
-    def __init__(self, spec: MocapSpec, scale: float, dt_s: float, rng: np.random.Generator) -> None:
+    Its per-step arithmetic is `simulator.device_kernels.mocap_step`, on its constants and state
+    (`MOCAP_CONSTANTS`, `MOCAP_STATE`, a ring of `MOCAP_PENDING`) and a block of draws
+    (`simulator.noise.CaptureDraws`): arrays of its own, or its rows of a fleet's once
+    `DeviceArrays.adopt_mocap` has moved it there (then `simulator.fleet_kernels.sense` steps it)."""
+
+    def __init__(self, spec: MocapSpec, scale: float, dt_s: float, rng: np.random.Generator,
+                 rows: int = MOCAP_ROWS) -> None:
         self.rng = rng
         self.every = max(1, round(1.0 / (spec.rate_hz * dt_s)))
         self.lag = int(round(spec.latency_s / dt_s))
@@ -86,33 +95,51 @@ class Mocap:
         self.drop = spec.drop_probability
         self.bias_p = scale * spec.position_bias_m * rng.standard_normal(3)
         self.bias_R = scale * spec.attitude_bias_rad * rng.standard_normal(3)
-        self._k = -1
-        self._in_flight: deque[tuple[int, np.ndarray, np.ndarray]] = deque()
-        self.dropped = self.captured = 0
+        c = np.zeros(1, dk.MOCAP_CONSTANTS)
+        c["every"], c["lag"], c["sigma_p"], c["sigma_R"] = self.every, self.lag, self.sigma_p, self.sigma_R
+        c["drop"], c["bias_p"], c["bias_R"] = self.drop, self.bias_p, self.bias_R
+        state = np.zeros(1, dk.MOCAP_STATE)
+        state["k"] = -1
+        self.use(c, state, np.zeros(self.lag // self.every + 1, dk.MOCAP_PENDING),
+                 np.zeros((rows, dk.MOCAP_DRAWS)), np.full(1, rows, np.int64))
+        self._p_m, self._q_m = np.zeros(3), np.zeros(4)
+
+    def use(self, constants: np.ndarray, state: np.ndarray, pending: np.ndarray, draws: np.ndarray,
+            draw_row: np.ndarray) -> None:
+        """Step on these arrays (`mocap_step`'s; views of a fleet's row, or its own)."""
+        if pending.shape[0] <= self.lag // self.every:
+            raise ValueError(f"{pending.shape[0]} frames in flight held, {self.lag // self.every + 1} needed")
+        self.constants, self.state, self.pending, self.draw_row = constants, state, pending, draw_row
+        self.draws = CaptureDraws(self.rng, draws.shape[0], draws, self.drop > 0.0)
 
     @property
     def frame_period_steps(self) -> int:
         return self.every
 
+    @property
+    def captured(self) -> int:
+        """Frames captured so far, the dropped ones included."""
+        return int(self.state["captured"][0])
+
+    @property
+    def dropped(self) -> int:
+        return int(self.state["dropped"][0])
+
+    def draw(self) -> None:
+        """The next block of draws (`CaptureDraws`), taken from its first row on."""
+        self.draws.fill()
+        self.draw_row[0] = 0
+
     def sample_values(self, x: np.ndarray):
         """This step's frame, if one arrives, from the base's exact values x (p_WB, quat_WB
         first, as `World.sensor_values`: all a motion capture sees), read on the steps that
         capture a frame."""
-        self._k = k = self._k + 1
-        if k % self.every == 0:
-            n = self.rng.standard_normal(6)
-            lost = self.drop > 0.0 and self.rng.random() < self.drop
-            self.captured += 1
-            if lost:
-                self.dropped += 1
-            else:
-                p = x[0:3] + self.bias_p + self.sigma_p * n[0:3]
-                q = np.array(quat_mul(x[3:7], quat_exp(self.bias_R + self.sigma_R * n[3:6])))
-                self._in_flight.append((k + self.lag, p, q))
-        if self._in_flight and self._in_flight[0][0] == k:
-            _, p, q = self._in_flight.popleft()
-            return (p, q), self.lag
-        return None
+        if self.draw_row[0] == self.draws.rows:
+            self.draw()
+        if not dk.mocap_step(self.constants, self.state, self.pending, np.asarray(x, dtype=np.float64),
+                             self.draws.block, self.draw_row, self._p_m, self._q_m):
+            return None
+        return (self._p_m.copy(), self._q_m.copy()), self.lag
 
 
 class ForceTorque:
@@ -140,16 +167,13 @@ class Encoders:
         self.dqdot = spec.velocity_quantum_radps
 
 
-NOISE_ROWS = 256  # physics steps of draws taken at once (`DeviceSuite.draw_noise`)
-
-
 class DeviceArrays:
     """The devices' and estimators' state of `count` AMs, stacked (one row per AM, its slot),
     so that one compiled call (`simulator.fleet_kernels.sense`) steps every AM; each
     `DeviceSuite` keeps views of its row. `step` takes the AMs' exact values of one physics step."""
 
     def __init__(self, count: int, n_joints: int, history_steps: int, dt_s: float, g: float,
-                 rows: int = NOISE_ROWS) -> None:
+                 rows: int = NOISE_ROWS, mocap_rows: int = MOCAP_ROWS) -> None:
         self.count, self.n, self._dt, self._g = count, n_joints, dt_s, g
         self.constants, self.state = np.zeros(count, dk.CONSTANTS), np.zeros(count, dk.STATE)
         self.imu_noise, self.ft_noise = np.zeros((count, rows, 12)), np.zeros((count, rows, 12))
@@ -163,30 +187,46 @@ class DeviceArrays:
         self.est_lpf = np.zeros((count, 2, 3))
         self.est_coef, self.est_gains = np.zeros(count, BIQUAD), np.zeros(count, LOOP_GAINS)
         self.innovation = np.zeros((count, 6))
+        self.mocap_c, self.mocap_state = np.zeros(count, dk.MOCAP_CONSTANTS), np.zeros(count, dk.MOCAP_STATE)
+        self.mocap_pending = np.zeros((count, history_steps), dk.MOCAP_PENDING)  # the latency is shorter (DeviceSuite)
+        self.mocap_draws = np.zeros((count, mocap_rows, dk.MOCAP_DRAWS))
+        self.mocap_row = np.full(count, mocap_rows, np.int64)  # each AM's next row of its block
+        self._mocap_rows = mocap_rows
+        # the motion capture's frame of the step, for the estimator (`simulator.fleet_kernels.sense` writes it)
         self.has_pose, self.lag = np.zeros(count, np.bool_), np.zeros(count, np.int64)
         self.p_m, self.q_m = np.zeros((count, 3)), np.zeros((count, 4))
         self.suites: list[DeviceSuite | None] = [None] * count
         self._all = np.arange(count, dtype=np.int64)
         self._sense_args = (self.values, self.full, self.constants, self.state, self.imu_noise, self.ft_noise,
-                            self.noise_row, self.k, self.frames, self.est_x, self.est_hist, self.est_lpf,
+                            self.noise_row, self.k, self.mocap_c, self.mocap_state, self.mocap_pending,
+                            self.mocap_draws, self.mocap_row, self.frames, self.est_x, self.est_hist, self.est_lpf,
                             self.est_coef, self.est_gains, self.has_pose, self.lag, self.p_m, self.q_m,
                             self.innovation, dt_s, g)
 
-    def load(self, values, slot: int) -> None:
-        """AM `slot`'s exact values of this step (full, or the base's 13), its motion-capture
-        frame if one arrives now, and new blocks of draws if it used its last."""
+    def adopt_mocap(self, mocap: Mocap, slot: int) -> None:
+        """AM `slot`'s motion capture (not yet stepped) moved onto its rows here: its constants
+        and state copied, and it steps on views of them from now on."""
+        i = slot
+        self.mocap_c[i], self.mocap_state[i] = mocap.constants[0], mocap.state[0]
+        self.mocap_row[i] = self._mocap_rows
+        mocap.use(self.mocap_c[i:i + 1], self.mocap_state[i:i + 1], self.mocap_pending[i], self.mocap_draws[i],
+                  self.mocap_row[i:i + 1])
+
+    def refill(self, slot: int) -> None:
+        """New blocks of draws for AM `slot` where it has used its last: the IMU's and the F/T
+        sensor's (a row a step), the motion capture's (a row a frame)."""
         if self.noise_row[slot] == self._rows:
             self.suites[slot].draw_noise()
+        if self.mocap_row[slot] == self._mocap_rows:
+            self.suites[slot].mocap.draw()
+
+    def load(self, values, slot: int) -> None:
+        """AM `slot`'s exact values of this step (full, or the base's 13), and new blocks of
+        draws if it used its last (`refill`)."""
+        self.refill(slot)
         m = len(values)
         self.values[slot, :m] = values
         self.full[slot] = m > N_OUT
-        arrived = self.suites[slot].mocap.sample_values(self.values[slot])
-        if arrived is None:
-            self.has_pose[slot] = False
-        else:
-            (p, q), lag = arrived
-            self.has_pose[slot], self.lag[slot] = True, lag
-            self.p_m[slot], self.q_m[slot] = p, q
 
     def step(self, t: float, slots: np.ndarray | None = None) -> None:
         """One physics step of the loaded AMs (`slots`; None: all) in one compiled call; their
@@ -206,10 +246,10 @@ class DeviceSuite:
 
     Its state is a row (`slot`) of a `DeviceArrays` (its own, of one row, unless a fleet's is
     given): the truth's, the IMU's, the encoders' and the F/T sensor's per-step arithmetic is
-    `simulator.device_kernels.suite_step`, the estimator's `amcore.estimator`, both called by
-    `simulator.fleet_kernels.sense` over every AM of the arrays at once; the draws are taken in
-    blocks (the same numbers in the same order); the device objects hold the draws made at
-    construction."""
+    `simulator.device_kernels.suite_step`, the motion capture's `mocap_step`, the estimator's
+    `amcore.estimator`, all called by `simulator.fleet_kernels.sense` over every AM of the
+    arrays at once; the draws are taken in blocks (the same numbers in the same order); the
+    device objects hold the draws made at construction."""
 
     def __init__(self, spec: DevicesSpec, n_joints: int, dt_s: float, g: float, seed: int, sysid: int,
                  initial_values: list[float], arrays: DeviceArrays | None = None, slot: int = 0) -> None:
@@ -243,6 +283,7 @@ class DeviceSuite:
         self.estimator.innovation = a.innovation[i]
         self._b_g_estimate = a.est_x["b_g"][i]  # a view: the estimator updates it in place
         a.k[i] = -1
+        a.adopt_mocap(self.mocap, i)
         self._kernel_state()
 
     def _kernel_state(self) -> None:

@@ -1,4 +1,4 @@
-"""A device's standard normal draws taken in blocks (pure: numpy only)."""
+"""A device's random draws taken in blocks (pure: numpy only)."""
 from __future__ import annotations
 
 import numpy as np
@@ -28,3 +28,27 @@ class NoiseBlock:
             self.fill()
         self._i += 1
         return self.block[self._i - 1]
+
+
+class CaptureDraws:
+    """The motion capture's draws, capture after capture, taken a block of `rows` captures at
+    once into `block` ((rows, 7): a view of a fleet's, simulator.devices): per capture
+    `rng.standard_normal(6)`, then `rng.random()` if `with_drop` (else column 6 is left 0),
+    the numbers, in the order, that a call per capture gives. Without drops, one call fills
+    the block, as `NoiseBlock`; with them the normals and the uniforms interleave in the
+    generator's stream, so each capture's are drawn in turn."""
+
+    def __init__(self, rng: np.random.Generator, rows: int, block: np.ndarray, with_drop: bool) -> None:
+        self.rng, self.rows, self.block, self.with_drop = rng, rows, block, with_drop
+        if block.shape != (rows, 7):
+            raise ValueError(f"a capture block of {block.shape}, not ({rows}, 7)")
+
+    def fill(self) -> None:
+        """The next block, in place."""
+        b, rng = self.block, self.rng
+        if not self.with_drop:
+            b[:, :6] = rng.standard_normal(self.rows * 6).reshape(self.rows, 6)
+            return
+        for r in range(self.rows):
+            b[r, :6] = rng.standard_normal(6)
+            b[r, 6] = rng.random()

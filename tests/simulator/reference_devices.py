@@ -1,18 +1,20 @@
 """The devices' per-step arithmetic in plain Python and numpy: the readable reference of
 simulator.device_kernels (the truth as the IMU sees it, the IMU's biases and noise, the F/T
-sensor's drift, noise and tare, the encoders' quantization), as methods on the device
-classes of simulator.devices, which hold each device's constants and turn-on draws.
+sensor's drift, noise and tare, the encoders' quantization, the motion capture's frames), as
+methods on the device classes of simulator.devices, which hold each device's constants and
+turn-on draws.
 
 `ReferenceDeviceSuite` is a `DeviceSuite` whose `step` runs these methods, drawing from the
-same streams one step at a time, with the same motion capture and estimator."""
+same streams one step (or one frame) at a time, with the same estimator."""
 from __future__ import annotations
 
+from collections import deque
 from typing import NamedTuple
 
 import numpy as np
 
-from amcore.quat_kernels import rotation
-from simulator.devices import DeviceSuite, Encoders, ForceTorque, Imu
+from amcore.quat_kernels import quat_exp, quat_mul, rotation
+from simulator.devices import DeviceSuite, Encoders, ForceTorque, Imu, Mocap
 
 
 class BodyTruth(NamedTuple):
@@ -81,6 +83,44 @@ class ReferenceEncoders(Encoders):
                                                                                   self.dqdot)
 
 
+class ReferenceMocap(Mocap):
+    """`sample_values(x)` -> ((p_m, q_m), lag) when a frame arrives this step, else None;
+    `captured` and `dropped` count the frames. `start()` readies a `Mocap`'s constants and
+    turn-on biases for it (the class is swapped in, as `ReferenceDeviceSuite` does)."""
+
+    captured = dropped = 0  # plain counters here, not the compiled state's
+
+    def start(self) -> ReferenceMocap:
+        self._k = -1
+        self._in_flight: deque[tuple[int, np.ndarray, np.ndarray]] = deque()
+        self.captured = self.dropped = 0
+        return self
+
+    def sample_values(self, x: np.ndarray):
+        self._k = k = self._k + 1
+        if k % self.every == 0:
+            n = self.rng.standard_normal(6)
+            lost = self.drop > 0.0 and self.rng.random() < self.drop
+            self.captured += 1
+            if lost:
+                self.dropped += 1
+            else:
+                p = x[0:3] + self.bias_p + self.sigma_p * n[0:3]
+                q = np.array(quat_mul(x[3:7], quat_exp(self.bias_R + self.sigma_R * n[3:6])))
+                self._in_flight.append((k + self.lag, p, q))
+        if self._in_flight and self._in_flight[0][0] == k:
+            _, p, q = self._in_flight.popleft()
+            return (p, q), self.lag
+        return None
+
+
+def reference_mocap(*args, **kwargs) -> ReferenceMocap:
+    """A `Mocap(*args, **kwargs)` (the same constants and turn-on draws) stepping as above."""
+    m = Mocap(*args, **kwargs)
+    m.__class__ = ReferenceMocap
+    return m.start()
+
+
 class ReferenceDeviceSuite(DeviceSuite):
     """A `DeviceSuite` (the same construction, the same draws at switch-on) whose `step` runs
     the reference devices above; it reads every value every step."""
@@ -89,6 +129,8 @@ class ReferenceDeviceSuite(DeviceSuite):
         super().__init__(*args, **kwargs)
         self.imu.__class__, self.ft.__class__, self.encoders.__class__ = (ReferenceImu, ReferenceForceTorque,
                                                                             ReferenceEncoders)
+        self.mocap.__class__ = ReferenceMocap
+        self.mocap.start()
         self._v_W_prev: np.ndarray | None = None
         self._k = -1  # the last IMU sample
 

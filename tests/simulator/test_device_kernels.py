@@ -1,6 +1,6 @@
-"""The devices (simulator.device_kernels, through `DeviceSuite`) against their readable
-reference (tests/simulator/reference_devices.py), step after step, through motion-capture
-frames, drops, the F/T tare and encoder rounding.
+"""The devices (simulator.device_kernels, through `DeviceSuite` and `Mocap`) against their
+readable reference (tests/simulator/reference_devices.py), step after step, through
+motion-capture frames, drops, the F/T tare and encoder rounding.
 
 Tolerance: 1e-12 on every frame value, relative to its size above 1. The truth's two
 products are made with fused multiply-adds in OpenBLAS's order (`mat_vec`, `mat_t_vec`),
@@ -16,13 +16,13 @@ import math
 import numpy as np
 import pytest
 
-from amcore.config import devices_from_table
+from amcore.config import MocapSpec, devices_from_table
 from amcore.quat_kernels import quat_exp, quat_mul, rotation
 from simulator import device_kernels as dk
-from simulator.devices import DeviceSuite
-from simulator.noise import NoiseBlock
+from simulator.devices import DeviceSuite, Mocap
+from simulator.noise import CaptureDraws, NoiseBlock
 
-from .reference_devices import ReferenceDeviceSuite, truth_of
+from .reference_devices import ReferenceDeviceSuite, reference_mocap, truth_of
 
 DT = 0.001
 G = 9.81
@@ -54,6 +54,20 @@ def test_noise_blocks_give_the_draws_one_at_a_time_would():
     block = NoiseBlock(a, 12, rows=7)
     for _ in range(30):
         assert np.array_equal(block.next(), b.standard_normal(12))
+
+
+@pytest.mark.parametrize("with_drop", [False, True])
+def test_capture_blocks_give_the_draws_one_capture_at_a_time_would(with_drop):
+    """Per capture 6 standard normals, then a uniform if frames may drop: interleaved in the
+    stream as the calls per capture take them."""
+    a, b = np.random.default_rng([4, 5]), np.random.default_rng([4, 5])
+    draws = CaptureDraws(a, 7, np.zeros((7, 7)), with_drop)
+    for i in range(30):
+        if i % 7 == 0:
+            draws.fill()
+        row = draws.block[i % 7]
+        assert np.array_equal(row[:6], b.standard_normal(6))
+        assert row[6] == (b.random() if with_drop else 0.0)
 
 
 TOL = 1e-12
@@ -179,3 +193,33 @@ def test_the_specific_force_is_the_references():
         expected = truth.R_WB.T @ (truth.a_W + np.array([0.0, 0.0, G]))
         assert close(f_B.tolist(), expected.tolist())
         assert close(s["v_W"].tolist(), truth.v_W.tolist())
+
+
+MOCAPS = [MocapSpec(latency_s=0.01, position_noise_m=0.00015, attitude_noise_rad=0.001, position_bias_m=0.001,
+                    attitude_bias_rad=0.005, drop_probability=0.05),
+          MocapSpec(rate_hz=1000.0, latency_s=0.0123, position_noise_m=0.01, attitude_noise_rad=0.05,
+                    drop_probability=0.3),  # a frame every step, 12 in flight
+          MocapSpec(rate_hz=300.0, latency_s=0.0, attitude_noise_rad=1e-13, attitude_bias_rad=1e-13),  # exp's small branch
+          MocapSpec(rate_hz=30.0, latency_s=0.07, position_noise_m=0.002, attitude_bias_rad=0.2)]
+
+
+@pytest.mark.parametrize("spec", MOCAPS)
+def test_the_motion_capture_gives_its_references_frames(spec):
+    """`Mocap` (`device_kernels.mocap_step`, its draws in blocks of 5 frames) gives the
+    reference's frames bit for bit, at the same steps, with the same age, and loses the same
+    ones, through several blocks."""
+    values = moving_values(np.random.default_rng(9), 2000)
+    fast = Mocap(spec, 2.0, DT, np.random.default_rng([3, 1]), rows=5)
+    slow = reference_mocap(spec, 2.0, DT, np.random.default_rng([3, 1]))
+    arrivals = 0
+    for k, v in enumerate(values):
+        x = np.array(v[:7])
+        a, b = fast.sample_values(x), slow.sample_values(x)
+        assert (a is None) == (b is None), f"step {k}"
+        if a is not None:
+            (p, q), lag = a
+            (p_ref, q_ref), lag_ref = b
+            assert p.tolist() == p_ref.tolist() and q.tolist() == q_ref.tolist() and lag == lag_ref, f"step {k}"
+            arrivals += 1
+        assert (fast.captured, fast.dropped) == (slow.captured, slow.dropped), f"step {k}"
+    assert arrivals > 40 and (spec.drop_probability == 0.0 or slow.dropped > 5)
