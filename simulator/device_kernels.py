@@ -1,7 +1,8 @@
 """The devices' per-step arithmetic (numba, as amcore.law): the base's truth as the IMU sees
 it, the IMU's biases and noise, the F/T sensor's drift, noise and tare, the encoders'
-quantization, the motion capture's frames (noise, biases, drops, latency). Their readable reference, in plain Python and numpy, is
-tests/simulator/reference_devices.py (compared in tests/simulator/test_device_kernels.py).
+quantization, the motion capture's frames (noise, biases, drops, latency). Their readable
+reference, in plain Python and numpy, is tests/simulator/reference_devices.py (compared in
+tests/simulator/test_device_kernels.py).
 
 The truth's two 3x3 products (R_WB v_B and R_WB^T (a_W + g e_3)) are made with fused
 multiply-adds in the order OpenBLAS's dgemv kernels use (`mat_vec`, `mat_t_vec`), so that

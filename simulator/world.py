@@ -185,7 +185,8 @@ class World:
         self._arm_ids: dict[int, list[int]] = {}
         self._sensed_links: dict[int, list[int]] = {}
         self._sensed_joints: dict[int, list[int]] = {}  # the arm's joints, then the wrist sensor's
-        self._last_limited: dict[int, tuple[np.ndarray, JointTorqueResult, list[float]]] = {}  # `_limited`'s last, per AM
+        # `_limited`'s last, per AM: the torques given, their result and its applied torques as a list
+        self._last_limited: dict[int, tuple[np.ndarray, JointTorqueResult, list[float]]] = {}
         self._tool_weights: dict[int, tuple[tuple[float, int], ...]] = {}  # per tool link: its mass share, its row
 
     # ------------------------------------------------------------------ lifecycle

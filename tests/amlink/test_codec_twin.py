@@ -211,12 +211,12 @@ def test_stock_pymavlink_reads_the_codec_and_the_codec_reads_pymavlink(key, fram
     for sysid, compid, fast_enc, slow_enc, Slow, Fast in batches:
         enc = codec.Encoder(sysid, compid, signing_key=key, link_id=sysid)
         fast_bytes, slow_bytes = fast_enc(enc), slow_enc(enc)
-        # pymavlink decodes the codec's bytes into the messages the pymavlink path would have sent
+        # pymavlink decodes the codec's bytes into the messages the twin would have sent
         got, want = stock_messages(fast_bytes, key), stock_messages(slow_bytes, key)
         parts = 4 + (frame.attitude_target is not None) if sysid == 1 else 2
         assert [str(m) for m in got] == [str(m) for m in want] and len(got) == parts  # NaN-safe
         assert all(m.get_srcSystem() == sysid and m.get_signed() == (key is not None) for m in got)
-        # the codec reads pymavlink-encoded bytes into what the pymavlink path assembles
+        # the codec reads pymavlink-encoded bytes into what the twin assembles
         keys = None if key is None else {sysid: key}
         slow_asm, fast_asm = Slow(), Fast()
         slow = [slow_asm.push(m) for m in codec.Decoder(keys).feed(slow_bytes)][-1]
