@@ -296,8 +296,8 @@ class ServoModel:
 
 # e-Manual xm540-w270: 10.6 N m at 12.0 V, 4.4 A ("2.409 Nm/A"); 30 rev/min no load; Current
 # Limit 0..2047 (initial 2047); Velocity Limit initial 128. The project's joint-effort model
-# (simulator/effort.py, configs/randomize/default.toml [randomize.devices.effort]) uses the same
-# torque constant: one current unit is 6.48 mN m.
+# (simulator/devices.py's JointEffortSensor, configs/randomize/default.toml
+# [randomize.devices.effort]) uses the same torque constant: one current unit is 6.48 mN m.
 XM540_W270 = ServoModel("XM540-W270", 1120, 10.6, 4.4, 30.0, 2047, 128)
 # e-Manual xm430-w350: 4.1 N m at 12.0 V, 2.3 A (1.78 N m/A, our quotient); 46 rev/min;
 # Current Limit 0..1193 (initial 1193); Velocity Limit initial 350.

@@ -9,7 +9,7 @@ Rows, each timed in interleaved rounds so that a change in machine load hits all
 - the simulator's attitude-mode path for one AM and step: read attitude and rate, the
   autopilot, command the rotors (World.attitude_and_rate + step + World.apply_rotors), next
   to torque mode's (World.apply: the allocation), on a connected world;
-- the rotors' lag for one AM and step (simulator.rotors.RotorLag.step);
+- the rotors' lag for one AM and step (simulator.actuators.RotorLag.step);
 - the companion's attitude-mode law on top of torque mode's step (amcore.offboard: the body
   torque estimate and the joint torques for it), next to torque mode's step alone.
 """
@@ -30,7 +30,7 @@ from amcore.so3 import R_to_quat_wxyz, exp_so3
 from amlink.types import AttitudeTarget
 from amcore.allocation import Allocation
 from simulator.flight_controller import FlightController
-from simulator.rotors import RotorLag
+from simulator.actuators import RotorLag
 from simulator.world import World
 
 ROOT = Path(__file__).resolve().parents[1]

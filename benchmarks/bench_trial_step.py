@@ -60,7 +60,7 @@ PARTS = (
     ("the emulated autopilot (FlightController.step)", "simulator.flight_controller", "FlightController.step"),
     ("apply (allocation, joint limits)", "simulator.world", "World.apply"),
     ("apply rotors (allocation, rotor lag, joint limits)", "simulator.world", "World.apply_rotors"),
-    ("joint effort sensor", "simulator.effort", "JointEffortSensor.advance"),
+    ("joint effort sensor", "simulator.devices", "JointEffortSensor.advance"),
     ("link (ImpairedLink.step)", "amlink.impair", "ImpairedLink.step"),
     ("ground truth and digest (observe)", "simulator.core", "SitlCore.observe"),
     ("PyBullet step (World.step)", "simulator.world", "World.step"),

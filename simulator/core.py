@@ -39,16 +39,21 @@ from amcore.mission import ObjectPose, am_mission
 from amcore.model import AmState, build_model
 from amcore.so3 import Rz
 from amlink.impair import ImpairedLink, LinkImpairment
-from amlink.types import AttitudeSetpoint, AttitudeTarget, SensorFrame, TorqueSetpoint, sensor_frame_of_array
+from amlink.types import (
+    AttitudeSetpoint,
+    AttitudeTarget,
+    SensorFrame,
+    TorqueSetpoint,
+    sensor_frame_of_array,
+)
 
 from . import fleet_kernels
+from .devices import DeviceArrays, DeviceSuite, JointEffortSensor
 from .failsafe import Failsafe, FailsafeGains
 from .fcstate import FcMode, FleetSnapshot, VehicleSnapshot
 from .flight_controller import AutopilotArrays, FlightController
 from .object_mocap import measure_object
 from .outcome import RunOutcome
-from .devices import DeviceArrays, DeviceSuite
-from .effort import JointEffortSensor
 from .sensors import SensorModel
 from .vehicle import Vehicle
 from .verdict import judge

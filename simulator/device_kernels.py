@@ -9,7 +9,7 @@ multiply-adds in the order OpenBLAS's dgemv kernels use (`mat_vec`, `mat_t_vec`)
 they round as numpy's products do on a machine whose numpy calls OpenBLAS; everywhere, the
 kernels give the same numbers, whatever BLAS numpy has.
 
-What stays in Python: the random draws (`simulator.noise`: a block of a device's stream at
+What stays in Python: the random draws (`simulator.devices.NoiseBlock`: a block of a device's stream at
 once, the same numbers in the same order). `simulator.fleet_kernels.sense` calls `suite_step`,
 `mocap_step` and the estimator for every AM at once.
 

@@ -15,6 +15,21 @@ parameters under the names of its reference model ([devices] in a scenario,
 - `ForceTorque`: the wrist F/T reading with white noise, a power-on offset that drifts as a
   random walk, and a tare (the driver's bias command) at a set time.
 - `Encoders`: joint positions quantized to whole counts, velocities to the servo's unit.
+- `JointEffortSensor` (attitude mode): the joint torques the arm's servos report. A
+  Dynamixel-class servo reports its present current; the driver multiplies it by the torque
+  constant and the flight controller (or the servo bus) streams the result as
+  AM_JOINT_STATE.effort_nm. Its reading of the torque the joint actually receives
+  ([devices.effort], `amcore.config.JointEffortSpec`; its sources in docs/flight_controller.md),
+  once per physics step:
+
+      x <- x + (1 - exp(-dt / lag_s)) (tau_applied - x)          first-order lag (lag_s = 0: none)
+      effort = resolution_nm * round((x + noise_nm * N(0, 1)) / resolution_nm)   (resolution 0: none)
+
+  with its own seeded generator (scenario seed, sysid, its stream), so that the other devices'
+  draws do not depend on it.
+
+Each device's random draws are taken in blocks (`NoiseBlock`, `CaptureDraws`): the numbers,
+in the order, that a call per step would give.
 
 The classes here hold each device's constants and the draws made when it is switched on (turn-on
 biases, offsets); the per-step arithmetic of the truth, the IMU, the encoders and the F/T
@@ -35,13 +50,19 @@ import math
 
 import numpy as np
 
-from amcore.config import DevicesSpec, EncoderSpec, ForceTorqueSpec, ImuSpec, MocapSpec
+from amcore.config import (
+    DevicesSpec,
+    EncoderSpec,
+    ForceTorqueSpec,
+    ImuSpec,
+    JointEffortSpec,
+    MocapSpec,
+)
 from amcore.estimator import BIQUAD, LOOP_GAINS, N_OUT, SNAPSHOT, STATE, Estimator
 from amcore.quat_kernels import quat_exp, quat_mul
 
 from . import device_kernels as dk
 from . import fleet_kernels
-from .noise import CaptureDraws, NoiseBlock
 
 _STREAM = 0xDE71  # distinguishes the devices' streams from the other seeded streams of an AM
 IMU, MOCAP, FT = 1, 2, 3  # each device's sub-stream
@@ -49,6 +70,58 @@ NOISE_ROWS = 256  # physics steps of draws taken at once (`DeviceSuite.draw_nois
 MOCAP_ROWS = 64  # motion-capture frames' draws taken at once (`Mocap.draw`)
 
 
+# ----------------------------------------------------------------------------- random draws, in blocks
+class NoiseBlock:
+    """Draws of `rng.standard_normal(width)` step after step, taken from blocks of `rows`
+    draws at once: numpy's generator fills a large array with the numbers, in the order,
+    that the small calls would give (tests/simulator/test_device_kernels.py). `block`: the
+    (rows, width) array to hold a block in, e.g. a view of a fleet's (simulator.devices);
+    None: one of its own."""
+
+    def __init__(self, rng: np.random.Generator, width: int, rows: int = 256, block: np.ndarray | None = None) -> None:
+        self.rng, self.width, self.rows = rng, width, rows
+        self.block = np.empty((rows, width)) if block is None else block
+        if self.block.shape != (rows, width):
+            raise ValueError(f"a noise block of {self.block.shape}, not ({rows}, {width})")
+        self._i = rows  # nothing drawn yet: the first `next` fills the first block
+
+    def fill(self) -> None:
+        """The next block, in place."""
+        self.block[:] = self.rng.standard_normal(self.rows * self.width).reshape(self.rows, self.width)
+        self._i = 0
+
+    def next(self) -> np.ndarray:
+        if self._i == self.rows:
+            self.fill()
+        self._i += 1
+        return self.block[self._i - 1]
+
+
+class CaptureDraws:
+    """The motion capture's draws, capture after capture, taken a block of `rows` captures at
+    once into `block` ((rows, 7): a view of a fleet's, simulator.devices): per capture
+    `rng.standard_normal(6)`, then `rng.random()` if `with_drop` (else column 6 is left 0),
+    the numbers, in the order, that a call per capture gives. Without drops, one call fills
+    the block, as `NoiseBlock`; with them the normals and the uniforms interleave in the
+    generator's stream, so each capture's are drawn in turn."""
+
+    def __init__(self, rng: np.random.Generator, rows: int, block: np.ndarray, with_drop: bool) -> None:
+        self.rng, self.rows, self.block, self.with_drop = rng, rows, block, with_drop
+        if block.shape != (rows, 7):
+            raise ValueError(f"a capture block of {block.shape}, not ({rows}, 7)")
+
+    def fill(self) -> None:
+        """The next block, in place."""
+        b, rng = self.block, self.rng
+        if not self.with_drop:
+            b[:, :6] = rng.standard_normal(self.rows * 6).reshape(self.rows, 6)
+            return
+        for r in range(self.rows):
+            b[r, :6] = rng.standard_normal(6)
+            b[r, 6] = rng.random()
+
+
+# ----------------------------------------------------------------------------- the devices
 def _gauss_markov(sigma_rw: float, tau_s: float, dt_s: float) -> tuple[float, float]:
     """(phi, sigma_d) of the bias's discrete update b <- phi b + sigma_d N(0, 1), as the Gazebo
     IMU plugin discretizes a first-order Gauss-Markov process of correlation time tau_s driven
@@ -83,7 +156,7 @@ class Mocap:
 
     Its per-step arithmetic is `simulator.device_kernels.mocap_step`, on its constants and state
     (`MOCAP_CONSTANTS`, `MOCAP_STATE`, a ring of `MOCAP_PENDING`) and a block of draws
-    (`simulator.noise.CaptureDraws`): arrays of its own, or its rows of a fleet's once
+    (`CaptureDraws`): arrays of its own, or its rows of a fleet's once
     `DeviceArrays.adopt_mocap` has moved it there (then `simulator.fleet_kernels.sense` steps it)."""
 
     def __init__(self, spec: MocapSpec, scale: float, dt_s: float, rng: np.random.Generator,
@@ -310,7 +383,7 @@ class DeviceSuite:
 
     def draw_noise(self) -> None:
         """The next blocks of the IMU's and the F/T sensor's standard normal draws (12 a step
-        each, `simulator.noise.NoiseBlock`: the numbers, in the order, that a call per step
+        each, `NoiseBlock`: the numbers, in the order, that a call per step
         would give) into the arrays' rows; the compiled step takes them row after row."""
         self._imu_noise.fill()
         self._ft_noise.fill()
@@ -346,3 +419,51 @@ class DeviceSuite:
         a.load(values, self.slot)
         a.step(t, self._slots)
         return self._frame.tolist() if full else self._frame[:N_OUT].tolist()
+
+
+# ----------------------------------------------------------------------------- the servos' joint effort
+_EFFORT_STREAM = 0xEFF0  # distinguishes the effort's stream from the other seeded streams of an AM
+
+
+class JointEffortSensor:
+    """One arm's measured joint torques; `sample(tau_applied)` once per physics step of dt_s.
+
+    `advance(tau_applied)` is `sample` for a step whose reading may not be read: the lag and
+    the draws advance (the draws taken in blocks, `NoiseBlock`), and the reading is
+    formed when `last` is read, from the same numbers, so that a run reads the same readings
+    either way."""
+
+    def __init__(self, spec: JointEffortSpec, scale: float, n: int, dt_s: float, seed: int, sysid: int) -> None:
+        self.noise_nm = scale * spec.noise_nm
+        self.resolution_nm = spec.resolution_nm
+        self.alpha = 1.0 if spec.lag_s <= 0.0 else -math.expm1(-dt_s / spec.lag_s)
+        self._rng = np.random.default_rng([seed, sysid, _EFFORT_STREAM])
+        self._noise = NoiseBlock(self._rng, n) if self.noise_nm > 0.0 else None
+        self._x: list[float] | None = None  # the lagged torque, on Python floats
+        self._draw: np.ndarray | None = None  # the last step's draws
+        self.n = n
+        self._last: np.ndarray | None = np.zeros(n)
+
+    def advance(self, tau_applied_nm) -> None:
+        """One more physics step with `tau_applied_nm` acting; its reading is `last`."""
+        u = np.asarray(tau_applied_nm, dtype=float).tolist()
+        x = self._x
+        self._x = u if x is None else [xi + self.alpha * (ui - xi) for xi, ui in zip(x, u)]
+        self._draw = None if self._noise is None else self._noise.next()
+        self._last = None
+
+    def sample(self, tau_applied_nm) -> np.ndarray:
+        """The reading [N m] after one more physics step with `tau_applied_nm` acting."""
+        self.advance(tau_applied_nm)
+        return self.last
+
+    @property
+    def last(self) -> np.ndarray:
+        """The reading of the last step [N m] (zeros before the first)."""
+        if self._last is None:
+            x = np.array(self._x)
+            y = x + self.noise_nm * self._draw if self._draw is not None else x
+            if self.resolution_nm > 0.0:
+                y = self.resolution_nm * np.round(y / self.resolution_nm)
+            self._last = y
+        return self._last

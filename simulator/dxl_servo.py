@@ -28,7 +28,7 @@ The torque the servo applies (`torque_nm(q, qdot)`), with the motor at 12 V as a
 current i = I_stall (d - qdot / w_0) for a duty d in [-1, 1] (d = PWM / 885), I_stall and the
 no-load speed w_0 from the model's e-Manual specification, torque = K_t i with
 K_t = stall torque / stall current (XM540-W270: 2.409 N m/A, the e-Manual's figure and the
-one simulator/effort.py uses), |i| <= Current Limit x 2.69 mA.
+one simulator/devices.py's JointEffortSensor uses), |i| <= Current Limit x 2.69 mA.
 - Torque Enable 0: no torque.
 - Current Control Mode (0): i = Goal Current x 2.69 mA (within Current Limit), as far as the
   duty (|d| <= Goal PWM / 885) can drive it at this speed.

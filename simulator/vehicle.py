@@ -18,8 +18,7 @@ import numpy as np
 
 from amlink.impair import ImpairedLink
 
-from .devices import DeviceSuite
-from .effort import JointEffortSensor
+from .devices import DeviceSuite, JointEffortSensor
 from .failsafe import Failsafe
 from .fcstate import FcMode
 from .flight_controller import FlightController

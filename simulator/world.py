@@ -21,7 +21,7 @@ the pad's contact face, x = outward normal). Conventions verified by tests/simul
   PyBullet clears external forces and joint torques after every step, so `step()`
   re-applies the latest command: commands persist until replaced.
 * Rotors: with [rotors].time_constant_s > 0 each rotor's thrust lags its command
-  (`simulator.rotors`), advanced in `step()`; with 0 the commanded wrench acts at once.
+  (`simulator.actuators`), advanced in `step()`; with 0 the commanded wrench acts at once.
 * The wrist sensor on `ft_joint` reports the wrench the parent link exerts on the pad,
   in the pad's inertial (CoM) frame, moment about the pad's CoM. `wrench_ee` turns it
   into the wrench the environment applies on E (see there).
@@ -40,8 +40,7 @@ from amcore.model import AmState
 from . import scene
 from amcore.allocation import Allocation, WrenchAllocation
 
-from .mixer import JointTorqueResult, limit_joint_torques
-from .rotors import RotorLag
+from .actuators import JointTorqueResult, RotorLag, limit_joint_torques
 
 
 class WorldNotConnected(RuntimeError):

@@ -19,8 +19,7 @@ import pytest
 from amcore.config import MocapSpec, devices_from_table
 from amcore.quat_kernels import quat_exp, quat_mul, rotation
 from simulator import device_kernels as dk
-from simulator.devices import DeviceSuite, Mocap
-from simulator.noise import CaptureDraws, NoiseBlock
+from simulator.devices import CaptureDraws, DeviceSuite, Mocap, NoiseBlock
 
 from .reference_devices import ReferenceDeviceSuite, reference_mocap, truth_of
 

@@ -1,4 +1,4 @@
-"""The servos' joint-effort reading (simulator.effort): its lag, noise and quantization have
+"""The servos' joint-effort reading (simulator.devices.JointEffortSensor): its lag, noise and quantization have
 the statistics its parameters state, and its draws follow its seed alone."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from amcore.config import JointEffortSpec
-from simulator.effort import JointEffortSensor
+from simulator.devices import JointEffortSensor
 
 DT = 0.001
 
@@ -59,7 +59,7 @@ class LiteralEffort:
     """The reading as the module doc writes it, in numpy, one draw call per step."""
 
     def __init__(self, spec, scale, n, dt, seed, sysid):
-        from simulator.effort import _STREAM
+        from simulator.devices import _EFFORT_STREAM as _STREAM
         self.noise, self.res = scale * spec.noise_nm, spec.resolution_nm
         self.alpha = 1.0 if spec.lag_s <= 0.0 else -math.expm1(-dt / spec.lag_s)
         self.rng, self.n, self.x = np.random.default_rng([seed, sysid, _STREAM]), n, None

@@ -15,7 +15,7 @@ from simulator.fc_kernels import attitude_error
 from simulator.flight_controller import FlightController, lowpass2p
 
 from .reference_flight_controller import LowPass2p
-from simulator.rotors import RotorLag
+from simulator.actuators import RotorLag
 
 
 @pytest.fixture(scope="module")

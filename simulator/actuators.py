@@ -1,4 +1,7 @@
-"""Rotor dynamics: each rotor's thrust lags its command by a first-order lag (pure Python).
+"""The actuators' own physics between a command and the world (pure Python and numpy; no I/O).
+The rotors' allocation is `amcore.allocation`, built from the vehicle's rotor table.
+
+Rotor dynamics: each rotor's thrust lags its command by a first-order lag,
 
     tau df_i/dt = f_c,i - f_i                                   (per rotor i)
 
@@ -14,12 +17,18 @@ run starts). Why a thrust lag: a propeller's speed follows the ESC's command wit
 mechanical time constant (PX4's Gazebo motor model lags rotor speed by 12.5 ms up and
 25 ms down for an Iris-sized rotor); thrust ~ speed^2 has the same time constant for small
 changes.
+
+Joint torques: the arm's drivers clip each joint's command to its limit.
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+
+import numpy as np
 
 
+# ---------------------------------------------------------------------- rotor thrusts
 class RotorLag:
     """First-order lag of `count` rotor thrusts [N] with time constant `tau_s` (one for all, or
     one per rotor; 0 for a rotor without lag), stepped every `dt_s`."""
@@ -40,3 +49,25 @@ class RotorLag:
         else:
             self.thrusts_n = [f + a * (c - f) for f, c, a in zip(self.thrusts_n, command_n, self.alphas)]
         return self.thrusts_n
+
+
+# ---------------------------------------------------------------------- joint torques
+@dataclass(frozen=True)
+class JointTorqueResult:
+    """Joint torques after limiting: applied_nm (n,) [N m]; saturated if any was clipped."""
+
+    applied_nm: np.ndarray
+    saturated: bool
+
+
+def limit_joint_torques(tau_q_nm, tau_max_nm) -> JointTorqueResult:
+    """Clip each joint torque to [-tau_max, tau_max] [N m]; report whether any was clipped."""
+    tau = np.asarray(tau_q_nm, dtype=float)
+    tau_max = np.asarray(tau_max_nm, dtype=float)
+    if tau.shape != tau_max.shape:
+        raise ValueError(f"got joint torques of shape {tau.shape} for {tau_max.shape[0]} joints")
+    t, t_max = tau.tolist(), tau_max.tolist()  # Python floats: a few joints, per AM per step
+    if not math.isfinite(sum(t)):
+        raise ValueError(f"non-finite joint torque command: {tau}")
+    applied = [min(max(x, -m), m) for x, m in zip(t, t_max)]
+    return JointTorqueResult(applied_nm=np.array(applied), saturated=applied != t)

@@ -1,4 +1,4 @@
-"""Rotor dynamics: the first-order thrust lag, alone and inside the world."""
+"""Rotor dynamics (simulator.actuators): the first-order thrust lag, alone and inside the world."""
 from __future__ import annotations
 
 import dataclasses
@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from simulator.rotors import RotorLag
+from simulator.actuators import RotorLag
 
 from .sim_testing import at_rest
 
