@@ -4,11 +4,6 @@ quantization, the motion capture's frames (noise, biases, drops, latency). Their
 reference, in plain Python and numpy, is tests/simulator/reference_devices.py (compared in
 tests/simulator/test_device_kernels.py).
 
-The truth's two 3x3 products (R_WB v_B and R_WB^T (a_W + g e_3)) are made with fused
-multiply-adds in the order OpenBLAS's dgemv kernels use (`mat_vec`, `mat_t_vec`), so that
-they round as numpy's products do on a machine whose numpy calls OpenBLAS; everywhere, the
-kernels give the same numbers, whatever BLAS numpy has.
-
 What stays in Python: the random draws (`simulator.devices.NoiseBlock`: a block of a device's stream at
 once, the same numbers in the same order). `simulator.fleet_kernels.sense` calls `suite_step`,
 `mocap_step` and the estimator for every AM at once.
@@ -20,10 +15,6 @@ The quaternion helpers are amcore.quat_kernels'.
 from __future__ import annotations
 
 import numpy as np
-from llvmlite import ir
-from numba import types
-from numba.core import cgutils
-from numba.extending import intrinsic
 
 from amcore.jit import kernel
 from amcore.quat_kernels import quat_exp, quat_mul, rotation
@@ -60,31 +51,18 @@ MOCAP_DRAWS = 7  # a capture's draws: 6 standard normals (position, attitude), t
 
 
 # ----------------------------------------------------------------------------- the truth
-@intrinsic
-def _fma(typingctx, a, b, c):
-    """a b + c rounded once (LLVM's llvm.fma.f64, in hardware or not): the fused
-    multiply-add of OpenBLAS's kernels."""
-    def codegen(context, builder, signature, args):
-        d = ir.DoubleType()
-        fma = cgutils.get_or_insert_function(builder.module, ir.FunctionType(d, [d, d, d]), "llvm.fma.f64")
-        return builder.call(fma, args)
-    return types.float64(types.float64, types.float64, types.float64), codegen
-
-
 @kernel
 def mat_vec(R, v, out):
-    """numpy's R @ v for a C-ordered (3, 3) R, rounded as OpenBLAS's dgemv_t computes it (a
-    row's three products summed by its compiler's fused multiply-adds, added to y = 0)."""
+    """out = R v for a (3, 3) R."""
     for i in range(3):
-        out[i] = 0.0 + _fma(R[i, 2], v[2], _fma(R[i, 0], v[0], R[i, 1] * v[1]))
+        out[i] = R[i, 0] * v[0] + R[i, 1] * v[1] + R[i, 2] * v[2]
 
 
 @kernel
 def mat_t_vec(R, u, out):
-    """numpy's R.T @ u for a C-ordered (3, 3) R (R.T Fortran-ordered), rounded as OpenBLAS's
-    dgemv_n computes it: y = 0, then y += R[j] u_j row after row by fused multiply-adds."""
+    """out = R^T u for a (3, 3) R."""
     for i in range(3):
-        out[i] = _fma(R[2, i], u[2], _fma(R[1, i], u[1], _fma(R[0, i], u[0], 0.0)))
+        out[i] = R[0, i] * u[0] + R[1, i] * u[1] + R[2, i] * u[2]
 
 
 @kernel

@@ -9,9 +9,8 @@ name), and its output in an `OUTPUT` record; `rate_loops` runs steps 1 and 2 of 
 `simulator.flight_controller` (attitude P loop, rate PID with the gyro filters); the
 allocation (step 3) stays in `amcore.allocation`, shared with torque mode.
 
-`_min` and `_max` keep their first argument on ties and NaNs, as Python's min and max do, and
-`_square` is C's pow(x, 2.0), as Python's `x ** 2`: the reference and the kernels take the same
-steps. The quaternion helpers are amcore.quat_kernels'.
+`_min` and `_max` keep their first argument on ties and NaNs, as Python's min and max do. The
+quaternion helpers are amcore.quat_kernels'.
 """
 from __future__ import annotations
 
@@ -37,12 +36,12 @@ STATE = np.dtype([("gyro_d1", *_AXES), ("gyro_d2", *_AXES), ("dgyro_d1", *_AXES)
 LOWPASS2P = np.dtype([("active", np.float64), ("b0", np.float64), ("b1", np.float64), ("b2", np.float64),
                       ("a1", np.float64), ("a2", np.float64)])
 # the loops' constants (a numpy record, `constants`): the rate's and its derivative's low-pass
-# filters, the gains and limits per axis, the yaw weight, the loop period [s], whether the
-# target's rates feed forward (1 or 0), and 2.0 (`_square`'s exponent, read at run time)
+# filters, the gains and limits per axis, the yaw weight, the loop period [s], and whether the
+# target's rates feed forward (1 or 0)
 PARAMS = np.dtype([("gyro", LOWPASS2P), ("dgyro", LOWPASS2P), ("att_p", *_AXES), ("rate_max", *_AXES),
                    ("gain_p", *_AXES), ("gain_i", *_AXES), ("gain_d", *_AXES), ("gain_ff", *_AXES),
                    ("int_lim", *_AXES), ("yaw_weight", np.float64), ("dt", np.float64),
-                   ("feedforward", np.float64), ("two", np.float64)])
+                   ("feedforward", np.float64)])
 
 # one loop period's output (`rate_loops`): the body-rate setpoint [rad/s], the normalized
 # torque per axis and the thrust within [0, 1], the last two what the allocation takes
@@ -57,7 +56,7 @@ AUTOPILOT = np.dtype([("k", np.int64), ("every", np.int64), ("has_output", np.fl
                       ("out", OUTPUT),
                       ("unallocated", np.float64, 4), ("saturated_axes", np.float64, 4), ("saturated", np.float64)])
 
-# ----------------------------------------------------------------------------- Python's min, max, **
+# ----------------------------------------------------------------------------- Python's min, max
 @kernel
 def _max(a, b):
     return b if b > a else a
@@ -66,13 +65,6 @@ def _max(a, b):
 @kernel
 def _min(a, b):
     return b if b < a else a
-
-
-@kernel
-def _square(x, two):
-    """x ** 2 as Python computes it for a float: C's pow(x, 2.0), which can differ from x * x in
-    the last bit. The exponent comes in at run time (`PARAMS`' two), else the compiler makes it x * x."""
-    return math.pow(x, two)
 
 
 @kernel
@@ -185,7 +177,8 @@ def rate_loops(params, state, quat_WB, w, quat_d, ff, thrust, unallocated, satur
             ei = _min(ei, 0.0)
         if s.sat_neg[ax] != 0.0:
             ei = _max(ei, 0.0)
-        i_factor = _max(0.0, 1.0 - _square(ei / I_ATTENUATION_RAD_S, p.two))
+        i_factor = ei / I_ATTENUATION_RAD_S  # RateControl::updateIntegral: 1 - i_factor * i_factor, at least 0
+        i_factor = _max(0.0, 1.0 - i_factor * i_factor)
         r_i = s.rate_int[ax] + i_factor * p.gain_i[ax] * ei * dt
         if math.isfinite(r_i):
             lim = p.int_lim[ax]
@@ -235,7 +228,7 @@ def constants(fc) -> np.ndarray:
     _set_lowpass2p(p["dgyro"], fc.dgyro_filter)
     p["att_p"], p["rate_max"], p["gain_p"], p["gain_i"] = fc.att_p, fc.rate_max, fc.gain_p, fc.gain_i
     p["gain_d"], p["gain_ff"], p["int_lim"] = fc.gain_d, fc.gain_ff, fc.int_lim
-    p["yaw_weight"], p["dt"], p["feedforward"], p["two"] = fc.yaw_weight, fc.dt_s, 1.0 if fc.feedforward else 0.0, 2.0
+    p["yaw_weight"], p["dt"], p["feedforward"] = fc.yaw_weight, fc.dt_s, 1.0 if fc.feedforward else 0.0
     return a
 
 

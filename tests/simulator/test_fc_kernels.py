@@ -26,11 +26,6 @@ def random_quat(rng) -> tuple[float, ...]:
     return tuple((q / np.linalg.norm(q) * rng.uniform(0.98, 1.02)).tolist())  # not quite unit, as estimates
 
 
-def test_square_is_pythons_power_of_two():
-    for x in np.random.default_rng(3).normal(scale=2.0, size=20000).tolist() + [0.0, -0.0, 1e-200, 1e150]:
-        assert fk._square(x, 2.0) == x ** 2
-
-
 def test_min_max_keep_pythons_order_on_ties_and_nan():
     for a, b in ((1.0, 2.0), (2.0, 1.0), (0.0, -0.0), (-0.0, 0.0), (math.nan, 1.0), (1.0, math.nan)):
         for fast, slow in ((fk._min, min), (fk._max, max)):
