@@ -19,7 +19,6 @@ import numpy as np
 from amcore.jit import kernel
 from amcore.quat_kernels import quat_exp, quat_mul, rotation
 
-
 _F8 = np.float64
 # `suite_step`'s constants and state, each a numpy record that numba reads and writes by field
 # name, passed as an array of one (a call's cost grows with its arguments, and numba takes an

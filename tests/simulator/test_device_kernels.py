@@ -8,7 +8,6 @@ noise or tare step moves a value by far more (the test of a wrong step shows it)
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 import pytest
