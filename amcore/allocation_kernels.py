@@ -14,7 +14,8 @@ thrust, the most output, the effectiveness computeDesaturationGain ignores and y
 (scalars carried in the record: a call unboxes three floats fewer). The result
 (`new_result`), which `allocate` writes: the outputs, the allocated and the unallocated
 control, whether it desaturated, the rotor thrusts; `amcore.allocation.Allocation.read_result`
-reads it. `_min` and `_max` keep their first argument on ties, as Python's min and max do.
+reads it. `pymin` and `pymax` keep their first argument on ties and NaNs, as Python's min
+and max do (simulator.fc_kernels takes them too).
 Imported at an `Allocation`'s first allocation: the pure modules that only read its scales do
 not load numba. numba's cache keys each kernel on its own and its callees' files (amcore.jit).
 """
@@ -53,12 +54,14 @@ def result_dtype(count: int) -> np.dtype:
 
 
 @kernel
-def _max(a, b):
+def pymax(a, b):
+    """Python's max(a, b) of two floats: a on a tie or a NaN b."""
     return b if b > a else a
 
 
 @kernel
-def _min(a, b):
+def pymin(a, b):
+    """Python's min(a, b) of two floats: a on a tie or a NaN b."""
     return b if b < a else a
 
 
@@ -71,10 +74,10 @@ def gain(v, out, out_min, hi, weak):
             continue
         if out[i] < out_min[i]:
             k = (out_min[i] - out[i]) / v[i]
-            k_min, k_max = _min(k_min, k), _max(k_max, k)
+            k_min, k_max = pymin(k_min, k), pymax(k_max, k)
         if out[i] > hi:
             k = (hi - out[i]) / v[i]
-            k_min, k_max = _min(k_min, k), _max(k_max, k)
+            k_min, k_max = pymin(k_min, k), pymax(k_max, k)
     return k_min + k_max
 
 
@@ -116,11 +119,11 @@ def mix_and_desaturate(c, roll, pitch, yaw, thrust, r):
         out[i] = out[i] + yaw * c.yaw[i]  # mixYaw
     lo_min = lo[0]
     for i in range(1, n):
-        lo_min = _min(lo_min, lo[i])
+        lo_min = pymin(lo_min, lo[i])
     desaturate(out, c.yaw, lo, hi + (hi - lo_min) * c.yaw_margin, weak, False)
     desaturate(out, c.thrust, lo, hi, weak, True)
     for i in range(n):
-        r.outputs[i] = _min(_max(out[i], lo[i]), hi)
+        r.outputs[i] = pymin(pymax(out[i], lo[i]), hi)
     request = (roll, pitch, yaw, thrust)
     for a in range(4):
         s = 0.0

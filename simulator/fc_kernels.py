@@ -9,8 +9,8 @@ name), and its output in an `OUTPUT` record; `rate_loops` runs steps 1 and 2 of 
 `simulator.flight_controller` (attitude P loop, rate PID with the gyro filters); the
 allocation (step 3) stays in `amcore.allocation`, shared with torque mode.
 
-`_min` and `_max` keep their first argument on ties and NaNs, as Python's min and max do. The
-quaternion helpers are amcore.quat_kernels'.
+`pymin` and `pymax` (amcore.allocation_kernels') keep their first argument on ties and NaNs, as
+Python's min and max do. The quaternion helpers are amcore.quat_kernels'.
 """
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from amcore.allocation_kernels import allocate
+from amcore.allocation_kernels import allocate, pymax, pymin
 from amcore.jit import kernel
 from amcore.quat_kernels import quat_canonical, quat_conj, quat_mul, quat_normalized, quat_z_axis
 
@@ -56,16 +56,6 @@ AUTOPILOT = np.dtype([("k", np.int64), ("every", np.int64), ("has_output", np.fl
                       ("out", OUTPUT),
                       ("unallocated", np.float64, 4), ("saturated_axes", np.float64, 4), ("saturated", np.float64)])
 
-# ----------------------------------------------------------------------------- Python's min, max
-@kernel
-def _max(a, b):
-    return b if b > a else a
-
-
-@kernel
-def _min(a, b):
-    return b if b < a else a
-
 
 @kernel
 def quat_between(src, dst, eps=1e-5):
@@ -99,7 +89,7 @@ def attitude_error(q, q_d, yaw_weight):
     else:
         q_red = quat_mul(q_red, q)
     w, _, _, z = quat_canonical(quat_mul(quat_conj(q_red), q_d))  # the yaw left about e_z,d
-    w, z = _min(_max(w, -1.0), 1.0), _min(_max(z, -1.0), 1.0)
+    w, z = pymin(pymax(w, -1.0), 1.0), pymin(pymax(z, -1.0), 1.0)
     q_target = quat_mul(q_red, (math.cos(yaw_weight * math.acos(w)), 0.0, 0.0, math.sin(yaw_weight * math.asin(z))))
     _, ex, ey, ez = quat_canonical(quat_mul(quat_conj(q), q_target))
     return (2.0 * ex, 2.0 * ey, 2.0 * ez)
@@ -144,7 +134,7 @@ def rate_loops(params, state, quat_WB, w, quat_d, ff, thrust, unallocated, satur
     fell short: `allocator_status`)."""
     p, s = params[0], state[0]
     allocator_status(s, unallocated, saturated)
-    out.thrust = _min(_max(thrust, 0.0), 1.0)  # `_update`'s min(max(thrust, 0), 1)
+    out.thrust = pymin(pymax(thrust, 0.0), 1.0)  # `_update`'s min(max(thrust, 0), 1)
     dt = p.dt
     q = quat_normalized(quat_WB)
     q_d = quat_normalized((quat_d[0], quat_d[1], quat_d[2], quat_d[3]))
@@ -165,7 +155,7 @@ def rate_loops(params, state, quat_WB, w, quat_d, ff, thrust, unallocated, satur
     for ax in range(3):
         f = ff[ax] if p.feedforward != 0.0 else 0.0
         m = p.rate_max[ax]
-        out.rates_sp[ax] = _min(_max(p.att_p[ax] * e[ax] + f, -m), m)
+        out.rates_sp[ax] = pymin(pymax(p.att_p[ax] * e[ax] + f, -m), m)
 
     # 2. rate PID, the integral updated after the output (RateControl::update)
     for ax in range(3):
@@ -174,15 +164,15 @@ def rate_loops(params, state, quat_WB, w, quat_d, ff, thrust, unallocated, satur
                           + p.gain_ff[ax] * out.rates_sp[ax])
         ei = err
         if s.sat_pos[ax] != 0.0:
-            ei = _min(ei, 0.0)
+            ei = pymin(ei, 0.0)
         if s.sat_neg[ax] != 0.0:
-            ei = _max(ei, 0.0)
+            ei = pymax(ei, 0.0)
         i_factor = ei / I_ATTENUATION_RAD_S  # RateControl::updateIntegral: 1 - i_factor * i_factor, at least 0
-        i_factor = _max(0.0, 1.0 - i_factor * i_factor)
+        i_factor = pymax(0.0, 1.0 - i_factor * i_factor)
         r_i = s.rate_int[ax] + i_factor * p.gain_i[ax] * ei * dt
         if math.isfinite(r_i):
             lim = p.int_lim[ax]
-            s.rate_int[ax] = _min(_max(r_i, -lim), lim)
+            s.rate_int[ax] = pymin(pymax(r_i, -lim), lim)
 
 
 @kernel
