@@ -27,15 +27,33 @@ import socket
 import time
 from collections.abc import Iterable, Sequence
 
-from amlink.endpoint import SERIAL, TCP_IN, TCP_OUT, UDP_IN, UDP_OUT, Endpoint
-from amlink.stream import MAX_BACKLOG, SerialPort, StreamPeer, TcpClient, TcpServer, resolve  # noqa: F401
+from amlink.endpoint import (
+    SERIAL,
+    TCP_IN,
+    TCP_OUT,
+    UDP_IN,
+    UDP_OUT,
+    Endpoint,
+    EndpointError,
+    parse_endpoint,
+)
+from amlink.stream import (  # noqa: F401
+    MAX_BACKLOG,
+    SerialPort,
+    StreamPeer,
+    TcpClient,
+    TcpServer,
+    resolve,
+)
 from amlink.udp import LinkStats, Shim, Udp
 
 _ROUTES_MAX = 4096  # Mux: addresses remembered (datagrams from many ports cannot grow it without bound)
 
 
-def _udp_socket(host: str, port: int, bind: bool) -> tuple[socket.socket, tuple]:
-    """A UDP socket of the family of ``host``; bound to it (listen) or to a free port (send)."""
+def udp_socket(host: str, port: int, bind: bool) -> tuple[socket.socket, tuple]:
+    """A UDP socket of the family of ``host`` and the address it resolves to; bound to it
+    (listen) or to a free port (send). OSError (socket.gaierror: a host that does not resolve)
+    if it cannot be."""
     family, kind, proto, _, addr = resolve(host, port, socket.SOCK_DGRAM)
     sock = socket.socket(family, kind, proto)
     try:
@@ -47,6 +65,47 @@ def _udp_socket(host: str, port: int, bind: bool) -> tuple[socket.socket, tuple]
     return sock, addr
 
 
+class UdpListener:
+    """A device's server end on one bound, non-blocking UDP socket (the simulator's motion
+    capture stream and Net F/T): `open` binds ``endpoint`` (``udpin:HOST:PORT``; port 0: a free
+    one, see `address`), `close` closes it and calls `_forget`, `fds` is for a caller's select.
+    ``name`` begins its errors."""
+
+    def __init__(self, endpoint: str, name: str) -> None:
+        try:
+            ep = parse_endpoint(endpoint)
+        except EndpointError as e:
+            raise ValueError(f"{name}: {e}") from None
+        if ep.kind != UDP_IN:
+            raise ValueError(f"{name} endpoint {endpoint!r}: must be udpin:HOST:PORT (it listens)")
+        self.endpoint, self._name, self._bind = endpoint, name, ep.address
+        self._sock: socket.socket | None = None
+
+    def open(self) -> None:
+        try:
+            s, _ = udp_socket(*self._bind, bind=True)
+        except OSError as e:
+            raise OSError(e.errno, f"{self._name}: cannot bind {self.endpoint}: {e.strerror}") from None
+        s.setblocking(False)
+        self._sock = s
+
+    def close(self) -> None:
+        if self._sock is not None:
+            self._sock.close()
+        self._sock = None
+        self._forget()
+
+    def _forget(self) -> None:
+        """What a closed server forgets of its clients (a subclass's)."""
+
+    @property
+    def address(self) -> tuple[str, int] | None:
+        return None if self._sock is None else self._sock.getsockname()[:2]
+
+    def fds(self) -> list[int]:
+        return [] if self._sock is None else [self._sock.fileno()]
+
+
 def open_transport(endpoint: Endpoint, stats: LinkStats, *, shim: Shim | None = None, client: bool = False):
     """Open ``endpoint``.  OSError if it cannot be (a port in use, no such device).
 
@@ -55,7 +114,7 @@ def open_transport(endpoint: Endpoint, stats: LinkStats, *, shim: Shim | None = 
     when this returns; it connects while ``recv`` waits."""
     kind = endpoint.kind
     if kind in (UDP_IN, UDP_OUT):
-        sock, addr = _udp_socket(endpoint.host, endpoint.port, bind=kind == UDP_IN)
+        sock, addr = udp_socket(endpoint.host, endpoint.port, bind=kind == UDP_IN)
         return Udp(sock, stats, shim, peer=addr if kind == UDP_OUT else None)
     if kind == TCP_IN:
         family, kind_, proto, _, addr = resolve(endpoint.host, endpoint.port, socket.SOCK_STREAM)

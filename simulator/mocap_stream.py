@@ -10,11 +10,11 @@ SUBSCRIPTION_TIMEOUT_S. All non-blocking.
 """
 from __future__ import annotations
 
-import socket
 from dataclasses import dataclass
 
 from amlink import mocap_protocol as mp
-from amlink.endpoint import UDP_IN, UDP_OUT, EndpointError, parse_endpoint
+from amlink.endpoint import UDP_OUT, EndpointError, parse_endpoint
+from amlink.transport import UdpListener
 
 DEFAULT_ENDPOINT = f"udpin:127.0.0.1:{mp.MOCAP_PORT}"
 MAX_SUBSCRIBERS = 32
@@ -31,55 +31,31 @@ class MocapStats:
     refused: int = 0  # subscriptions beyond MAX_SUBSCRIBERS
 
 
-class MocapStream:
+class MocapStream(UdpListener):
     """Sender of one pose stream. endpoint: ``udpin:HOST:PORT`` it binds (port 0: a free
     one, see `address`); destinations: ``udpout:HOST:PORT`` strings it always sends to."""
 
     def __init__(self, *, endpoint: str = DEFAULT_ENDPOINT, destinations=(), body_id: int = mp.OBJECT_BODY_ID) -> None:
+        super().__init__(endpoint, "mocap stream")
         try:
-            ep = parse_endpoint(endpoint)
             dests = [parse_endpoint(d) for d in destinations]
         except EndpointError as e:
             raise ValueError(f"mocap stream: {e}") from None
-        if ep.kind != UDP_IN:
-            raise ValueError(f"mocap stream endpoint {endpoint!r}: must be udpin:HOST:PORT (it binds)")
         for d, text in zip(dests, destinations):
             if d.kind != UDP_OUT:
                 raise ValueError(f"mocap destination {text!r}: must be udpout:HOST:PORT")
-        self.endpoint, self._bind = endpoint, ep.address
         self._dests = [d.address for d in dests]
         self.body_id = body_id
         self.stats = MocapStats()
         self._subs: dict[tuple, float] = {}  # address -> last subscription [s]
         self._frame = 0
-        self._sock: socket.socket | None = None
 
-    def open(self) -> None:
-        s = socket.socket(socket.AF_INET6 if ":" in self._bind[0] else socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            s.bind(self._bind)
-        except OSError as e:
-            s.close()
-            raise OSError(e.errno, f"mocap stream: cannot bind {self.endpoint}: {e.strerror}") from None
-        s.setblocking(False)
-        self._sock = s
-
-    def close(self) -> None:
-        if self._sock is not None:
-            self._sock.close()
-        self._sock = None
+    def _forget(self) -> None:
         self._subs.clear()
-
-    @property
-    def address(self) -> tuple[str, int] | None:
-        return None if self._sock is None else self._sock.getsockname()[:2]
 
     @property
     def subscribers(self) -> list[tuple]:
         return list(self._subs)
-
-    def fds(self) -> list[int]:
-        return [] if self._sock is None else [self._sock.fileno()]
 
     def poll(self, now_s: float) -> None:
         if self._sock is None:

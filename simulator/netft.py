@@ -24,11 +24,10 @@ Default rate 1000 Hz: the rate the project's F/T model samples at (every physics
 """
 from __future__ import annotations
 
-import socket
 from dataclasses import dataclass
 
 from amlink import rdt_protocol as rdt
-from amlink.endpoint import UDP_IN, EndpointError, parse_endpoint
+from amlink.transport import UdpListener
 
 
 def default_endpoint(index: int) -> str:
@@ -47,7 +46,7 @@ class NetFtStats:
     biases: int = 0
 
 
-class NetFtServer:
+class NetFtServer(UdpListener):
     """The emulated Net F/T (module doc). endpoint: ``udpin:HOST:PORT`` (port 0: a free one,
     see `address`)."""
 
@@ -58,18 +57,11 @@ class NetFtServer:
             raise ValueError(f"rate_hz must be > 0, got {rate_hz!r}")
         if not 1 <= rdt_buffer_size <= 40:
             raise ValueError(f"rdt_buffer_size must be in 1..40, got {rdt_buffer_size!r}")
-        try:
-            ep = parse_endpoint(endpoint)
-        except EndpointError as e:
-            raise ValueError(f"Net F/T: {e}") from None
-        if ep.kind != UDP_IN:
-            raise ValueError(f"Net F/T endpoint {endpoint!r}: must be udpin:HOST:PORT (it listens)")
-        self.endpoint, self._bind = endpoint, ep.address
+        super().__init__(endpoint, "Net F/T")
         self.period_s = 1.0 / rate_hz
         self.cpf, self.cpt = counts_per_force, counts_per_torque
         self.buffer_size, self.max_burst = rdt_buffer_size, max_burst
         self.stats = NetFtStats()
-        self._sock: socket.socket | None = None
         self._t0: float | None = None
         self._wrench = (0.0,) * 6  # the latest published wrench (converted to counts when a record needs it)
         self._counts: tuple[int, ...] | None = (0,) * 6  # its counts (None: not converted yet)
@@ -82,28 +74,8 @@ class NetFtServer:
         self._next_slot = 0  # the next sample slot to send
         self._pending: list[bytes] = []
 
-    def open(self) -> None:
-        s = socket.socket(socket.AF_INET6 if ":" in self._bind[0] else socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            s.bind(self._bind)
-        except OSError as e:
-            s.close()
-            raise OSError(e.errno, f"Net F/T: cannot bind {self.endpoint}: {e.strerror}") from None
-        s.setblocking(False)
-        self._sock = s
-
-    def close(self) -> None:
-        if self._sock is not None:
-            self._sock.close()
-        self._sock = None
+    def _forget(self) -> None:
         self._client = None
-
-    @property
-    def address(self) -> tuple[str, int] | None:
-        return None if self._sock is None else self._sock.getsockname()[:2]
-
-    def fds(self) -> list[int]:
-        return [] if self._sock is None else [self._sock.fileno()]
 
     @property
     def streaming_to(self) -> tuple | None:
