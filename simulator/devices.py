@@ -75,7 +75,7 @@ class NoiseBlock:
     """Draws of `rng.standard_normal(width)` step after step, taken from blocks of `rows`
     draws at once: numpy's generator fills a large array with the numbers, in the order,
     that the small calls would give (tests/simulator/test_device_kernels.py). `block`: the
-    (rows, width) array to hold a block in, e.g. a view of a fleet's (simulator.devices);
+    (rows, width) array to hold a block in, e.g. a view of a fleet's (`DeviceArrays`);
     None: one of its own."""
 
     def __init__(self, rng: np.random.Generator, width: int, rows: int = 256, block: np.ndarray | None = None) -> None:
@@ -99,7 +99,7 @@ class NoiseBlock:
 
 class CaptureDraws:
     """The motion capture's draws, capture after capture, taken a block of `rows` captures at
-    once into `block` ((rows, 7): a view of a fleet's, simulator.devices): per capture
+    once into `block` ((rows, 7): a view of a fleet's, `DeviceArrays`): per capture
     `rng.standard_normal(6)`, then `rng.random()` if `with_drop` (else column 6 is left 0),
     the numbers, in the order, that a call per capture gives. Without drops, one call fills
     the block, as `NoiseBlock`; with them the normals and the uniforms interleave in the
