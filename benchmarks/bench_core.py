@@ -3,7 +3,7 @@ driven as `simulator.main` drives it, with the MAVLink work of `amlink.server` f
 (frame and sign the sensor batch; verify and decode a signed answer) but no sockets and no
 companions: every AM answers each control step with the same hovering setpoint.
 
-    python -m benchmarks.bench_core [--n 2 10] [--duration 2] [--mode attitude torque] [--devices]
+    python -m benchmarks.bench_core [--n 2 10] [--duration 2] [--mode attitude torque] [--devices] [--unsigned]
 
 Each part is timed with `time.perf_counter` around it inside the running loop (caches as a
 run leaves them, not back to back), summed over the run and divided by AMs x physics steps:
@@ -16,7 +16,8 @@ run leaves them, not back to back), summed over the run and divided by AMs x phy
   (`simulator.fleet_kernels`), that time is in frame (control steps) and apply (the steps
   between, fused with the autopilots), and estimate reads 0: compare "lockstep work";
 - frame: the frame's value type and the autopilot's reports (`SitlCore.iter_frames` less the above);
-- sign: the sensor batch packed and signed (`codec.sensor_frame_payloads`, `Encoder.pack_payloads`);
+- sign: the sensor batch packed and signed (`codec.sensor_frame_payloads`, `Encoder.pack_payloads`;
+  with --unsigned, packed and framed only);
 - verify: the answer verified and decoded (`Decoder.feed_records`, `SetpointAssembler`);
 - apply: the flight controllers (attitude mode: the emulated autopilot and allocation every
   physics step) and the world's actuation (`SitlCore.actuate` / `hold`);
@@ -63,12 +64,12 @@ def spec_for(mode: str, n: int, devices: bool):
     return spec
 
 
-def answers(core: SitlCore, s: int, mode: str) -> list[bytes]:
-    """Signed answers of AM s for steps 0, every, 2 every, ...: a hovering setpoint."""
+def answers(core: SitlCore, s: int, mode: str, key: bytes | None = KEY):
+    """(one, steps): one(k) is AM s's answer to step k, a hovering setpoint's datagram signed with
+    key (None: unsigned), for the control steps 0, every, 2 every, ... (steps)."""
     n = core.model.n
     hover = core.model.mass_kg * core.model.gravity_mps2
-    enc = wire.Encoder(s, 191, signing_key=KEY, link_id=2)
-    out = []
+    enc = wire.Encoder(s, 191, signing_key=key, link_id=2)
     steps = range(0, 1 << 20, core.control_every)
 
     def one(k):
@@ -82,14 +83,17 @@ def answers(core: SitlCore, s: int, mode: str) -> list[bytes]:
     return one, steps
 
 
-def run(mode: str, n: int, duration_s: float, devices: bool) -> dict[str, float]:
+def run(mode: str, n: int, duration_s: float, devices: bool, signed: bool = True) -> dict[str, float]:
+    """One run's parts per AM and physics step [us]; signed False: the link unsigned (MAVLink 2
+    signing off, as PX4's SITL runs by default), so that sign and verify are framing alone."""
+    key = KEY if signed else None
     spec = spec_for(mode, n, devices)
     core = SitlCore(spec)
     t = dict.fromkeys(PARTS, 0.0)
     pc = time.perf_counter
     # split iter_frames into sense, estimate and frame by timing the world's and the devices' calls
     w = core.world
-    sense0, dev_step = w.sensor_values, None
+    sense0 = w.sensor_values
 
     def timed_read(read):
         def timed(s):
@@ -118,10 +122,10 @@ def run(mode: str, n: int, duration_s: float, devices: bool) -> dict[str, float]
             truth_core(wrench_E)
             t_truth[0] += pc() - t0
         core._truth = timed_truth
-    encs = {s: wire.Encoder(SIM_SYSID, SIM_COMPID, signing_key=KEY, link_id=1) for s in core.sysids}
-    dec = wire.Decoder({s: KEY for s in core.sysids}, readers=codec.READERS)
+    encs = {s: wire.Encoder(SIM_SYSID, SIM_COMPID, signing_key=key, link_id=1) for s in core.sysids}
+    dec = wire.Decoder(None if key is None else {s: key for s in core.sysids}, readers=codec.READERS)
     asm = {s: codec.SetpointAssembler() for s in core.sysids}
-    makers = {s: answers(core, s, mode)[0] for s in core.sysids}
+    makers = {s: answers(core, s, mode, key)[0] for s in core.sysids}
     steps = int(round(duration_s * spec.rate_hz))
     # the answers are made before the run (they are the companions' work)
     pre = {s: {k: makers[s](k) for k in range(0, steps, core.control_every)} for s in core.sysids}
@@ -181,14 +185,16 @@ def main(argv=None) -> None:
     ap.add_argument("--duration", type=float, default=2.0)
     ap.add_argument("--mode", nargs="+", default=["attitude", "torque"], choices=sorted(SCENARIOS))
     ap.add_argument("--devices", action="store_true", help="[devices] on: the sensors as devices and the estimator")
+    ap.add_argument("--unsigned", action="store_true", help="the link unsigned (signing is on by default)")
     a = ap.parse_args(argv)
     cols = PARTS + ("lockstep work",)
-    print(f"[us per AM and physics step] devices {'on' if a.devices else 'off'}, {a.duration:g} s each")
+    print(f"[us per AM and physics step] devices {'on' if a.devices else 'off'}, link "
+          f"{'unsigned' if a.unsigned else 'signed'}, {a.duration:g} s each")
     print(f"{'mode':9s} {'N':>3s} " + " ".join(f"{c:>13s}" for c in cols)
           + f" {'wall/step':>10s} {'one-core rtf':>12s} {'CPU per AM':>11s}")
     for mode in a.mode:
         for n in a.n:
-            r = run(mode, n, a.duration, a.devices)
+            r = run(mode, n, a.duration, a.devices, not a.unsigned)
             print(f"{mode:9s} {n:3d} " + " ".join(f"{r[c]:13.1f}" for c in cols)
                   + f" {r['wall per step']:10.0f} {r['rtf']:11.2f}x {r['cpu per AM']:11.1f}", flush=True)
 
