@@ -137,6 +137,19 @@ def as_destination(ep: Endpoint, text: str | None = None) -> Endpoint:
     return Endpoint(UDP_OUT, ep.host, ep.port, alias=ep.alias or ep.kind)
 
 
+def listen_address(text: str, kind: str, name: str) -> tuple[str, int]:
+    """The (host, port) a device server called ``name`` binds, from its endpoint ``text``, which
+    must be of ``kind`` (``udpin`` or ``tcpin``): ValueError naming the server and the endpoint
+    otherwise."""
+    try:
+        ep = parse_endpoint(text)
+    except EndpointError as e:
+        raise ValueError(f"{name}: {e}") from None
+    if ep.kind != kind:
+        raise ValueError(f"{name} endpoint {text!r}: must be {kind}:HOST:PORT (it listens)")
+    return ep.address
+
+
 def _host_port(text: str, rest: str) -> tuple[str, int]:
     if rest.startswith("["):  # [IPv6]:PORT
         host, close, tail = rest[1:].partition("]")

@@ -27,24 +27,8 @@ import socket
 import time
 from collections.abc import Iterable, Sequence
 
-from amlink.endpoint import (
-    SERIAL,
-    TCP_IN,
-    TCP_OUT,
-    UDP_IN,
-    UDP_OUT,
-    Endpoint,
-    EndpointError,
-    parse_endpoint,
-)
-from amlink.stream import (  # noqa: F401
-    MAX_BACKLOG,
-    SerialPort,
-    StreamPeer,
-    TcpClient,
-    TcpServer,
-    resolve,
-)
+from amlink.endpoint import SERIAL, TCP_IN, TCP_OUT, UDP_IN, UDP_OUT, Endpoint, listen_address
+from amlink.stream import MAX_BACKLOG, SerialPort, StreamPeer, TcpClient, TcpServer, resolve  # noqa: F401
 from amlink.udp import LinkStats, Shim, Udp
 
 _ROUTES_MAX = 4096  # Mux: addresses remembered (datagrams from many ports cannot grow it without bound)
@@ -72,13 +56,7 @@ class UdpListener:
     ``name`` begins its errors."""
 
     def __init__(self, endpoint: str, name: str) -> None:
-        try:
-            ep = parse_endpoint(endpoint)
-        except EndpointError as e:
-            raise ValueError(f"{name}: {e}") from None
-        if ep.kind != UDP_IN:
-            raise ValueError(f"{name} endpoint {endpoint!r}: must be udpin:HOST:PORT (it listens)")
-        self.endpoint, self._name, self._bind = endpoint, name, ep.address
+        self.endpoint, self._name, self._bind = endpoint, name, listen_address(endpoint, UDP_IN, name)
         self._sock: socket.socket | None = None
 
     def open(self) -> None:

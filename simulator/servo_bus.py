@@ -31,7 +31,7 @@ import numpy as np
 
 from amcore.config import JointEffortSpec
 from amlink import dxl_protocol as dxl
-from amlink.endpoint import TCP_IN, EndpointError, parse_endpoint
+from amlink.endpoint import TCP_IN, listen_address
 
 from .dxl_servo import BusPort, BusStats, DxlBus, XServo, servo_rng
 
@@ -87,13 +87,7 @@ class ServoBus:
                 raise ValueError(f"torque_max_nm must be {n_joints} positive values, got {torque_max_nm!r}")
             limits = [min(model.current_limit_max, int(round(x / model.nm_per_current_unit))) for x in t]
         if endpoint is not None:
-            try:
-                ep = parse_endpoint(endpoint)
-            except EndpointError as e:
-                raise ValueError(f"servo bus: {e}") from None
-            if ep.kind != TCP_IN:
-                raise ValueError(f"servo bus endpoint {endpoint!r}: must be tcpin:HOST:PORT (it listens)")
-            self._bind = ep.address
+            self._bind = listen_address(endpoint, TCP_IN, "servo bus")
         self.endpoint, self.pty_link = endpoint, pty_link
         self.model = model
         self.servos = [XServo(dxl.joint_id(j), model, float(q0[j]), limits[j], effort, noise_scale,

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from amlink.endpoint import ACCEPTED_FORMS, DEFAULT_BAUD, Endpoint, EndpointError, parse_endpoint
+from amlink.endpoint import (ACCEPTED_FORMS, DEFAULT_BAUD, TCP_IN, UDP_IN, Endpoint, EndpointError, listen_address,
+                             parse_endpoint)
 
 
 @pytest.mark.parametrize("text,kind,host,port", [
@@ -63,3 +64,14 @@ def test_malformed_strings_name_the_problem_and_list_the_accepted_forms(text, wh
         parse_endpoint(text)
     assert why in str(err.value) and ACCEPTED_FORMS in str(err.value)
     assert isinstance(err.value, ValueError)
+
+
+def test_a_device_servers_listen_address_names_the_server_and_the_endpoint():
+    assert listen_address("udpin:127.0.0.1:49152", UDP_IN, "Net F/T") == ("127.0.0.1", 49152)
+    assert listen_address("tcpin:0.0.0.0:0", TCP_IN, "servo bus") == ("0.0.0.0", 0)
+    with pytest.raises(ValueError, match=r"servo bus endpoint 'udpin:127.0.0.1:7200': must be tcpin:HOST:PORT"):
+        listen_address("udpin:127.0.0.1:7200", TCP_IN, "servo bus")
+    with pytest.raises(ValueError, match=r"^mocap stream: ") as e:
+        listen_address("udpin:127.0.0.1:notaport", UDP_IN, "mocap stream")
+    assert not isinstance(e.value, EndpointError)  # the server's ValueError, naming it
+
