@@ -39,13 +39,7 @@ from amcore.mission import ObjectPose, am_mission
 from amcore.model import AmState, build_model
 from amcore.so3 import Rz
 from amlink.impair import ImpairedLink, LinkImpairment
-from amlink.types import (
-    AttitudeSetpoint,
-    AttitudeTarget,
-    SensorFrame,
-    TorqueSetpoint,
-    sensor_frame_of_array,
-)
+from amlink.types import AttitudeSetpoint, AttitudeTarget, SensorFrame, TorqueSetpoint, sensor_frame_of_array
 
 from . import fleet_kernels
 from .devices import DeviceArrays, DeviceSuite, JointEffortSensor

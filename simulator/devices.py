@@ -50,14 +50,7 @@ import math
 
 import numpy as np
 
-from amcore.config import (
-    DevicesSpec,
-    EncoderSpec,
-    ForceTorqueSpec,
-    ImuSpec,
-    JointEffortSpec,
-    MocapSpec,
-)
+from amcore.config import DevicesSpec, EncoderSpec, ForceTorqueSpec, ImuSpec, JointEffortSpec, MocapSpec
 from amcore.estimator import BIQUAD, LOOP_GAINS, N_OUT, SNAPSHOT, STATE, Estimator
 from amcore.quat_kernels import quat_exp, quat_mul
 
