@@ -285,7 +285,7 @@ class FlightControllerParams:
       body_rate_feedforward: add the target's body rates to the rate setpoint (false: the
       attitude P loop alone makes it).
     - failsafe_after_rejected: K. A setpoint the flight controller refuses as implausible
-      (non-finite, or beyond `amlink.limits` of this vehicle) is answered at once: the flight
+      (non-finite, or beyond `amlink.types` of this vehicle) is answered at once: the flight
       controller keeps flying the last valid command and counts the refusal. After K refused
       setpoints in a row from one companion, that vehicle goes to its failsafe (hold, then
       land; `simulator.failsafe`) for the rest of the run: its companion's setpoints are

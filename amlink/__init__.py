@@ -3,15 +3,17 @@
 * :mod:`amlink.dialect` -- the amstack MAVLink 2 dialect (XML in ``amlink/dialect/``),
   generated with pymavlink's mavgen into a cache on first use.
 * :mod:`amlink.types` -- value types (numpy only): SensorFrame, TorqueSetpoint,
-  AttitudeTarget, AttitudeSetpoint, ScenarioInfo.
+  AttitudeTarget, AttitudeSetpoint, ScenarioInfo; and the plausibility bounds
+  (SetpointLimits, SensorLimits) a value must keep to cross the link.
 * :mod:`amlink.codec` -- value types <-> MAVLink payloads: the lockstep batches with
-  precompiled structs, which :mod:`amlink.layout` derives from the generated dialect, and
+  precompiled structs (payload layouts derived from the generated dialect), and
   the messages sent once a run as pymavlink message objects.
-* :mod:`amlink.wire` -- datagram <-> frames (strict framing, MAVLink 2 signing).
-* :mod:`amlink.signing` -- signing keys: formats, derivation, scenario keys.
-* :mod:`amlink.limits` -- plausibility bounds on setpoints and sensor frames.
+* :mod:`amlink.wire` -- datagram <-> frames (strict framing, MAVLink 2 signatures and
+  their timestamp clock).
+* :mod:`amlink.signing` -- signing keys: formats, derivation, key files, scenario keys.
 * :mod:`amlink.lockstep` -- SimServer / CompanionClient (retransmission, partial
-  exchange, rejoin); :mod:`amlink.server`, :mod:`amlink.client`.
+  exchange, rejoin); :mod:`amlink.server`, :mod:`amlink.client`; :mod:`amlink.protocol`:
+  the ids, timing constants and counters both ends share.
 * :mod:`amlink.endpoint` -- endpoint strings in mavutil's forms (udpin, udpout, tcp,
   tcpin, serial); :mod:`amlink.transport` -- UDP, TCP and serial behind one interface
   (:mod:`amlink.stream`: the TCP and serial byte streams).

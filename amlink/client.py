@@ -10,10 +10,7 @@ from amlink import codec
 from amlink.codec import mav
 from amlink.endpoint import UDP_IN, UDP_OUT, Endpoint, as_destination, parse_endpoint
 from amlink.errors import CommandRejectedError, LinkError, SimulatorTimeoutError, SimulatorUnreachableError
-from amlink.limits import DEFAULT_SENSOR_LIMITS, SensorLimits
-from amlink.transport import open_transport
-from amlink.types import AttitudeSetpoint, AttitudeTarget, ScenarioInfo, SensorFrame, TorqueSetpoint
-from amlink.udp import (
+from amlink.protocol import (
     COMMAND_RETRY_S,
     COMPANION_COMPID,
     HEARTBEAT_PERIOD_S,
@@ -22,7 +19,16 @@ from amlink.udp import (
     SIM_SYSID,
     WAITING_NOTICE_PREFIX,
     LinkStats,
-    Shim,
+)
+from amlink.transport import Shim, open_transport
+from amlink.types import (
+    DEFAULT_SENSOR_LIMITS,
+    AttitudeSetpoint,
+    AttitudeTarget,
+    ScenarioInfo,
+    SensorFrame,
+    SensorLimits,
+    TorqueSetpoint,
 )
 
 _HEARTBEAT = mav.MAVLINK_MSG_ID_HEARTBEAT
@@ -78,7 +84,7 @@ class CompanionClient:
             vehicle's 32-byte key: everything sent is signed (link id = sysid) and
             only packets signed by the simulator with this key are accepted.
         limits: plausibility bounds a sensor frame must meet to be handed on.
-        shim: send-path impairment hook of :class:`amlink.udp.Udp` (tests).
+        shim: send-path impairment hook of :class:`amlink.transport.Udp` (tests).
         tlog: an open :class:`amlink.tlog.TlogWriter` that gets every frame sent and
             received, or None.
 
@@ -224,7 +230,7 @@ class CompanionClient:
         """Newest sensor frame not yet returned, or None once the simulator announced shutdown.
 
         Before the first frame, a simulator still gathering its other companions says so every
-        few seconds (:data:`amlink.udp.WAITING_NOTICE_PREFIX`); ``timeout_s`` then counts from
+        few seconds (:data:`amlink.protocol.WAITING_NOTICE_PREFIX`); ``timeout_s`` then counts from
         its last notice, so a companion waits as long as its simulator does, and
         ``on_waiting(text)``, if given, gets each notice.
 

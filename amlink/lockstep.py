@@ -24,9 +24,9 @@ streams, :mod:`amlink.transport`; the simulator may serve several endpoints at o
 
 Faults and attackers:
 
-* Every receive path drops and counts (:class:`amlink.udp.LinkStats`) junk,
+* Every receive path drops and counts (:class:`amlink.protocol.LinkStats`) junk,
   truncated or corrupt frames, unknown sysids, wrong steps, and setpoints or
-  sensor frames that are non-finite or outside :mod:`amlink.limits`; none of
+  sensor frames that are non-finite or outside :mod:`amlink.types`; none of
   these raises or reaches the caller.
 * MAVLink 2 signing (:mod:`amlink.signing`, :mod:`amlink.wire`): one 32-byte key
   per companion, link id = its sysid.  Off at this API level (``signing_keys=None``

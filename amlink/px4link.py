@@ -53,9 +53,9 @@ from amlink import px4samples as ps
 from amlink.endpoint import UDP_IN, UDP_OUT, Endpoint, parse_endpoint
 from amlink.offboard_handshake import (ACCEPTED, IN_PROGRESS, MAV_CMD_SET_MESSAGE_INTERVAL, OffboardHandshake,
                                        SendCommand, SendHeartbeat, result_name)
+from amlink.protocol import LinkStats
 from amlink.timebase import Timebase
 from amlink.transport import open_transport
-from amlink.udp import LinkStats
 from amlink.wire import Decoder, Encoder, mav
 
 TIMESYNC_RATE_HZ = 10.0  # PX4's own TIMESYNC stream rate on an onboard link (mavlink_main.cpp)

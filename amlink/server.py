@@ -10,12 +10,7 @@ from amlink import codec
 from amlink.codec import mav
 from amlink.endpoint import UDP_OUT, Endpoint, parse_endpoint
 from amlink.errors import PeerMissingError, PeerTimeoutError
-from amlink.limits import DEFAULT_SETPOINT_LIMITS, SetpointLimits
-from amlink.signing import check_key
-from amlink.stream import StreamPeer
-from amlink.transport import Mux, close_all, open_transport
-from amlink.types import AttitudeSetpoint, AttitudeTarget, ScenarioInfo, SensorFrame, TorqueSetpoint
-from amlink.udp import (
+from amlink.protocol import (
     HEARTBEAT_PERIOD_S,
     REJOIN_QUIET_S,
     SENSOR_RETRY_S,
@@ -26,7 +21,18 @@ from amlink.udp import (
     WAITING_NOTICE_PERIOD_S,
     WAITING_NOTICE_PREFIX,
     LinkStats,
-    Shim,
+)
+from amlink.signing import check_key
+from amlink.stream import StreamPeer
+from amlink.transport import Mux, Shim, close_all, open_transport
+from amlink.types import (
+    DEFAULT_SETPOINT_LIMITS,
+    AttitudeSetpoint,
+    AttitudeTarget,
+    ScenarioInfo,
+    SensorFrame,
+    SetpointLimits,
+    TorqueSetpoint,
 )
 
 _HEARTBEAT = mav.MAVLINK_MSG_ID_HEARTBEAT
@@ -75,11 +81,11 @@ class SimServer:
             process mains turn it on from the scenario).  Else ``{sysid: 32-byte
             key}`` for every sysid: all traffic with companion ``s`` is signed with
             its key on link id ``s``; unsigned, wrongly signed and replayed packets
-            are dropped and counted (:class:`amlink.udp.LinkStats`).
+            are dropped and counted (:class:`amlink.protocol.LinkStats`).
         limits: plausibility bounds a setpoint must meet to be returned.
         retry_s: wall time after which an unanswered sensor batch is re-sent
             (then 2x, 4x, 4x ... that) [s].
-        shim: send-path impairment hook of :class:`amlink.udp.Udp` (tests).
+        shim: send-path impairment hook of :class:`amlink.transport.Udp` (tests).
         on_heartbeat: called with ``(sysid, compid, message)`` for every admitted
             companion HEARTBEAT (the simulator forwards them to its GCS link).
 

@@ -1,4 +1,4 @@
-"""A seeded lossy / duplicating / reordering send shim for :class:`amlink.udp.Udp` (no I/O).
+"""A seeded lossy / duplicating / reordering send shim for :class:`amlink.transport.Udp` (no I/O).
 
 ``Udp(sock, stats, shim=LossyShim(...))`` passes every outgoing datagram through
 the shim, which returns what really goes out now.  It exists to test that the

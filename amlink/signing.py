@@ -1,6 +1,6 @@
-"""MAVLink 2 signing keys of the amstack link: formats, derivation, the timestamp clock.
+"""MAVLink 2 signing keys of the amstack link: formats, derivation, key files.
 
-Pure (hashlib and time only; :func:`read_key_file` reads one file).
+Pure (hashlib only; :func:`read_key_file` reads one file).
 
 Keys.  Each companion (sysid ``s``) shares a 32-byte secret with the simulator; the
 simulator holds all of them.  :func:`resolve_key` picks a vehicle's key, first match:
@@ -19,32 +19,21 @@ The GCS link (the simulator's flight controllers to a ground station) has a key 
 :func:`gcs_key_from_passphrase`: SHA-256 of a passphrase, MAVProxy's rule (``signing key
 PASSPHRASE``), so a stock GCS can use it; a GCS key file holds the passphrase.
 
-Timestamps follow the MAVLink 2 signing spec: units of 10 us since
-2015-01-01T00:00:00Z; :func:`now_timestamp` is the wall clock in those units.  Both
-ends must have clocks within 60 s of each other (NTP), or a new stream is taken as
-a replay of old traffic and rejected.
+The signatures themselves, and their timestamp clock, are :mod:`amlink.wire`'s.
 """
 
 from __future__ import annotations
 
 import hashlib
-import time
 from pathlib import Path
 
 KEY_BYTES = 32
-MAVLINK_EPOCH_UNIX_S = 1420070400  # 2015-01-01T00:00:00Z
-NEW_STREAM_WINDOW = 6000 * 1000  # 60 s in 10 us units: as pymavlink and the MAVLink spec
 _DERIVE_TAG = b"amstack-link-v1"
 _DEV_TAG = b"amstack-dev-key-PUBLIC"
 
 
 class SigningKeyError(ValueError):
     """A signing key is malformed or missing; the message says which and where."""
-
-
-def now_timestamp() -> int:
-    """MAVLink 2 signing timestamp of the wall clock now [10 us since 2015-01-01 UTC]."""
-    return int((time.time() - MAVLINK_EPOCH_UNIX_S) * 1e5)
 
 
 def key_from_hex(text: str, where: str = "signing key") -> bytes:

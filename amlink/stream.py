@@ -18,7 +18,7 @@ import socket
 import time
 
 from amlink.endpoint import Endpoint
-from amlink.udp import LinkStats
+from amlink.protocol import LinkStats
 from amlink.wire import StreamFramer
 
 MAX_BACKLOG = 1 << 20  # bytes a stream keeps for a far end that does not read [B]

@@ -16,8 +16,11 @@ an object with
 * ``stream``; ``fds()``, ``wfds()`` and ``poll(readable, writable)`` for :class:`Mux`;
   ``close()``.
 
-UDP is :class:`amlink.udp.Udp`, the lockstep's fast path (one ``select``, then drain);
-TCP and serial ports are in :mod:`amlink.stream`.
+UDP is :class:`Udp`, the lockstep's fast path (one ``select``, then drain); TCP and serial
+ports are in :mod:`amlink.stream`.  ``Udp.send`` and ``Udp.recv`` are the only places a
+datagram leaves and enters a process.  ``Udp.send`` passes every datagram through an optional
+*send shim* (``shim(addr, data) -> [(addr, data), ...]``, e.g. :class:`amlink.shim.LossyShim`)
+that may drop, duplicate or hold it back: how the tests impair the real socket path.
 """
 
 from __future__ import annotations
@@ -25,13 +28,95 @@ from __future__ import annotations
 import select
 import socket
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 
 from amlink.endpoint import SERIAL, TCP_IN, TCP_OUT, UDP_IN, UDP_OUT, Endpoint, listen_address
 from amlink.stream import MAX_BACKLOG, SerialPort, StreamPeer, TcpClient, TcpServer, resolve  # noqa: F401
-from amlink.udp import LinkStats, Shim, Udp
+from amlink.protocol import LinkStats
 
+_MAX_DATAGRAM = 65535
+_MAX_DRAIN = 256  # datagrams read per wake-up before checking the clock again
+_DONTWAIT = getattr(socket, "MSG_DONTWAIT", None)
 _ROUTES_MAX = 4096  # Mux: addresses remembered (datagrams from many ports cannot grow it without bound)
+
+
+Shim = Callable[[tuple[str, int], bytes], Iterable[tuple[tuple[str, int], bytes]]]
+
+
+class Udp:
+    """One UDP socket; ``send`` and ``recv`` are the only I/O paths (``shim``: impairment hook).
+
+    The transport interface of :mod:`amlink.transport`; ``peer`` is where a client sends
+    (the udpout destination; ``None`` on a listening socket until the caller learns it).
+    """
+
+    stream = False
+
+    def __init__(self, sock: socket.socket, stats: LinkStats, shim: Shim | None = None,
+                 peer: tuple | None = None) -> None:  # fmt: skip
+        self.sock = sock
+        self.stats = stats
+        self.shim = shim
+        self.peer = peer
+
+    @property
+    def local_address(self) -> tuple:
+        return self.sock.getsockname()
+
+    def peers(self) -> list:
+        """The far ends known to this transport (the udpout destination)."""
+        return [self.peer] if self.peer is not None else []
+
+    def send(self, addr: tuple, data: bytes) -> None:
+        try:
+            if self.shim is None:
+                self.sock.sendto(data, addr)
+                self.stats.datagrams_tx += 1
+                return
+            for a, d in self.shim(addr, data):
+                self.sock.sendto(d, a)
+                self.stats.datagrams_tx += 1
+        except (BlockingIOError, ConnectionRefusedError):  # a full buffer, an ICMP error of an earlier datagram
+            self.stats.send_drops += 1
+
+    def recv(self, timeout_s: float) -> list[tuple[bytes, tuple]]:
+        """Datagrams available within ``timeout_s`` (waits for the first, drains the rest)."""
+        ready, _, _ = select.select([self.sock], [], [], max(0.0, timeout_s))
+        return self._drain() if ready else []
+
+    def fds(self) -> list[int]:
+        return [self.sock.fileno()]
+
+    def wfds(self) -> list[int]:
+        return []
+
+    def poll(self, readable, writable) -> list[tuple[bytes, tuple]]:
+        """What :meth:`recv` returns, without waiting, when the socket is in ``readable``."""
+        return self._drain() if self.sock.fileno() in readable else []
+
+    def _drain(self) -> list[tuple[bytes, tuple]]:
+        out: list[tuple[bytes, tuple]] = []
+        for i in range(_MAX_DRAIN):
+            try:
+                if i == 0:
+                    data, addr = self.sock.recvfrom(_MAX_DATAGRAM)
+                elif _DONTWAIT is None:
+                    break
+                else:
+                    data, addr = self.sock.recvfrom(_MAX_DATAGRAM, _DONTWAIT)
+            except BlockingIOError:
+                break
+            except ConnectionRefusedError:  # Linux: ICMP port unreachable of an earlier datagram
+                continue
+            except ConnectionResetError:  # Windows reports ICMP port unreachable here
+                continue
+            out.append((data, addr))
+        self.stats.datagrams_rx += len(out)
+        return out
+
+    def close(self) -> None:
+        self.sock.close()
+
 
 
 def udp_socket(host: str, port: int, bind: bool) -> tuple[socket.socket, tuple]:

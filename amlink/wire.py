@@ -26,6 +26,12 @@ stream's timestamp only AFTER the signature verified.  pymavlink 2.4.x records
 it first, so one forged packet carrying a far-future timestamp and a wrong
 signature makes every later genuine packet of that stream look like a replay
 (tests/amlink/test_signing.py shows it).
+
+Timestamps follow the MAVLink 2 signing spec: units of 10 us since
+2015-01-01T00:00:00Z; :func:`now_timestamp` is the wall clock in those units.  Both
+ends must have clocks within 60 s of each other (NTP), or a new stream is taken as
+a replay of old traffic and rejected.
+Keys (formats, derivation, key files) are :mod:`amlink.signing`'s.
 """
 
 from __future__ import annotations
@@ -33,10 +39,11 @@ from __future__ import annotations
 import hashlib
 import hmac
 import struct
+import time
 from collections.abc import Callable, Iterable, Mapping
 
 from amlink import dialect
-from amlink.signing import NEW_STREAM_WINDOW, check_key, now_timestamp
+from amlink.signing import check_key
 
 mav = dialect.load()
 
@@ -51,9 +58,16 @@ _CRC_EXTRA = {mid: bytes((cls.crc_extra,)) for mid, cls in mav.mavlink_map.items
 _mcrf4xx = mav.mcrf4xx or dialect.mcrf4xx
 _HEADER = struct.Struct("<BBBBBBBHB")  # magic, len, incompat, compat, seq, sysid, compid, msgid (24 bit)
 _SIGN_PREFIX = struct.Struct("<BQ")  # link id, timestamp: the first 7 bytes are the signature block's
+MAVLINK_EPOCH_UNIX_S = 1420070400  # 2015-01-01T00:00:00Z
+NEW_STREAM_WINDOW = 6000 * 1000  # 60 s in 10 us units: as pymavlink and the MAVLink spec
 
 Reader = Callable[[bytes, int, int], tuple]
-"""``read(datagram, payload_start, payload_len) -> tuple`` (see :class:`amlink.layout.Reader`)."""
+"""``read(datagram, payload_start, payload_len) -> tuple`` (see :class:`amlink.codec.Reader`)."""
+
+
+def now_timestamp() -> int:
+    """MAVLink 2 signing timestamp of the wall clock now [10 us since 2015-01-01 UTC]."""
+    return int((time.time() - MAVLINK_EPOCH_UNIX_S) * 1e5)
 
 
 class CodecError(ValueError):
@@ -226,7 +240,7 @@ class Decoder:
             ``ignored`` without the cost of unpacking.  ``None``: all.
         counters: object whose counter attributes (``bad_frames``,
             ``unknown_sysid``, ``unsigned``, ``bad_signature``, ``replayed``,
-            ``ignored``) are incremented, e.g. a :class:`amlink.udp.LinkStats`;
+            ``ignored``) are incremented, e.g. a :class:`amlink.protocol.LinkStats`;
             default: this decoder's own attributes.
         readers: ``msgid -> read(datagram, payload_start, payload_len) -> tuple``
             used by :meth:`feed_records` (e.g. :data:`amlink.codec.READERS`).

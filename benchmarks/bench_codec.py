@@ -19,8 +19,8 @@ import time
 import numpy as np
 
 from amlink import codec
-from amlink.signing import now_timestamp
 from amlink.types import AttitudeTarget, SensorFrame, TorqueSetpoint
+from amlink.wire import now_timestamp
 from tests.amlink import codec_reference as ref
 
 KEY = bytes(range(32))

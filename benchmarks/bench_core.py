@@ -42,8 +42,8 @@ import numpy as np
 
 from amcore.config import load_scenario
 from amlink import codec, wire
+from amlink.protocol import SIM_COMPID, SIM_SYSID
 from amlink.types import AttitudeSetpoint, AttitudeTarget, TorqueSetpoint
-from amlink.udp import SIM_COMPID, SIM_SYSID
 from simulator.core import SitlCore
 
 ROOT = Path(__file__).resolve().parents[1]

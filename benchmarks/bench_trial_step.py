@@ -56,7 +56,7 @@ PARTS = (
     ("Pilot.command, the rest", "companion.pilot", "Pilot.command"),
     ("record (companion.outcome)", "companion.pilot", "Pilot.record"),
     ("setpoint_as_on_the_wire", "sitl.inprocess", "setpoint_as_on_the_wire"),
-    ("setpoint limits", "amlink.limits", "SetpointLimits.violation"),
+    ("setpoint limits", "amlink.types", "SetpointLimits.violation"),
     ("the emulated autopilot (FlightController.step)", "simulator.flight_controller", "FlightController.step"),
     ("apply (allocation, joint limits)", "simulator.world", "World.apply"),
     ("apply rotors (allocation, rotor lag, joint limits)", "simulator.world", "World.apply_rotors"),

@@ -32,8 +32,8 @@ import numpy as np
 
 from amcore.config import SCENARIOS_DIR, ScenarioSpec, load_scenario
 from amlink import codec, wire
+from amlink.protocol import SIM_COMPID, SIM_SYSID
 from amlink.types import AttitudeTarget, TorqueSetpoint, sensor_frame_from_wire
-from amlink.udp import SIM_COMPID, SIM_SYSID
 from simulator.bullet import pb
 from simulator.world import World
 from tests.simulator.sim_testing import RING_GAP_M, RING_Q, ring_placement, ten_am_spec

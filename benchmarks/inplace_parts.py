@@ -35,12 +35,12 @@ SIMULATOR_PARTS = [
     ("simulator.world", "World.sensor_values", "sense: PyBullet's getters (one AM)"),
     ("simulator.core", "sensor_frame_of_array", "the frame from its values, the autopilot's reports in it (one AM)"),
     ("amlink.wire", "Encoder.pack_payloads", "frame, CRC and sign the payloads"),
-    ("amlink.udp", "Udp.send", "socket: sendto"),
+    ("amlink.transport", "Udp.send", "socket: sendto"),
     ("simulator.gcs", "GcsSession.tick", "GCS link"),
 ]
 COMPANION_PARTS = [
     ("amlink.client", "CompanionClient.recv_frame", "receive a frame"),
-    ("amlink.udp", "Udp.recv", "socket: select and recvfrom"),
+    ("amlink.transport", "Udp.recv", "socket: select and recvfrom"),
     ("amlink.wire", "Decoder.feed_records", "verify and decode"),
     ("amlink.client", "CompanionClient._on_message", "frame assembly and checks"),
     ("companion.pilot", "Pilot.command", "command (state, references, law)"),

@@ -38,9 +38,9 @@ from pathlib import Path
 from amlink import codec
 from amlink.codec import mav
 from amlink.endpoint import DEFAULT_GCS, UDP_IN, Endpoint  # noqa: F401  (DEFAULT_GCS: the mains' default)
+from amlink.protocol import LinkStats
 from amlink.tlog import TlogWriter
 from amlink.transport import open_transport
-from amlink.udp import LinkStats
 from amlink.wire import StreamFramer
 
 from . import gcs_messages

@@ -46,10 +46,9 @@ from amcore.config import DEFAULT_SCENARIO, ConfigError, check_duration, load_sc
 from amlink import signing
 from amlink.endpoint import DEFAULT_GCS, SIM_BIND, EndpointError, parse_endpoint
 from amlink.errors import LinkError
-from amlink.limits import SetpointLimits
 from amlink.lockstep import SimServer
-from amlink.types import ScenarioInfo
-from amlink.udp import STATUSTEXT_MAX
+from amlink.protocol import STATUSTEXT_MAX
+from amlink.types import ScenarioInfo, SetpointLimits
 from amruntime import jitcache, procstats
 
 from telemetry import schema

@@ -23,8 +23,14 @@ import numpy as np
 from amcore import cliargs, preflight
 from amcore.config import ConfigError, ScenarioSpec, check_duration, load_scenario
 from amlink import codec
-from amlink.limits import SetpointLimits
-from amlink.types import AttitudeSetpoint, SensorFrame, TorqueSetpoint, frame_values, sensor_frame_of_array
+from amlink.types import (
+    AttitudeSetpoint,
+    SensorFrame,
+    SetpointLimits,
+    TorqueSetpoint,
+    frame_values,
+    sensor_frame_of_array,
+)
 from amruntime import jitcache
 from companion.pilot import Pilot
 from simulator.core import SitlCore, kernel_group
@@ -60,7 +66,7 @@ def setpoint_as_on_the_wire(sp: TorqueSetpoint | AttitudeSetpoint) -> TorqueSetp
 class Companions:
     """`simulator.lockstep.Transport` by calling each AM's `Pilot` at once: a frame as its
     companion decodes it in, the setpoint as the simulator decodes it out, refused as the
-    UDP simulator refuses it (`amlink.limits`); a controller that raises is reported
+    UDP simulator refuses it (`amlink.types`); a controller that raises is reported
     (`SitlCore.note_controller_error`) and its companion counts as lost for the rest of the run.
     `lost(t)`: sysids whose companion is silent at t, who get no frame (tests)."""
 
@@ -117,7 +123,7 @@ def run(spec: ScenarioSpec, duration_s: float | None = None,
     """Run a scenario in-process, on the UDP simulator's schedule (`simulator.lockstep`);
     `lost(t)` -> sysids whose companion is silent at t (tests).
 
-    As the UDP simulator does, a setpoint outside the plausibility bounds (`amlink.limits`)
+    As the UDP simulator does, a setpoint outside the plausibility bounds (`amlink.types`)
     is refused at once (its flight controller holds the last command) and counted, and
     `failsafe_after_rejected` (None: the scenario's) refusals in a row send that vehicle to
     failsafe for good (`simulator.core`); a controller

@@ -16,7 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from amlink import codec, signing
+from amlink import codec, wire
 from amlink.codec import mav
 from amlink.types import AttitudeSetpoint, AttitudeTarget, ScenarioInfo, SensorFrame, StepFlag, TorqueSetpoint
 from tests.amlink import codec_reference as ref
@@ -37,7 +37,7 @@ def twins(sysid: int, compid: int, key: bytes | None):
     a = codec.Encoder(sysid, compid, signing_key=key, link_id=sysid)
     b = codec.Encoder(sysid, compid, signing_key=key, link_id=sysid)
     if key is not None:
-        a.mavlink.signing.timestamp = b.mavlink.signing.timestamp = signing.now_timestamp() + 10**9
+        a.mavlink.signing.timestamp = b.mavlink.signing.timestamp = wire.now_timestamp() + 10**9
     return a, b
 
 
@@ -188,7 +188,7 @@ def stock_messages(data: bytes, key: bytes | None) -> list:
     p.robust_parsing = True
     if key is not None:
         p.signing.secret_key = key
-        p.signing.timestamp = signing.now_timestamp()
+        p.signing.timestamp = wire.now_timestamp()
     msgs = [m for m in p.parse_buffer(data) or [] if not isinstance(m, mav.MAVLink_bad_data)]
     if key is not None:
         assert p.signing.goodsig_count == len(msgs) and p.signing.badsig_count == 0

@@ -8,7 +8,7 @@ import struct
 import pytest
 
 from amlink import dialect, wire
-from amlink.layout import LayoutError, MessageLayout
+from amlink.codec import LayoutError, MessageLayout
 
 mav = dialect.load()
 ALL = sorted(mav.mavlink_map.items())

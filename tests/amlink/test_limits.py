@@ -6,8 +6,14 @@ import math
 
 import pytest
 
-from amlink.limits import SensorLimits, SetpointLimits
-from amlink.types import AttitudeSetpoint, AttitudeTarget, SensorFrame, TorqueSetpoint
+from amlink.types import (
+    AttitudeSetpoint,
+    AttitudeTarget,
+    SensorFrame,
+    SensorLimits,
+    SetpointLimits,
+    TorqueSetpoint,
+)
 from tests.amlink import codec_reference as ref
 from tests.amlink.kit import answer, linked, make_frame
 

@@ -441,7 +441,7 @@ def test_a_companion_waits_while_its_simulator_gathers_the_others_and_hears_whom
     try:
         with pytest.raises(PeerMissingError):
             server.wait_for_peers(1.6, on_waiting=said.append)
-        server.close(f"no HEARTBEAT from sysid 2", error=True)
+        server.close("no HEARTBEAT from sysid 2", error=True)
     finally:
         t.join(5.0)
         client.close()

@@ -7,7 +7,7 @@ import threading
 
 import pytest
 
-from amlink import codec, signing
+from amlink import codec, signing, wire
 from amlink.codec import mav
 from amlink.errors import PeerMissingError, PeerTimeoutError, SimulatorUnreachableError
 from amlink.lockstep import CompanionClient
@@ -27,7 +27,7 @@ def stock_parser(key: bytes):
     p = mav.MAVLink(None)
     p.robust_parsing = True
     p.signing.secret_key = key
-    p.signing.timestamp = signing.now_timestamp()
+    p.signing.timestamp = wire.now_timestamp()
     return p
 
 
@@ -61,7 +61,7 @@ def test_key_formats_and_resolution(tmp_path):
 def test_encoder_timestamp_follows_the_wall_clock_and_grows_per_frame():
     enc = codec.Encoder(2, 191, signing_key=KEY, link_id=2)
     enc.mavlink.signing.timestamp = 0  # e.g. a long-running process whose counter fell behind
-    before = signing.now_timestamp()
+    before = wire.now_timestamp()
     data = enc.pack(ref.setpoint_messages(TorqueSetpoint(1, 5.0, [0, 0, 0], []), None) * 2)
     stamps, i = [], 0
     while i < len(data):
@@ -88,7 +88,7 @@ def test_pymavlink_records_the_timestamp_before_checking_the_signature():
     """One forged packet with a far-future timestamp silences a genuine stream in stock pymavlink."""
     genuine = codec.Encoder(2, 191, signing_key=KEY, link_id=2)
     forger = codec.Encoder(2, 191, signing_key=OTHER, link_id=2)  # same stream id, wrong key
-    forger.mavlink.signing.timestamp = signing.now_timestamp() + 10**11  # ~11 days ahead
+    forger.mavlink.signing.timestamp = wire.now_timestamp() + 10**11  # ~11 days ahead
     forged, real = setpoint_datagram(forger), setpoint_datagram(genuine)
     p = stock_parser(KEY)
     assert good_messages(p, forged) == []
@@ -125,7 +125,7 @@ def test_decoder_counts_each_kind_of_rejection():
 def test_decoder_rejects_a_new_stream_older_than_a_minute():
     """A recording from an earlier run (two minutes old) is a new stream too old to trust."""
     old = codec.Encoder(2, 191, signing_key=KEY, link_id=2)
-    old.mavlink.signing.timestamp = signing.now_timestamp() - 2 * signing.NEW_STREAM_WINDOW
+    old.mavlink.signing.timestamp = wire.now_timestamp() - 2 * wire.NEW_STREAM_WINDOW
     old.mavlink.send(mav.MAVLink_am_torque_setpoint_message(1, 1.0, [0.0] * 3, 0, [0.0] * 8, 0))  # bypass pack()
     recorded = b"".join(old._sink.parts)
     dec = codec.Decoder({2: KEY})

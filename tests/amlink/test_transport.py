@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from amlink.lockstep import CompanionClient, SimServer
 from amlink.stream import MAX_BACKLOG, _socket_stream, resolve
 from amlink.types import AttitudeTarget
-from amlink.udp import LinkStats
+from amlink.protocol import LinkStats
 from amlink.wire import SIGNATURE_LEN, Encoder, StreamFramer, split_frames
 from tests.amlink import codec_reference as ref
 from tests.amlink.kit import SCENARIO, answer, key_for, make_frame

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from amlink.udp import STATUSTEXT_MAX
+from amlink.protocol import STATUSTEXT_MAX
 from simulator.main import _told
 
 
