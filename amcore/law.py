@@ -223,7 +223,7 @@ def sigma_min(A):
 # ----------------------------------------------------------------------------- reference trajectories
 def _smoothstep_horner() -> np.ndarray:
     """Row k: the coefficients of d^k s / d tau^k, highest power first (zero-padded), for
-    s(tau) = 35 tau^4 - 84 tau^5 + 70 tau^6 - 20 tau^7 (amcore.trajectory)."""
+    s(tau) = 35 tau^4 - 84 tau^5 + 70 tau^6 - 20 tau^7 (amcore.mission.SmoothPath)."""
     c = np.array([0.0, 0.0, 0.0, 0.0, 35.0, -84.0, 70.0, -20.0])  # tau^0 .. tau^7
     rows = np.zeros((8, 8))
     for k in range(8):

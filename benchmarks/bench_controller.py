@@ -13,7 +13,7 @@ time goes: the state as pinocchio takes it (amcore.model.pin_configuration, one 
 call), pinocchio's six calls (M^-1, C, CoM Jacobian, {e}'s placement, Jacobian and its
 rate), the compiled law (amcore.law.control_law, called alone on the same inputs), and the
 rest of `step` (argument passing, naming the results). The companion calls, every step
-besides, mission.reference and the wire conversions of companion/adapter.py; each has its
+besides, mission.reference and the wire conversions of companion/pilot.py; each has its
 own line. In attitude mode the companion calls amcore.offboard.offboard_step instead of
 `step` (every 4 ms): its row, and the same with the numpy reference the compiled estimate
 is tested against (tests/amcore/reference_offboard.py), show what the body torque estimate
@@ -44,7 +44,7 @@ from amcore.offboard import Applied, OffboardMemory, OffboardParams, offboard_st
 from amcore.model import AmState, build_model, create_data, pin_configuration
 from amcore.so3 import R_to_quat_wxyz, exp_so3
 from amlink.types import SensorFrame
-from companion.adapter import setpoint_from_result, state_from_frame
+from companion.pilot import setpoint_from_result, state_from_frame
 from tests.amcore import reference_adapt, reference_offboard
 from tests.amcore.literal import controller_literal
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from amcore.filters import LowPass2, lowpass_accel, lowpass_update
-from amcore.trajectory import path_through
+from amcore.mission import path_through
 
 
 @pytest.mark.parametrize("zeta", [0.7, 1.0, 1.5])

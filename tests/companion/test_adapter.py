@@ -8,7 +8,7 @@ from amcore.mission import am_mission
 from amcore.model import create_data
 from amcore.so3 import R_to_quat_wxyz, exp_so3, quat_wxyz_to_R
 from amlink.types import SensorFrame
-from companion.adapter import setpoint_from_result, state_from_frame
+from companion.pilot import setpoint_from_result, state_from_frame
 
 
 def test_state_from_frame_keeps_frames_and_renormalizes_the_quaternion():
