@@ -11,7 +11,12 @@ ControlAllocationPseudoInverse and ControlAllocationSequentialDesaturation (MC_A
 
 1. mix = pinv(B) over the control axes (roll, pitch, yaw torque, F_x, F_y, F_z): where the
    rotors can make lateral force (canted rotors) the pseudo-inverse solves for zero of it;
-   where they cannot (all axes parallel), those rows are zero and change nothing.
+   where they cannot (all axes parallel), those rows are zero and change nothing. It is
+   computed in exact rational arithmetic and rounded once (`pinv_exact`), not by LAPACK:
+   numpy's SVD gives last bits that depend on the BLAS kernel the CPU selects (OpenBLAS's
+   SkylakeX and Haswell kernels differ by ~2e-14 on am4dof's mix), and the mix reaches the
+   attitude-mode gains the loader derives (so the scenario fingerprint) and every step of
+   the flight, which must be the same on every host.
 2. The mix is normalized as PX4 normalizes it: roll and pitch by one scale such that a unit
    command moves a quad X's rotors by +-0.707 of their range, yaw by its largest entry,
    thrust by the mean of its nonzero entries. A normalized command u on an axis is the
@@ -35,6 +40,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -106,16 +112,20 @@ class Allocation:
         B_out = self.B * self.f_max  # per unit output
         # control axes in PX4's order: roll, pitch, yaw torque, thrust x, y, z
         B_ctrl = np.vstack([B_out[3:6], B_out[0:3]])
-        mix = np.linalg.pinv(B_ctrl)  # (n, 6)
+        mix = pinv_exact(B_ctrl)  # (n, 6)
+        lapack = np.linalg.pinv(B_ctrl)
+        if not np.allclose(mix, lapack, rtol=0.0, atol=1e-9 * max(1.0, float(np.abs(lapack).max()))):
+            mix = lapack  # a table within rounding of losing an axis: LAPACK's cutoff decides its rank
         mix[np.abs(mix) < 1e-12] = 0.0
         scale = np.ones(6)
         n_rp = [int(np.sum(np.abs(mix[:, k]) > _SMALL_MIX)) for k in (0, 1)]
-        rp = max((math.sqrt(float(mix[:, k] @ mix[:, k]) / (n / 2.0)) for k, n in zip((0, 1), n_rp) if n), default=1.0)
+        rp = max((math.sqrt(math.fsum(x * x for x in mix[:, k].tolist()) / (n / 2.0))
+                  for k, n in zip((0, 1), n_rp) if n), default=1.0)
         scale[0] = scale[1] = rp
         scale[2] = float(mix[:, 2].max())
         for k in (5, 4, 3):  # thrust z first: an axis with no actuator takes its scale
             nz = np.abs(mix[:, k]) > np.finfo(np.float32).eps
-            scale[k] = float(np.abs(mix[nz, k]).sum() / nz.sum()) if nz.any() else scale[5]
+            scale[k] = math.fsum(np.abs(mix[nz, k]).tolist()) / int(nz.sum()) if nz.any() else scale[5]
         self.mix_full = mix / scale  # (n, 6) outputs per unit normalized command
         # the four axes the law commands: roll, pitch, yaw, thrust z (lateral setpoints are 0)
         self.mix = self.mix_full[:, [0, 1, 2, 5]]
@@ -228,3 +238,70 @@ class Allocation:
                     up, down = min(up, (m - x) / v), min(down, (x - hi) / v)
             out[ax] = (down * self.torque_scale_nm[k], up * self.torque_scale_nm[k])
         return out
+
+
+def pinv_exact(A) -> np.ndarray:
+    """The Moore-Penrose pseudo-inverse of a small matrix, exact and rounded once to float64:
+    the same bits on every CPU and BLAS. Computed in rationals (every float is one) from a full-
+    rank factorization A = C F (F: the nonzero rows of A's reduced row echelon form, C: A's
+    pivot columns), A+ = F^T (F F^T)^-1 (C^T C)^-1 C^T. Entries below 1e-12 of the largest
+    count as zero (a rotor axis computed as cos(pi/2) = 6e-17), as LAPACK's cutoff would."""
+    a = np.asarray(A, dtype=float)
+    return np.array(_pinv_rows(tuple(map(tuple, a.tolist())), a.shape[1])).reshape(a.shape[1], a.shape[0])
+
+
+@lru_cache(maxsize=64)  # an Allocation per vehicle and process, often of the same table
+def _pinv_rows(a: tuple[tuple[float, ...], ...], n: int) -> tuple[tuple[float, ...], ...]:
+    from fractions import Fraction
+
+    m = len(a)
+    big = max((abs(x) for r in a for x in r), default=0.0)
+    rows = [[Fraction(x) if abs(x) > 1e-12 * big else Fraction(0) for x in r] for r in a]
+    echelon, pivots, r = [row[:] for row in rows], [], 0
+    for c in range(n):
+        k = next((i for i in range(r, m) if echelon[i][c] != 0), None)
+        if k is None:
+            continue
+        echelon[r], echelon[k] = echelon[k], echelon[r]
+        lead = echelon[r][c]
+        echelon[r] = [x / lead for x in echelon[r]]
+        for i in range(m):
+            if i != r and echelon[i][c] != 0:
+                f = echelon[i][c]
+                echelon[i] = [x - f * y for x, y in zip(echelon[i], echelon[r])]
+        pivots.append(c)
+        r += 1
+        if r == m:
+            break
+    if r == 0:
+        return tuple((0.0,) * m for _ in range(n))
+    F = echelon[:r]  # r x n
+    C = [[rows[i][c] for c in pivots] for i in range(m)]  # m x r
+    FFt = [[sum(x * y for x, y in zip(F[i], F[j])) for j in range(r)] for i in range(r)]
+    CtC = [[sum(C[k][i] * C[k][j] for k in range(m)) for j in range(r)] for i in range(r)]
+    inner = _matmul(_inverse(FFt), _inverse(CtC))  # r x r
+    Ft = [list(col) for col in zip(*F)]  # n x r
+    Ct = [list(col) for col in zip(*C)]  # r x m
+    return tuple(tuple(float(x) for x in row) for row in _matmul(_matmul(Ft, inner), Ct))
+
+
+def _matmul(X, Y):
+    return [[sum(x * y for x, y in zip(row, col)) for col in zip(*Y)] for row in X]
+
+
+def _inverse(M):
+    """The inverse of a nonsingular square matrix of Fractions (Gauss-Jordan)."""
+    from fractions import Fraction
+
+    r = len(M)
+    aug = [list(row) + [Fraction(int(i == j)) for j in range(r)] for i, row in enumerate(M)]
+    for c in range(r):
+        k = next(i for i in range(c, r) if aug[i][c] != 0)
+        aug[c], aug[k] = aug[k], aug[c]
+        lead = aug[c][c]
+        aug[c] = [x / lead for x in aug[c]]
+        for i in range(r):
+            if i != c and aug[i][c] != 0:
+                f = aug[i][c]
+                aug[i] = [x - f * y for x, y in zip(aug[i], aug[c])]
+    return [row[r:] for row in aug]

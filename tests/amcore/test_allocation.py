@@ -3,13 +3,16 @@ rotor-by-rotor literal sum, the quad table against the paper's X mixer, round tr
 desaturation order, the canted hexarotor's zero lateral force, and authority in closed form."""
 from __future__ import annotations
 
+import hashlib
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from amcore.allocation import AXES, Allocation
+from amcore.allocation import AXES, Allocation, pinv_exact
 from amcore.rotors import effectiveness
 from amcore.authority import vehicle_authority
 from amcore.config import load_vehicle
@@ -131,3 +134,45 @@ def test_the_hexarotor_meets_its_targets_and_the_quad_does_not(quad, hexa):
     assert h.cant_loss == pytest.approx(1.0 - math.cos(math.radians(20.0)), rel=1e-6)
     loaded = vehicle_authority(hexa, squeeze_n=9.0, load_kg=0.5).loaded
     assert loaded.feasible and max(loaded.rotor_fractions) < 0.8
+
+
+def _penrose_residuals(A, X):
+    """The four Moore-Penrose conditions' residuals of X as A's pseudo-inverse (max |.|)."""
+    return max(float(np.abs(A @ X @ A - A).max()), float(np.abs(X @ A @ X - X).max()),
+               float(np.abs((A @ X).T - A @ X).max()), float(np.abs((X @ A).T - X @ A).max()))
+
+
+@given(st.lists(st.floats(-2.0, 2.0, allow_nan=False).filter(lambda x: x == 0.0 or abs(x) > 1e-6),
+                min_size=24, max_size=24),
+       st.sampled_from([(6, 4), (4, 6), (3, 3), (6, 2)]), st.integers(0, 2))
+@settings(max_examples=60, deadline=None)
+def test_the_exact_pseudo_inverse_meets_penrose_and_numpys_for_any_rank(values, shape, dropped):
+    """pinv_exact against the four Moore-Penrose conditions and numpy's SVD pseudo-inverse, on
+    full-rank matrices and on ones with rows repeated (rank lost)."""
+    m, n = shape
+    A = np.array(values[: m * n]).reshape(m, n)
+    for k in range(min(dropped, m - 1)):
+        A[k + 1] = A[0]  # a repeated row: rank falls by one
+    X = pinv_exact(A)
+    if np.linalg.cond(np.linalg.pinv(A)) > 1e6:  # within rounding of another rank: LAPACK's cutoff and ours differ
+        return
+    assert _penrose_residuals(A, X) < 1e-9
+    assert np.allclose(X, np.linalg.pinv(A), rtol=0.0, atol=1e-9 * max(1.0, float(np.abs(X).max())))
+
+
+def test_the_mix_is_the_same_bits_whatever_blas_kernel_the_cpu_selects(tmp_path):
+    """The allocation's set-up uses no LAPACK or BLAS reduction: a fresh process with OpenBLAS
+    forced to another kernel (SkylakeX, Prescott) builds the same mix for every shipped vehicle."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("import hashlib, pathlib; from amcore.config import load_vehicle; from amcore.allocation import Allocation;"
+            "print(*[hashlib.sha256(Allocation(load_vehicle(p).rotors).mix_full.tobytes()).hexdigest()"
+            f" for p in sorted(pathlib.Path({str(VEHICLES)!r}).glob('*.toml'))])")
+    digests = {subprocess.run([sys.executable, "-c", code], env=os.environ | {"OPENBLAS_CORETYPE": core},
+                              capture_output=True, text=True, check=True).stdout for core in ("SkylakeX", "Prescott")}
+    assert len(digests) == 1
+    here = " ".join(hashlib.sha256(Allocation(load_vehicle(p).rotors).mix_full.tobytes()).hexdigest()
+                    for p in sorted(VEHICLES.glob("*.toml")))
+    assert digests == {here + "\n"}

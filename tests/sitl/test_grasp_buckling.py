@@ -3,11 +3,13 @@ ones (amcore.envelope.buckling_squeeze_n; docs/robust_grasp.md, section 9).
 
 The draw (data/buckling_draw.toml) is the one the mechanism was traced on: the default
 randomization, seed 2615, trial 25, a 0.178 m box of 1.07 kg planned as 1.11 kg and squeezed
-with 14.6 N, every device at its default level, 2.3 % setpoint loss. Between two_am_robust's
-former 5 cm crowns N_cr is 11.0 N and the box turned 50 deg in the lift; between the
-scenario's 12 cm crowns (wider than the box's 8.9 cm half-width) it cannot buckle. The
-devices' draws give the push that starts the turning: a change to the sensor models may
-change this draw, and the 5 cm case then shows it."""
+with 14.6 N, every device at its default level, 2.3 % setpoint loss. Between 5 cm crowns N_cr
+is 11.0 N, below the squeeze: the straight grasp is unstable, and whether the box turns out
+(about 50 deg in the lift) depends on the push that starts it, down to the arithmetic's last
+bits (on one draw it turned on one CPU's BLAS kernels and not on another's). So the box is
+flown at six yaws around the draw's (-10 to +10 deg): between 5 cm crowns it must turn out at
+one at least (3 of the 6 did when this was written), between 12 cm crowns (wider than the
+box's 8.9 cm half-width) at none."""
 from __future__ import annotations
 
 import math
@@ -25,10 +27,11 @@ pytestmark = pytest.mark.sitl
 DRAW = Path(__file__).resolve().parent / "data" / "buckling_draw.toml"
 
 
-def _fly(crown_radius_m: float) -> tuple[float, float]:
+def _fly(crown_radius_m: float, yaw_offset_deg: float) -> tuple[float, float]:
     """The box's largest turn from the grasp's end [deg] and the largest slip [m] over 16 s."""
     data = read_scenario(DRAW)
     data["pad"]["crown_radius_m"] = crown_radius_m
+    data["object"]["yaw_deg"] += yaw_offset_deg
     spec = scenario_from_dict(data, DRAW)
     yaw = []
 
@@ -42,10 +45,13 @@ def _fly(crown_radius_m: float) -> tuple[float, float]:
     return turned, max(a["slip_max_m"] for a in res["ams"].values())
 
 
+YAW_OFFSETS_DEG = (-10.0, -3.0, 0.0, 1.0, 3.0, 10.0)
+
+
 @pytest.mark.parametrize("crown_radius_m, buckles", [(0.05, True), (0.12, False)])
 def test_the_box_turns_out_of_narrow_crowns_and_holds_between_wide_ones(crown_radius_m, buckles):
-    turned_deg, slip_m = _fly(crown_radius_m)
+    flown = {dy: _fly(crown_radius_m, dy) for dy in YAW_OFFSETS_DEG}
     if buckles:
-        assert turned_deg > 20.0 and slip_m > 2e-3, (turned_deg, slip_m)
+        assert any(turned > 20.0 and slip > 2e-3 for turned, slip in flown.values()), flown
     else:
-        assert turned_deg < 2.0 and slip_m < 1e-3, (turned_deg, slip_m)
+        assert all(turned < 2.0 and slip < 1e-3 for turned, slip in flown.values()), flown
