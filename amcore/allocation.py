@@ -257,31 +257,15 @@ def _pinv_rows(a: tuple[tuple[float, ...], ...], n: int) -> tuple[tuple[float, .
     m = len(a)
     big = max((abs(x) for r in a for x in r), default=0.0)
     rows = [[Fraction(x) if abs(x) > 1e-12 * big else Fraction(0) for x in r] for r in a]
-    echelon, pivots, r = [row[:] for row in rows], [], 0
-    for c in range(n):
-        k = next((i for i in range(r, m) if echelon[i][c] != 0), None)
-        if k is None:
-            continue
-        echelon[r], echelon[k] = echelon[k], echelon[r]
-        lead = echelon[r][c]
-        echelon[r] = [x / lead for x in echelon[r]]
-        for i in range(m):
-            if i != r and echelon[i][c] != 0:
-                f = echelon[i][c]
-                echelon[i] = [x - f * y for x, y in zip(echelon[i], echelon[r])]
-        pivots.append(c)
-        r += 1
-        if r == m:
-            break
+    echelon = [row[:] for row in rows]
+    pivots = _eliminate(echelon, n)
+    r = len(pivots)
     if r == 0:
         return tuple((0.0,) * m for _ in range(n))
     F = echelon[:r]  # r x n
     C = [[rows[i][c] for c in pivots] for i in range(m)]  # m x r
-    FFt = [[sum(x * y for x, y in zip(F[i], F[j])) for j in range(r)] for i in range(r)]
-    CtC = [[sum(C[k][i] * C[k][j] for k in range(m)) for j in range(r)] for i in range(r)]
-    inner = _matmul(_inverse(FFt), _inverse(CtC))  # r x r
-    Ft = [list(col) for col in zip(*F)]  # n x r
-    Ct = [list(col) for col in zip(*C)]  # r x m
+    Ft, Ct = [list(col) for col in zip(*F)], [list(col) for col in zip(*C)]  # n x r, r x m
+    inner = _matmul(_inverse(_matmul(F, Ft)), _inverse(_matmul(Ct, C)))  # (F F^T)^-1 (C^T C)^-1
     return tuple(tuple(float(x) for x in row) for row in _matmul(_matmul(Ft, inner), Ct))
 
 
@@ -289,19 +273,33 @@ def _matmul(X, Y):
     return [[sum(x * y for x, y in zip(row, col)) for col in zip(*Y)] for row in X]
 
 
+def _eliminate(rows: list, cols: int) -> list[int]:
+    """Gauss-Jordan on `rows` (lists of Fractions, changed in place) over their first `cols`
+    columns: the reduced row echelon form, and its pivot columns."""
+    pivots: list[int] = []
+    for c in range(cols):
+        r = len(pivots)
+        if r == len(rows):
+            break
+        k = next((i for i in range(r, len(rows)) if rows[i][c] != 0), None)
+        if k is None:
+            continue
+        rows[r], rows[k] = rows[k], rows[r]
+        lead = rows[r][c]
+        rows[r] = [x / lead for x in rows[r]]
+        for i in range(len(rows)):
+            if i != r and rows[i][c] != 0:
+                f = rows[i][c]
+                rows[i] = [x - f * y for x, y in zip(rows[i], rows[r])]
+        pivots.append(c)
+    return pivots
+
+
 def _inverse(M):
-    """The inverse of a nonsingular square matrix of Fractions (Gauss-Jordan)."""
+    """The inverse of a nonsingular square matrix of Fractions: Gauss-Jordan on [M | I]."""
     from fractions import Fraction
 
     r = len(M)
     aug = [list(row) + [Fraction(int(i == j)) for j in range(r)] for i, row in enumerate(M)]
-    for c in range(r):
-        k = next(i for i in range(c, r) if aug[i][c] != 0)
-        aug[c], aug[k] = aug[k], aug[c]
-        lead = aug[c][c]
-        aug[c] = [x / lead for x in aug[c]]
-        for i in range(r):
-            if i != c and aug[i][c] != 0:
-                f = aug[i][c]
-                aug[i] = [x - f * y for x, y in zip(aug[i], aug[c])]
+    _eliminate(aug, r)
     return [row[r:] for row in aug]
