@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from fractions import Fraction
 from functools import lru_cache
 
 import numpy as np
@@ -247,13 +248,11 @@ def pinv_exact(A) -> np.ndarray:
     pivot columns), A+ = F^T (F F^T)^-1 (C^T C)^-1 C^T. Entries below 1e-12 of the largest
     count as zero (a rotor axis computed as cos(pi/2) = 6e-17), as LAPACK's cutoff would."""
     a = np.asarray(A, dtype=float)
-    return np.array(_pinv_rows(tuple(map(tuple, a.tolist())), a.shape[1])).reshape(a.shape[1], a.shape[0])
+    return np.array(_pinv_rows(tuple(map(tuple, a.tolist())), a.shape[1]))  # (n, m)
 
 
 @lru_cache(maxsize=64)  # an Allocation per vehicle and process, often of the same table
 def _pinv_rows(a: tuple[tuple[float, ...], ...], n: int) -> tuple[tuple[float, ...], ...]:
-    from fractions import Fraction
-
     m = len(a)
     big = max((abs(x) for r in a for x in r), default=0.0)
     rows = [[Fraction(x) if abs(x) > 1e-12 * big else Fraction(0) for x in r] for r in a]
@@ -297,8 +296,6 @@ def _eliminate(rows: list, cols: int) -> list[int]:
 
 def _inverse(M):
     """The inverse of a nonsingular square matrix of Fractions: Gauss-Jordan on [M | I]."""
-    from fractions import Fraction
-
     r = len(M)
     aug = [list(row) + [Fraction(int(i == j)) for j in range(r)] for i, row in enumerate(M)]
     _eliminate(aug, r)
