@@ -7,9 +7,11 @@ with 14.6 N, every device at its default level, 2.3 % setpoint loss. Between 5 c
 is 11.0 N, below the squeeze: the straight grasp is unstable, and whether the box turns out
 (about 50 deg in the lift) depends on the push that starts it, down to the arithmetic's last
 bits (on one draw it turned on one CPU's BLAS kernels and not on another's). So the box is
-flown at six yaws around the draw's (-10 to +10 deg): between 5 cm crowns it must turn out at
-one at least (3 of the 6 did when this was written), between 12 cm crowns (wider than the
-box's 8.9 cm half-width) at none."""
+flown at yaws around the draw's: between 5 cm crowns at twelve (-10 to +10 deg), where it must
+turn out at one at least (5 of the 12 did when this was written: were each a fair coin at
+that rate, all twelve would hold on about one host in 650); between 12 cm crowns (wider than the
+box's 8.9 cm half-width) at six of them, where it must turn out at none (none of the twelve
+did: at most 1.6 deg)."""
 from __future__ import annotations
 
 import math
@@ -46,11 +48,13 @@ def _fly(crown_radius_m: float, yaw_offset_deg: float) -> tuple[float, float]:
 
 
 YAW_OFFSETS_DEG = (-10.0, -3.0, 0.0, 1.0, 3.0, 10.0)
+MORE_YAW_OFFSETS_DEG = (-5.0, -2.0, -1.0, 2.0, 5.0, 7.0)  # buckling is a matter of chance: more tries
 
 
 @pytest.mark.parametrize("crown_radius_m, buckles", [(0.05, True), (0.12, False)])
 def test_the_box_turns_out_of_narrow_crowns_and_holds_between_wide_ones(crown_radius_m, buckles):
-    flown = {dy: _fly(crown_radius_m, dy) for dy in YAW_OFFSETS_DEG}
+    yaws = YAW_OFFSETS_DEG + MORE_YAW_OFFSETS_DEG if buckles else YAW_OFFSETS_DEG
+    flown = {dy: _fly(crown_radius_m, dy) for dy in yaws}
     if buckles:
         assert any(turned > 20.0 and slip > 2e-3 for turned, slip in flown.values()), flown
     else:
